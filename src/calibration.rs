@@ -1,0 +1,98 @@
+//! Raw counts to physical units: load-cell tare and gain, encoder scale.
+
+use crate::units::{saturate_i32, MicroNewtons, Nanometres};
+
+/// Load-cell calibration: `force = (counts − tare) · gain`.
+///
+/// `gain_q16` is the gain in µN per ADC count in Q16.16 (resolution
+/// 1/65536 µN per count, range up to 32767 µN per count). The product is
+/// formed in `i64` and saturates at the [`MicroNewtons`] range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoadCell {
+    /// ADC counts at zero force.
+    pub tare_counts: i32,
+    /// µN per count, Q16.16.
+    pub gain_q16: i32,
+    /// Converter full scale in counts: a reading at or beyond ±this is saturated.
+    pub full_scale_counts: i32,
+}
+
+impl LoadCell {
+    /// A 10 N load cell on a 24-bit converter whose ±full scale spans ±10 N:
+    /// 10 N / 2^23 counts = 1.1921 µN per count, exactly 78125 in Q16.16.
+    pub const TEN_NEWTON_24_BIT: Self = Self {
+        tare_counts: 0,
+        gain_q16: 78_125,
+        full_scale_counts: (1 << 23) - 1,
+    };
+
+    /// Calibrated force for a raw reading.
+    #[inline]
+    pub fn force(&self, counts: i32) -> MicroNewtons {
+        let net = counts as i64 - self.tare_counts as i64;
+        MicroNewtons(saturate_i32((net * self.gain_q16 as i64) >> 16))
+    }
+
+    /// Raw counts that read as `force` (inverse of [`Self::force`], rounded),
+    /// for generating replays on the host.
+    pub fn counts_for(&self, force: MicroNewtons) -> i32 {
+        let scaled = ((force.0 as i64) << 16) + self.gain_q16 as i64 / 2;
+        saturate_i32(scaled.div_euclid(self.gain_q16 as i64) + self.tare_counts as i64)
+    }
+}
+
+/// Encoder scale: nanometres of needle travel per count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Encoder {
+    /// Travel per count, nm (1000 for a 1 µm linear scale).
+    pub nm_per_count: i32,
+    /// Largest count change between two samples that the mechanics allow;
+    /// a larger jump is a glitch and raises [`crate::faults::Faults::ENCODER_JUMP`].
+    pub max_counts_per_sample: u16,
+}
+
+impl Encoder {
+    /// A 1 µm linear encoder on a drive that moves at most 100 mm/s; at the
+    /// slowest supported rate (500 Hz) that is 200 counts per sample.
+    pub const ONE_MICRON: Self = Self {
+        nm_per_count: 1_000,
+        max_counts_per_sample: 200,
+    };
+
+    /// Position for an unwrapped count, saturating.
+    #[inline]
+    pub fn position(&self, counts: i32) -> Nanometres {
+        Nanometres(saturate_i32(counts as i64 * self.nm_per_count as i64))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn full_scale_reads_ten_newtons_and_inverse_round_trips() {
+        let cell = LoadCell::TEN_NEWTON_24_BIT;
+        assert_eq!(cell.force(1 << 23), MicroNewtons(10_000_000));
+        assert_eq!(cell.force(-(1 << 23)), MicroNewtons(-10_000_000));
+        for f in [-2_000_000, -1, 0, 1, 940_000, 2_240_000] {
+            let back = cell.force(cell.counts_for(MicroNewtons(f)));
+            assert!((back.0 - f).abs() <= 1, "{f} -> {back:?}");
+        }
+    }
+
+    #[test]
+    fn extreme_inputs_saturate() {
+        let cell = LoadCell {
+            tare_counts: i32::MIN,
+            gain_q16: i32::MAX,
+            full_scale_counts: 1,
+        };
+        assert_eq!(cell.force(i32::MAX), MicroNewtons::MAX);
+        let enc = Encoder {
+            nm_per_count: i32::MAX,
+            max_counts_per_sample: 1,
+        };
+        assert_eq!(enc.position(i32::MIN), Nanometres::MIN);
+    }
+}

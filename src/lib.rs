@@ -1,0 +1,33 @@
+//! Core of the instrumented needle holder: everything that happens to a
+//! sample between the load-cell ADC and the serial port.
+//!
+//! `no_std`, integer-only in the per-sample path, free of registers and
+//! `unsafe`. The same code runs in the firmware (`src/main.rs`, behind
+//! `target_os = "none"`) and on the host (`host-tools`, tests), so the two
+//! produce byte-identical frames for the same input.
+//!
+//! Pipeline, one call of [`device::Device::tick`] per sample:
+//!
+//! ```text
+//! ADC counts ─ calibration ─> force ─┐
+//! encoder counts ─ kinematics ─> x, v ┼─> phase + model + detectors ─> frames, halt line
+//! ```
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+#[cfg(test)]
+extern crate std;
+
+pub mod calibration;
+pub mod config;
+pub mod detect;
+pub mod device;
+pub mod faults;
+pub mod hal;
+pub mod kinematics;
+pub mod model;
+pub mod pipeline;
+pub mod protocol;
+pub mod replay;
+pub mod units;

@@ -1,0 +1,99 @@
+//! One sample through the pure logic: raw readings in, sample and event out.
+//! No hardware here; [`crate::device::Device`] does the reading and sending.
+
+use crate::config::DeviceConfig;
+use crate::detect::{DetectInput, DetectState};
+use crate::faults::Faults;
+use crate::hal::AdcSample;
+use crate::kinematics::{EncoderTracker, VelocityState};
+use crate::protocol::{Event, Sample};
+use crate::units::MicroNewtons;
+
+/// What the sensors gave for one sample period.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RawSample {
+    /// The ADC conversion, or `None` when the ADC returned an error.
+    pub adc: Option<AdcSample>,
+    /// The encoder's wrapping count.
+    pub encoder_count: u16,
+}
+
+/// Per-sample state of the pipeline.
+#[derive(Clone, Debug, Default)]
+pub struct PipelineState {
+    index: u32,
+    encoder: EncoderTracker,
+    velocity: VelocityState,
+    detect: DetectState,
+    last_force: MicroNewtons,
+}
+
+/// Result of one step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StepOutput {
+    /// The processed sample.
+    pub sample: Sample,
+    /// The event detected at this sample, if any.
+    pub event: Option<Event>,
+    /// Faults this sample raised (not latched here; the device latches).
+    pub faults: Faults,
+}
+
+impl DeviceConfig {
+    /// Process one raw sample.
+    ///
+    /// A sample whose force is unknown (ADC error or saturation) or whose
+    /// position is doubtful (encoder jump) is still reported, but the
+    /// detectors skip it, so a fault never fires an event by itself.
+    pub fn step(&self, state: &mut PipelineState, raw: RawSample) -> StepOutput {
+        let index = state.index;
+        state.index = state.index.saturating_add(1);
+
+        let mut faults = Faults::NONE;
+        let force = match raw.adc {
+            Some(adc) => {
+                if adc.saturated {
+                    faults = faults.union(Faults::ADC_SATURATED);
+                }
+                self.load_cell.force(adc.counts)
+            }
+            None => {
+                faults = faults.union(Faults::ADC_ERROR);
+                state.last_force
+            }
+        };
+        state.last_force = force;
+
+        let enc = state
+            .encoder
+            .update(raw.encoder_count, self.encoder.max_counts_per_sample);
+        if enc.jumped {
+            faults = faults.union(Faults::ENCODER_JUMP);
+        }
+        let x = self.encoder.position(enc.total_counts);
+        let v = state.velocity.update(&self.velocity, x);
+
+        let event = if faults.is_empty() {
+            self.detect
+                .update(&mut state.detect, DetectInput { index, x, v, force })
+        } else {
+            None
+        };
+        let phase = state.detect.phase();
+        let model = self.model.expected(phase, x, v);
+        let sample = Sample {
+            index,
+            x,
+            v,
+            force,
+            model,
+            residual: force.sub(model),
+            phase,
+        };
+        StepOutput {
+            sample,
+            event,
+            faults,
+        }
+    }
+}

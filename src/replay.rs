@@ -1,0 +1,208 @@
+//! Replay input: recorded raw sensor readings fed to the device in place of
+//! the ADC and encoder. QEMU reads it over semihosting; the host twin reads
+//! the same bytes from memory; both call [`run`].
+//!
+//! File format (little-endian), written by `needle simulate`/`needle demo`:
+//!
+//! | bytes | field |
+//! |---|---|
+//! | 0..4 | magic `NHRP` |
+//! | 4 | format version, 1 |
+//! | 5 | reserved, 0 |
+//! | 6..8 | sample rate, Hz, `u16` |
+//! | then 6 per sample | ADC counts `i32`, encoder count `u16` |
+//!
+//! A file that ends inside a record raises `REPLAY_TRUNCATED` after the last
+//! whole record; a bad header raises `REPLAY_BAD_HEADER` and nothing runs.
+
+use core::convert::Infallible;
+
+use embedded_hal::digital::OutputPin;
+use embedded_io::{Read, Write};
+
+use crate::config::DeviceConfig;
+use crate::device::{Device, Summary};
+use crate::faults::Faults;
+use crate::hal::{AdcSample, EncoderCounter, LoadCellAdc};
+
+/// First four bytes of a replay file.
+pub const MAGIC: [u8; 4] = *b"NHRP";
+/// Format version this code reads and writes.
+pub const FORMAT_VERSION: u8 = 1;
+/// Header length, bytes.
+pub const HEADER_LEN: usize = 8;
+/// Record length, bytes.
+pub const RECORD_LEN: usize = 6;
+
+/// The replay header.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct ReplayHeader {
+    /// Sample rate of the recording, Hz.
+    pub sample_rate_hz: u16,
+}
+
+impl ReplayHeader {
+    /// Serialise.
+    pub fn to_bytes(self) -> [u8; HEADER_LEN] {
+        let rate = self.sample_rate_hz.to_le_bytes();
+        [
+            MAGIC[0],
+            MAGIC[1],
+            MAGIC[2],
+            MAGIC[3],
+            FORMAT_VERSION,
+            0,
+            rate[0],
+            rate[1],
+        ]
+    }
+
+    /// Parse; `None` for a wrong magic, version or a zero rate.
+    pub fn parse(bytes: &[u8; HEADER_LEN]) -> Option<Self> {
+        let rate = u16::from_le_bytes([bytes[6], bytes[7]]);
+        (bytes[..4] == MAGIC && bytes[4] == FORMAT_VERSION && rate > 0).then_some(Self {
+            sample_rate_hz: rate,
+        })
+    }
+}
+
+/// One recorded sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Record {
+    /// Raw load-cell ADC counts.
+    pub adc_counts: i32,
+    /// Raw wrapping encoder count.
+    pub encoder_count: u16,
+}
+
+impl Record {
+    /// Serialise.
+    pub fn to_bytes(self) -> [u8; RECORD_LEN] {
+        let a = self.adc_counts.to_le_bytes();
+        let e = self.encoder_count.to_le_bytes();
+        [a[0], a[1], a[2], a[3], e[0], e[1]]
+    }
+
+    /// Parse.
+    pub fn from_bytes(b: &[u8; RECORD_LEN]) -> Self {
+        Self {
+            adc_counts: i32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            encoder_count: u16::from_le_bytes([b[4], b[5]]),
+        }
+    }
+}
+
+/// Why reading stopped early.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum ReplayError {
+    /// The input ended inside a header or record.
+    Truncated,
+    /// The reader failed.
+    Io,
+}
+
+/// Fill `buf` from `reader`. `Ok(false)` at a clean end before any byte.
+fn fill<R: Read>(reader: &mut R, buf: &mut [u8]) -> Result<bool, ReplayError> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match reader.read(&mut buf[filled..]) {
+            Ok(0) if filled == 0 => return Ok(false),
+            Ok(0) => return Err(ReplayError::Truncated),
+            Ok(n) => filled += n,
+            Err(_) => return Err(ReplayError::Io),
+        }
+    }
+    Ok(true)
+}
+
+/// Read the header.
+pub fn read_header<R: Read>(reader: &mut R) -> Result<Option<ReplayHeader>, ReplayError> {
+    let mut buf = [0; HEADER_LEN];
+    if !fill(reader, &mut buf)? {
+        return Err(ReplayError::Truncated);
+    }
+    Ok(ReplayHeader::parse(&buf))
+}
+
+/// Read the next record; `Ok(None)` at a clean end.
+pub fn read_record<R: Read>(reader: &mut R) -> Result<Option<Record>, ReplayError> {
+    let mut buf = [0; RECORD_LEN];
+    Ok(fill(reader, &mut buf)?.then(|| Record::from_bytes(&buf)))
+}
+
+/// The load-cell ADC during a replay: returns the current record's counts,
+/// and reports saturation at the calibrated full scale.
+#[derive(Clone, Copy, Debug)]
+pub struct ReplayAdc {
+    /// Counts returned by the next read.
+    pub counts: i32,
+    /// Full scale, counts.
+    pub full_scale_counts: i32,
+}
+
+impl LoadCellAdc for ReplayAdc {
+    type Error = Infallible;
+    fn read(&mut self) -> Result<AdcSample, Infallible> {
+        let saturated = self.counts.unsigned_abs() >= self.full_scale_counts.unsigned_abs();
+        Ok(AdcSample {
+            counts: self.counts,
+            saturated,
+        })
+    }
+}
+
+/// The encoder counter during a replay.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ReplayEncoder {
+    /// Count returned by the next read.
+    pub count: u16,
+}
+
+impl EncoderCounter for ReplayEncoder {
+    fn count(&mut self) -> u16 {
+        self.count
+    }
+}
+
+/// Run a whole replay through a [`Device`] built from `config` (its sample
+/// rate replaced by the replay's), sending frames to `sink`.
+pub fn run<R: Read, W: Write, H: OutputPin>(
+    mut reader: R,
+    config: DeviceConfig,
+    sink: W,
+    halt: H,
+) -> Summary {
+    let header = read_header(&mut reader);
+    let rate = match header {
+        Ok(Some(h)) => h.sample_rate_hz,
+        _ => config.velocity.sample_rate_hz,
+    };
+    let mut device = Device::new(config.with_sample_rate(rate), sink, halt);
+    if !matches!(header, Ok(Some(_))) {
+        device.raise(Faults::REPLAY_BAD_HEADER);
+        return device.finish();
+    }
+    let mut adc = ReplayAdc {
+        counts: 0,
+        full_scale_counts: config.load_cell.full_scale_counts,
+    };
+    let mut encoder = ReplayEncoder::default();
+    loop {
+        match read_record(&mut reader) {
+            Ok(Some(record)) => {
+                adc.counts = record.adc_counts;
+                encoder.count = record.encoder_count;
+                device.tick(&mut adc, &mut encoder);
+            }
+            Ok(None) => break,
+            Err(_) => {
+                device.raise(Faults::REPLAY_TRUNCATED);
+                break;
+            }
+        }
+    }
+    device.finish()
+}
