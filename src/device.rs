@@ -79,7 +79,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             self.send(&Frame::Event(event));
         }
         let at = (out.sample.index, out.sample.x, out.sample.force);
-        if !self.raise_at(out.faults, at) && self.samples % STATUS_PERIOD_SAMPLES == 0 {
+        if !self.raise_at(out.faults, at) && self.samples.is_multiple_of(STATUS_PERIOD_SAMPLES) {
             self.send_status();
         }
     }
@@ -140,6 +140,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
     fn send_status(&mut self) {
         let status = Status {
             protocol_version: PROTOCOL_VERSION,
+            sample_rate_hz: self.config.velocity.sample_rate_hz,
             samples: self.samples,
             frames_dropped: self.frames_dropped,
             faults: self.faults,

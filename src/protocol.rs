@@ -1,9 +1,13 @@
 //! The wire protocol: frames the device sends, defined once and used by the
 //! firmware and the host alike.
 //!
-//! Each frame is a [`Frame`] serialised with postcard (varint integers) and
-//! COBS-framed, ending in a `0x00` byte, so a reader that starts mid-stream
-//! or loses bytes resynchronises at the next zero. The first frame after
+//! Each frame is a [`Frame`] serialised with postcard (varint integers),
+//! followed by a CRC-16 of those bytes (little-endian), the whole COBS-framed
+//! and ending in a `0x00` byte. A reader that starts mid-stream or loses
+//! bytes resynchronises at the next zero; the CRC catches the corrupted
+//! frames that would otherwise still decode (postcard accepts almost any
+//! bytes as varints), so a line error shows up as a lost frame, not as a
+//! wrong force. The first frame after
 //! boot is a [`Header`]; sample frames carry the sample index, so a gap in
 //! the indices is a lost frame; a [`Status`] heartbeat with counters follows
 //! every [`STATUS_PERIOD_SAMPLES`] samples, on every new fault, and at the end.
@@ -105,6 +109,8 @@ pub struct Event {
 pub struct Status {
     /// [`PROTOCOL_VERSION`] again, so a host that missed the header can check.
     pub protocol_version: u16,
+    /// Sample rate again, for a host that joined mid-stream.
+    pub sample_rate_hz: u16,
     /// Samples processed since boot.
     pub samples: u32,
     /// Frames that the sink refused since boot.
@@ -137,9 +143,15 @@ macro_rules! max_size_i32 {
 }
 max_size_i32!(MicroNewtons, Nanometres, NanometresPerSecond);
 
-/// Bytes one encoded frame can take on the wire: postcard's bound, plus
-/// COBS overhead (one byte per 254) and the leading code and trailing zero.
-pub const MAX_ENCODED_FRAME: usize = Frame::POSTCARD_MAX_SIZE + Frame::POSTCARD_MAX_SIZE / 254 + 2;
+/// The frame check: CRC-16/IBM-SDLC (the X.25/HDLC CRC), table-driven.
+pub const FRAME_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_IBM_SDLC);
+
+/// Largest frame before COBS: postcard's bound plus the 2-byte CRC.
+pub const MAX_RAW_FRAME: usize = Frame::POSTCARD_MAX_SIZE + 2;
+
+/// Bytes one encoded frame can take on the wire: the raw bound plus COBS
+/// overhead (one byte per 254, and the leading code) and the trailing zero.
+pub const MAX_ENCODED_FRAME: usize = MAX_RAW_FRAME + MAX_RAW_FRAME / 254 + 2;
 
 /// Buffer for one encoded frame.
 pub type FrameBuffer = [u8; MAX_ENCODED_FRAME];
@@ -148,9 +160,49 @@ pub type FrameBuffer = [u8; MAX_ENCODED_FRAME];
 /// Cannot fail: `buf` is sized by [`MAX_ENCODED_FRAME`]. An empty slice
 /// would mean a bug in that bound; the caller counts it as a dropped frame.
 pub fn encode<'a>(frame: &Frame, buf: &'a mut FrameBuffer) -> &'a [u8] {
-    match postcard::to_slice_cobs(frame, buf) {
-        Ok(bytes) => bytes,
-        Err(_) => &[],
+    let mut raw = [0u8; MAX_RAW_FRAME];
+    let Ok(body) = postcard::to_slice(frame, &mut raw[..Frame::POSTCARD_MAX_SIZE]) else {
+        return &[];
+    };
+    let n = body.len();
+    let crc = FRAME_CRC.checksum(&raw[..n]).to_le_bytes();
+    raw[n..n + 2].copy_from_slice(&crc);
+    let Ok(len) = cobs::try_encode(&raw[..n + 2], &mut buf[..MAX_ENCODED_FRAME - 1]) else {
+        return &[];
+    };
+    buf[len] = 0;
+    &buf[..=len]
+}
+
+/// Why a received frame was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DecodeError {
+    /// Not valid COBS, or too long.
+    Cobs,
+    /// The CRC does not match: corrupted on the way.
+    Crc,
+    /// The CRC matches but the bytes are not exactly one frame of this
+    /// protocol version.
+    Postcard,
+}
+
+/// Decode one frame from the bytes between two `0x00` delimiters.
+pub fn decode(cobs_bytes: &[u8]) -> Result<Frame, DecodeError> {
+    let mut raw = [0u8; MAX_ENCODED_FRAME];
+    if cobs_bytes.len() > raw.len() {
+        return Err(DecodeError::Cobs);
+    }
+    let n = cobs::decode(cobs_bytes, &mut raw).map_err(|_| DecodeError::Cobs)?;
+    if n < 3 {
+        return Err(DecodeError::Crc);
+    }
+    let (body, crc) = raw[..n].split_at(n - 2);
+    if FRAME_CRC.checksum(body).to_le_bytes() != crc {
+        return Err(DecodeError::Crc);
+    }
+    match postcard::take_from_bytes::<Frame>(body) {
+        Ok((frame, [])) => Ok(frame),
+        _ => Err(DecodeError::Postcard),
     }
 }
 
@@ -171,7 +223,8 @@ mod tests {
     }
 
     /// Pins the wire format. If this fails you changed the bytes on the
-    /// wire: bump PROTOCOL_VERSION and update the expectation.
+    /// wire: bump PROTOCOL_VERSION and update the expectation. The CRC bytes
+    /// (0xc9, 0x55) were checked against an independent bitwise CRC-16/X.25.
     #[test]
     fn golden_bytes_pin_the_wire_format() {
         let mut buf = [0; MAX_ENCODED_FRAME];
@@ -180,10 +233,22 @@ mod tests {
         assert_eq!(
             bytes,
             &[
-                0x18, 0x01, 0xd2, 0x09, 0xa0, 0xbc, 0xf0, 0x0f, 0x80, 0x9b, 0xee, 0x02, 0x80, 0xb8,
-                0x91, 0x02, 0x80, 0xc7, 0x8c, 0x02, 0x80, 0xf1, 0x04, 0x01, 0x00
+                0x1a, 0x01, 0xd2, 0x09, 0xa0, 0xbc, 0xf0, 0x0f, 0x80, 0x9b, 0xee, 0x02, 0x80, 0xb8,
+                0x91, 0x02, 0x80, 0xc7, 0x8c, 0x02, 0x80, 0xf1, 0x04, 0x01, 0xc9, 0x55, 0x00
             ][..]
         );
+    }
+
+    #[test]
+    fn any_single_bit_error_is_caught() {
+        let mut buf = [0; MAX_ENCODED_FRAME];
+        let good = encode(&sample(), &mut buf).to_vec();
+        let body = &good[..good.len() - 1];
+        for bit in 0..body.len() * 8 {
+            let mut bad = body.to_vec();
+            bad[bit / 8] ^= 1 << (bit % 8);
+            assert!(decode(&bad).is_err(), "bit {bit} flipped went unnoticed");
+        }
     }
 
     #[test]
@@ -203,6 +268,7 @@ mod tests {
             }),
             Frame::Status(Status {
                 protocol_version: PROTOCOL_VERSION,
+                sample_rate_hz: u16::MAX,
                 samples: u32::MAX,
                 frames_dropped: u32::MAX,
                 faults: Faults(u16::MAX),
@@ -218,9 +284,7 @@ mod tests {
                 1,
                 "only the terminator is zero"
             );
-            let mut copy = std::vec::Vec::from(bytes);
-            let back: Frame = postcard::from_bytes_cobs(&mut copy).unwrap();
-            assert_eq!(back, frame);
+            assert_eq!(decode(&bytes[..bytes.len() - 1]), Ok(frame));
         }
     }
 }

@@ -1,1 +1,51 @@
-fn main() {}
+//! `needle`: host tools for the instrumented needle holder.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use host_tools::{decode, demo};
+
+#[derive(Parser)]
+#[command(
+    name = "needle",
+    version,
+    about = "Host tools for the instrumented needle holder"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Decode device frames from a capture file or a serial port.
+    Decode(decode::DecodeArgs),
+    /// Build the firmware, replay one liver insertion in QEMU, decode it live.
+    Demo(demo::DemoArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Decode(args) => decode::run(args),
+        Command::Demo(args) => demo::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        // `needle decode … | head` closing the pipe is not a failure.
+        Err(err) if is_broken_pipe(&err) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("needle: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn is_broken_pipe(err: &anyhow::Error) -> bool {
+    err.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}

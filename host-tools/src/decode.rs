@@ -1,0 +1,254 @@
+//! `needle decode`: frames from a capture file or a serial port to text or
+//! to the trial CSV (DESIGN.md §4), reporting gaps and skipped bytes.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use needle_holder::faults::Faults;
+use needle_holder::protocol::{EventKind, Frame, Phase, Sample};
+
+use crate::frames::{Item, StreamDecoder, StreamStats};
+
+#[derive(Debug, clap::Args)]
+pub struct DecodeArgs {
+    /// Capture file of raw frame bytes (what the device sent on its UART).
+    #[arg(required_unless_present = "port", conflicts_with = "port")]
+    pub file: Option<PathBuf>,
+    /// Read from this serial port instead (e.g. /dev/ttyACM0).
+    #[arg(long)]
+    pub port: Option<String>,
+    /// Serial baud rate.
+    #[arg(long, default_value_t = 115_200)]
+    pub baud: u32,
+    /// Stop reading the port after this many seconds (default: until it closes).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Write samples as a trial CSV here; events, status and gaps still print.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Sample rate to assume when the stream holds no header or status frame.
+    #[arg(long)]
+    pub rate_hz: Option<u16>,
+}
+
+pub fn run(args: &DecodeArgs) -> Result<()> {
+    let mut out = Output::new(args.csv.as_deref(), args.rate_hz)?;
+    let mut decoder = StreamDecoder::new();
+    let feed = |bytes: &[u8], decoder: &mut StreamDecoder, out: &mut Output| -> Result<()> {
+        let mut items = Vec::new();
+        decoder.feed(bytes, |item| items.push(item))?;
+        items.into_iter().try_for_each(|item| out.item(item))
+    };
+    if let Some(path) = &args.file {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        feed(&bytes, &mut decoder, &mut out)?;
+    } else if let Some(port) = &args.port {
+        let mut serial = serialport::new(port, args.baud)
+            .timeout(Duration::from_millis(100))
+            .open()
+            .with_context(|| format!("{port}: cannot open serial port"))?;
+        let deadline = args
+            .seconds
+            .map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
+        let mut buf = [0u8; 4096];
+        while deadline.is_none_or(|d| Instant::now() < d) {
+            match serial.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => feed(&buf[..n], &mut decoder, &mut out)?,
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
+                Err(e) => return Err(e).with_context(|| format!("{port}: read failed")),
+            }
+        }
+    }
+    let mut tail = Vec::new();
+    let stats = decoder.finish(|item| tail.push(item));
+    tail.into_iter().try_for_each(|item| out.item(item))?;
+    out.finish(&stats)
+}
+
+/// Where decoded items go: text lines, and samples to CSV when asked.
+struct Output {
+    text: std::io::BufWriter<std::io::Stdout>,
+    csv: Option<csv::Writer<std::fs::File>>,
+    csv_path: Option<PathBuf>,
+    rate_hz: Option<u16>,
+    /// Samples that arrived before the sample rate was known.
+    pending: Vec<Sample>,
+}
+
+impl Output {
+    fn new(csv_path: Option<&Path>, rate_hz: Option<u16>) -> Result<Self> {
+        let csv = match csv_path {
+            Some(path) => {
+                let mut w = csv::Writer::from_path(path)
+                    .with_context(|| format!("{}: cannot create", path.display()))?;
+                w.write_record([
+                    "t_s",
+                    "x_m",
+                    "f_n",
+                    "v_mps",
+                    "model_n",
+                    "residual_n",
+                    "phase",
+                ])?;
+                Some(w)
+            }
+            None => None,
+        };
+        let text = std::io::BufWriter::new(std::io::stdout());
+        Ok(Self {
+            text,
+            csv,
+            csv_path: csv_path.map(Path::to_path_buf),
+            rate_hz,
+            pending: Vec::new(),
+        })
+    }
+
+    fn item(&mut self, item: Item) -> Result<()> {
+        match item {
+            Item::Frame(Frame::Sample(s)) if self.csv.is_some() => self.sample_to_csv(s)?,
+            Item::Frame(frame) => {
+                if let Frame::Header(h) = frame {
+                    self.learn_rate(h.sample_rate_hz)?;
+                }
+                if let Frame::Status(s) = frame {
+                    self.learn_rate(s.sample_rate_hz)?;
+                }
+                writeln!(self.text, "{}", describe(&frame, self.rate_hz))?;
+            }
+            Item::Skipped { bytes, reason } => {
+                writeln!(self.text, "skipped {bytes} bytes ({reason})")?
+            }
+            Item::Gap { first, last } => writeln!(
+                self.text,
+                "gap     samples {first}..={last} lost ({})",
+                last - first + 1
+            )?,
+        }
+        Ok(())
+    }
+
+    fn learn_rate(&mut self, rate_hz: u16) -> Result<()> {
+        if self.rate_hz.is_none() && rate_hz > 0 {
+            self.rate_hz = Some(rate_hz);
+            for s in std::mem::take(&mut self.pending) {
+                self.sample_to_csv(s)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn sample_to_csv(&mut self, s: Sample) -> Result<()> {
+        let (Some(w), Some(rate)) = (self.csv.as_mut(), self.rate_hz) else {
+            self.pending.push(s);
+            return Ok(());
+        };
+        w.write_record([
+            format!("{:.6}", f64::from(s.index) / f64::from(rate)),
+            format!("{:.9}", s.x.as_m()),
+            format!("{:.6}", s.force.as_n()),
+            format!("{:.9}", s.v.as_mps()),
+            format!("{:.6}", s.model.as_n()),
+            format!("{:.6}", s.residual.as_n()),
+            phase_name(s.phase).to_string(),
+        ])?;
+        Ok(())
+    }
+
+    fn finish(mut self, stats: &StreamStats) -> Result<()> {
+        self.text.flush()?;
+        if !self.pending.is_empty() {
+            bail!(
+                "{} samples but no header or status frame gave the sample rate: pass --rate-hz",
+                self.pending.len()
+            );
+        }
+        if let Some(mut w) = self.csv.take() {
+            w.flush()?;
+            if let Some(path) = &self.csv_path {
+                eprintln!("wrote {} samples to {}", stats.samples, path.display());
+            }
+        }
+        eprintln!("{}", summary_line(stats));
+        Ok(())
+    }
+}
+
+/// One-line account of a stream.
+pub fn summary_line(s: &StreamStats) -> String {
+    format!(
+        "{} frames ({} samples, {} events), {} gaps ({} samples lost), {} bytes skipped in {} runs",
+        s.frames, s.samples, s.events, s.gaps, s.lost_samples, s.skipped_bytes, s.skipped_runs
+    )
+}
+
+/// Phase name as used in CSV files and reports.
+pub fn phase_name(phase: Phase) -> &'static str {
+    match phase {
+        Phase::Out => "out",
+        Phase::Loading => "loading",
+        Phase::Inserted => "inserted",
+        Phase::Withdrawal => "withdrawal",
+    }
+}
+
+/// Event kind name (DESIGN.md §4 vocabulary, plus `fault`).
+pub fn event_name(kind: EventKind) -> &'static str {
+    match kind {
+        EventKind::Contact => "contact",
+        EventKind::Puncture => "puncture",
+        EventKind::Structure => "structure",
+        EventKind::Exit => "exit",
+        EventKind::Fault => "fault",
+    }
+}
+
+/// Comma-separated names of a fault set, or `none`.
+pub fn fault_names(faults: Faults) -> String {
+    if faults.is_empty() {
+        return "none".into();
+    }
+    faults.names().collect::<Vec<_>>().join(",")
+}
+
+/// A frame as one line of text.
+pub fn describe(frame: &Frame, rate_hz: Option<u16>) -> String {
+    let t = |index: u32| match rate_hz {
+        Some(r) => format!("{:9.3} s", f64::from(index) / f64::from(r)),
+        None => format!("#{index:>9}"),
+    };
+    match frame {
+        Frame::Header(h) => {
+            format!("header  protocol {}, {} Hz", h.protocol_version, h.sample_rate_hz)
+        }
+        Frame::Sample(s) => format!(
+            "sample  {}  x {:8.3} mm  v {:7.3} mm/s  f {:7.3} N  model {:7.3} N  residual {:7.3} N  {}",
+            t(s.index),
+            s.x.as_m() * 1e3,
+            s.v.as_mps() * 1e3,
+            s.force.as_n(),
+            s.model.as_n(),
+            s.residual.as_n(),
+            phase_name(s.phase)
+        ),
+        Frame::Event(e) => format!(
+            "event   {}  {:<9} x {:8.3} mm  f {:7.3} N  confidence {:.1} %",
+            t(e.index),
+            event_name(e.kind),
+            e.x.as_m() * 1e3,
+            e.force.as_n(),
+            f64::from(e.confidence_permille) / 10.0
+        ),
+        Frame::Status(s) => format!(
+            "status  {} samples, {} frames dropped, faults {}, halt {}",
+            s.samples,
+            s.frames_dropped,
+            fault_names(s.faults),
+            if s.halt { "ASSERTED" } else { "released" }
+        ),
+    }
+}

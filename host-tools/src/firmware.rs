@@ -1,0 +1,227 @@
+//! Building the firmware and running it in QEMU, installing QEMU first
+//! when it is missing (a fresh machine of this kind has apt-get and root).
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use wait_timeout::ChildExt;
+
+/// A QEMU board and the firmware build that runs on it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Board {
+    /// lm3s6965evb, Cortex-M3 image (thumbv7m-none-eabi): the CI board.
+    Lm3s6965,
+    /// lm3s6965evb running the Cortex-M0 image (thumbv6m-none-eabi): the M3
+    /// executes the v6-M subset, so this measures the M0 build.
+    Lm3s6965M0,
+    /// mps2-an386, Cortex-M4F image (thumbv7em-none-eabihf).
+    Mps2An386,
+}
+
+impl Board {
+    pub fn target(self) -> &'static str {
+        match self {
+            Board::Lm3s6965 => "thumbv7m-none-eabi",
+            Board::Lm3s6965M0 => "thumbv6m-none-eabi",
+            Board::Mps2An386 => "thumbv7em-none-eabihf",
+        }
+    }
+
+    fn features(self) -> &'static [&'static str] {
+        match self {
+            Board::Mps2An386 => &["--features", "board-mps2"],
+            _ => &[],
+        }
+    }
+
+    fn machine_args(self) -> &'static [&'static str] {
+        match self {
+            Board::Lm3s6965 | Board::Lm3s6965M0 => {
+                &["-machine", "lm3s6965evb", "-cpu", "cortex-m3"]
+            }
+            Board::Mps2An386 => &["-machine", "mps2-an386"],
+        }
+    }
+}
+
+/// The repository root (host-tools lives one level below it).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
+}
+
+/// Build the firmware image for `board`; returns the ELF path.
+pub fn build(board: Board) -> Result<PathBuf> {
+    let root = repo_root();
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(&root)
+        .args([
+            "build",
+            "--profile",
+            "firmware",
+            "--bin",
+            "needle-holder",
+            "--target",
+            board.target(),
+        ])
+        .args(board.features())
+        .status()
+        .context("cannot run cargo to build the firmware")?;
+    if !status.success() {
+        bail!("firmware build for {} failed ({status})", board.target());
+    }
+    let elf = root
+        .join("target")
+        .join(board.target())
+        .join("firmware")
+        .join("needle-holder");
+    if !elf.exists() {
+        bail!("firmware build succeeded but {} is missing", elf.display());
+    }
+    Ok(elf)
+}
+
+/// Make sure `qemu-system-arm` is on PATH, installing Debian's package if not.
+pub fn ensure_qemu() -> Result<()> {
+    if which("qemu-system-arm") {
+        return Ok(());
+    }
+    eprintln!("qemu-system-arm is missing: installing it with apt-get");
+    let sudo: &[&str] = if is_root() { &[] } else { &["sudo"] };
+    for args in [
+        &["apt-get", "update"][..],
+        &[
+            "apt-get",
+            "install",
+            "-y",
+            "--no-install-recommends",
+            "qemu-system-arm",
+        ],
+    ] {
+        let all: Vec<&str> = sudo.iter().chain(args).copied().collect();
+        let status = Command::new(all[0])
+            .args(&all[1..])
+            .status()
+            .with_context(|| format!("cannot run {}", all.join(" ")))?;
+        if !status.success() {
+            bail!(
+                "`{}` failed ({status}); install qemu-system-arm by hand",
+                all.join(" ")
+            );
+        }
+    }
+    if !which("qemu-system-arm") {
+        bail!("qemu-system-arm still not on PATH after installing it");
+    }
+    Ok(())
+}
+
+fn which(program: &str) -> bool {
+    std::env::var_os("PATH")
+        .map(|paths| std::env::split_paths(&paths).any(|dir| dir.join(program).is_file()))
+        .unwrap_or(false)
+}
+
+fn is_root() -> bool {
+    Command::new("id")
+        .arg("-u")
+        .output()
+        .map(|o| o.stdout.trim_ascii() == b"0")
+        .unwrap_or(false)
+}
+
+/// How QEMU's UART0 is connected.
+pub enum Serial<'a> {
+    /// Written to a file.
+    File(&'a Path),
+    /// QEMU connects to a TCP listener on this loopback address.
+    Tcp(std::net::SocketAddr),
+}
+
+/// The QEMU command line for `elf` on `board`, replaying `replay`.
+pub fn qemu_command(
+    board: Board,
+    elf: &Path,
+    replay: &Path,
+    serial: Serial<'_>,
+    extra: &[&str],
+) -> Command {
+    let serial_arg = match serial {
+        Serial::File(path) => format!("file:{}", path.display()),
+        Serial::Tcp(addr) => format!("tcp:{addr}"),
+    };
+    // Commas in semihosting args must be doubled.
+    let replay_arg = replay.display().to_string().replace(',', ",,");
+    let mut cmd = Command::new("qemu-system-arm");
+    cmd.args(board.machine_args())
+        .args(["-nographic", "-monitor", "none", "-serial", &serial_arg])
+        .arg("-semihosting-config")
+        .arg(format!(
+            "enable=on,target=native,arg=needle-holder,arg={replay_arg}"
+        ))
+        .args(extra)
+        .arg("-kernel")
+        .arg(elf);
+    cmd
+}
+
+/// Result of one QEMU run.
+#[derive(Debug)]
+pub struct QemuRun {
+    pub status: ExitStatus,
+    /// defmt log bytes (semihosting stdout); decode with `defmt-print -e ELF`.
+    pub defmt: Vec<u8>,
+    /// QEMU's own messages.
+    pub stderr: String,
+}
+
+impl QemuRun {
+    /// Fail unless QEMU (that is, the firmware) exited 0.
+    pub fn success(self) -> Result<Self> {
+        if !self.status.success() {
+            bail!("QEMU exited with {}: {}", self.status, self.stderr.trim());
+        }
+        Ok(self)
+    }
+}
+
+/// Run a prepared QEMU command to completion, killing it after `timeout`.
+/// A non-zero exit is returned, not an error: see [`QemuRun::success`].
+pub fn run_qemu(mut cmd: Command, timeout: Duration) -> Result<QemuRun> {
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("cannot start qemu-system-arm")?;
+    let mut stdout = child.stdout.take().context("no QEMU stdout")?;
+    let reader = std::thread::spawn(move || {
+        let mut buf = Vec::new();
+        let _ = stdout.read_to_end(&mut buf);
+        buf
+    });
+    let Some(status) = child.wait_timeout(timeout)? else {
+        let _ = child.kill();
+        let _ = child.wait();
+        bail!(
+            "QEMU did not finish within {} s (a wrong memory map hangs silently)",
+            timeout.as_secs()
+        );
+    };
+    let defmt = reader.join().unwrap_or_default();
+    let mut stderr = String::new();
+    if let Some(mut pipe) = child.stderr.take() {
+        let _ = pipe.read_to_string(&mut stderr);
+    }
+    Ok(QemuRun {
+        status,
+        defmt,
+        stderr,
+    })
+}

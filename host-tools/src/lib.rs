@@ -1,0 +1,10 @@
+//! Host tools for the instrumented needle holder, as a library so the
+//! `needle` command and the integration tests share them.
+
+pub mod decode;
+pub mod demo;
+pub mod firmware;
+pub mod frames;
+pub mod sim;
+pub mod trial;
+pub mod twin;

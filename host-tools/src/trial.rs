@@ -1,0 +1,138 @@
+//! Trial CSV files (DESIGN.md §4): header `t_s,x_m,f_n`, extra columns
+//! allowed. Readers reject bad files with the file and line at fault.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+/// One trial: time, position, force, all SI.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Trial {
+    pub t_s: Vec<f64>,
+    pub x_m: Vec<f64>,
+    pub f_n: Vec<f64>,
+}
+
+impl Trial {
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    pub fn push(&mut self, t_s: f64, x_m: f64, f_n: f64) {
+        self.t_s.push(t_s);
+        self.x_m.push(x_m);
+        self.f_n.push(f_n);
+    }
+}
+
+/// Read a trial, checking columns, numbers and time order.
+pub fn read(path: &Path) -> Result<Trial> {
+    let shown = path.display();
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .with_context(|| format!("{shown}: cannot open"))?;
+    let headers = reader
+        .headers()
+        .with_context(|| format!("{shown}:1: cannot read the header"))?;
+    let column = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h == name)
+            .with_context(|| format!("{shown}:1: no `{name}` column (need t_s,x_m,f_n)"))
+    };
+    let (ti, xi, fi) = (column("t_s")?, column("x_m")?, column("f_n")?);
+    let mut trial = Trial::default();
+    for record in reader.records() {
+        let record = record.with_context(|| format!("{shown}: malformed CSV"))?;
+        let line = record.position().map_or(0, |p| p.line());
+        let field = |i: usize, name: &str| -> Result<f64> {
+            let text = record.get(i).unwrap_or("");
+            let value: f64 = text.parse().map_err(|_| {
+                anyhow::anyhow!("{shown}:{line}: `{name}` is not a number: {text:?}")
+            })?;
+            if !value.is_finite() {
+                bail!("{shown}:{line}: `{name}` is not finite: {text:?}");
+            }
+            Ok(value)
+        };
+        let (t, x, f) = (field(ti, "t_s")?, field(xi, "x_m")?, field(fi, "f_n")?);
+        if let Some(&last) = trial.t_s.last() {
+            if t <= last {
+                bail!("{shown}:{line}: time does not increase ({t} s after {last} s)");
+            }
+        }
+        trial.push(t, x, f);
+    }
+    if trial.is_empty() {
+        bail!("{shown}: no samples");
+    }
+    Ok(trial)
+}
+
+/// All `*.csv` files of a dataset directory, sorted by name.
+pub fn dataset_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot read directory", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "csv"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        bail!("{}: no *.csv trial files", dir.display());
+    }
+    Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &tempfile::TempDir, text: &str) -> PathBuf {
+        let path = dir.path().join("t.csv");
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    #[test]
+    fn reads_required_columns_in_any_order_and_ignores_extras() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(
+            &dir,
+            "f_n,phase,t_s,x_m\n0.5,out,0,0.001\n0.75,out,0.002,0.0011\n",
+        );
+        let trial = read(&path).unwrap();
+        assert_eq!(trial.t_s, [0.0, 0.002]);
+        assert_eq!(trial.x_m, [0.001, 0.0011]);
+        assert_eq!(trial.f_n, [0.5, 0.75]);
+    }
+
+    #[test]
+    fn bad_files_name_the_file_and_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let cases = [
+            ("t_s,x_m\n0,0\n", "t.csv:1: no `f_n` column"),
+            (
+                "t_s,x_m,f_n\n0,0,0\n0.002,abc,0\n",
+                "t.csv:3: `x_m` is not a number",
+            ),
+            (
+                "t_s,x_m,f_n\n0,0,0\n0.002,0,NaN\n",
+                "t.csv:3: `f_n` is not finite",
+            ),
+            (
+                "t_s,x_m,f_n\n0,0,0\n0,0,0\n",
+                "t.csv:3: time does not increase",
+            ),
+            ("t_s,x_m,f_n\n", "t.csv: no samples"),
+        ];
+        for (text, expected) in cases {
+            let err = format!("{:#}", read(&write(&dir, text)).unwrap_err());
+            assert!(err.contains(expected), "{err} lacks {expected}");
+        }
+    }
+}

@@ -1,0 +1,228 @@
+//! The firmware in QEMU and the core on the host, fed the same replay, must
+//! send the same bytes. These tests build the firmware images and run QEMU
+//! for real (installing it when missing); nothing here skips itself.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::{Mutex, OnceLock};
+use std::time::Duration;
+
+use host_tools::firmware::{self, Board, Serial};
+use host_tools::frames::decode_all;
+use host_tools::sim::{self, Plan, Tissue};
+use host_tools::twin;
+use needle_holder::config::DeviceConfig;
+use needle_holder::faults::Faults;
+use needle_holder::protocol::{EventKind, Frame, Status};
+use needle_holder::replay::{Record, ReplayHeader};
+
+/// One firmware build per board per test run, and one at a time (cargo
+/// serialises builds anyway; this keeps the output readable).
+fn elf(board: Board) -> PathBuf {
+    static BUILDS: OnceLock<Mutex<Vec<(Board, PathBuf)>>> = OnceLock::new();
+    let mut builds = BUILDS.get_or_init(Default::default).lock().unwrap();
+    if let Some((_, path)) = builds.iter().find(|(b, _)| *b == board) {
+        return path.clone();
+    }
+    firmware::ensure_qemu().expect("qemu-system-arm is needed and could not be installed");
+    let path = firmware::build(board).expect("firmware build");
+    builds.push((board, path.clone()));
+    path
+}
+
+struct Outcome {
+    frames: Vec<u8>,
+    defmt: Vec<u8>,
+    exit_code: Option<i32>,
+}
+
+fn run_in_qemu(board: Board, replay: &[u8], name: &str) -> Outcome {
+    let elf = elf(board);
+    let dir = tempfile::tempdir().unwrap();
+    let replay_path = dir.path().join(format!("{name}.replay"));
+    let frames_path = dir.path().join(format!("{name}.frames"));
+    std::fs::write(&replay_path, replay).unwrap();
+    let cmd = firmware::qemu_command(board, &elf, &replay_path, Serial::File(&frames_path), &[]);
+    let run = firmware::run_qemu(cmd, Duration::from_secs(120)).expect("QEMU run");
+    Outcome {
+        frames: std::fs::read(&frames_path).unwrap_or_default(),
+        defmt: run.defmt,
+        exit_code: run.status.code(),
+    }
+}
+
+fn liver_replay(noise_n: f64, seed: u64) -> Vec<u8> {
+    let plan = Plan {
+        noise_n,
+        seed,
+        ..Plan::PAPER
+    };
+    let (trial, _) = sim::insertion(&Tissue::LIVER_1, &plan);
+    let config = DeviceConfig::default();
+    sim::to_replay(&trial, 500, &config.load_cell, &config.encoder)
+}
+
+/// Index of the first differing byte, for a readable failure.
+fn first_difference(a: &[u8], b: &[u8]) -> Option<usize> {
+    a.iter()
+        .zip(b)
+        .position(|(x, y)| x != y)
+        .or((a.len() != b.len()).then(|| a.len().min(b.len())))
+}
+
+fn assert_twin(board: Board, replay: &[u8], name: &str) -> (Outcome, twin::TwinRun) {
+    let qemu = run_in_qemu(board, replay, name);
+    assert_eq!(
+        qemu.exit_code,
+        Some(0),
+        "{name} on {board:?}: firmware must exit 0"
+    );
+    let host = twin::run(replay);
+    assert!(!host.frames.is_empty());
+    if let Some(at) = first_difference(&qemu.frames, &host.frames) {
+        panic!(
+            "{name} on {board:?}: QEMU and host frames differ at byte {at} (QEMU {} bytes, host {} bytes)",
+            qemu.frames.len(),
+            host.frames.len()
+        );
+    }
+    (qemu, host)
+}
+
+fn last_status(frames: &[u8]) -> Status {
+    let (items, stats) = decode_all(frames).unwrap();
+    assert_eq!(stats.skipped_bytes, 0);
+    items
+        .iter()
+        .rev()
+        .find_map(|i| match i {
+            host_tools::frames::Item::Frame(Frame::Status(s)) => Some(*s),
+            _ => None,
+        })
+        .expect("a status frame")
+}
+
+#[test]
+fn cortex_m3_in_qemu_matches_the_host_twin_byte_for_byte() {
+    let replay = liver_replay(0.005, 7);
+    let (qemu, host) = assert_twin(Board::Lm3s6965, &replay, "liver1");
+    let (items, stats) = decode_all(&qemu.frames).unwrap();
+    assert_eq!((stats.gaps, stats.skipped_bytes), (0, 0));
+    assert_eq!(stats.samples as usize, (replay.len() - 8) / 6);
+    let kinds: Vec<EventKind> = items
+        .iter()
+        .filter_map(|i| match i {
+            host_tools::frames::Item::Frame(Frame::Event(e)) => Some(e.kind),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(kinds, [EventKind::Contact, EventKind::Puncture]);
+    assert!(!host.summary.halt && host.summary.faults.is_empty());
+}
+
+#[test]
+fn cortex_m0_image_matches_the_host_twin() {
+    assert_twin(Board::Lm3s6965M0, &liver_replay(0.005, 8), "liver1-m0");
+}
+
+#[test]
+fn cortex_m4f_on_mps2_matches_the_host_twin() {
+    assert_twin(Board::Mps2An386, &liver_replay(0.005, 9), "liver1-m4");
+}
+
+fn replay_of(records: impl IntoIterator<Item = Record>) -> Vec<u8> {
+    let mut bytes = ReplayHeader {
+        sample_rate_hz: 500,
+    }
+    .to_bytes()
+    .to_vec();
+    for r in records {
+        bytes.extend_from_slice(&r.to_bytes());
+    }
+    bytes
+}
+
+fn assert_fault(replay: &[u8], name: &str, fault: Faults) {
+    let (qemu, host) = assert_twin(Board::Lm3s6965, replay, name);
+    let status = last_status(&qemu.frames);
+    assert!(
+        status.faults.contains(fault),
+        "{name}: faults {:?}",
+        status.faults
+    );
+    assert!(status.halt, "{name}: halt must be asserted");
+    assert!(host.halt.high, "{name}: the twin's halt pin must be high");
+    let log = defmt_print(&elf(Board::Lm3s6965), &qemu.defmt);
+    assert!(
+        log.contains("halt asserted"),
+        "{name}: defmt log lacks the halt: {log}"
+    );
+    assert!(log.contains("replay done"), "{name}: defmt log: {log}");
+}
+
+#[test]
+fn odd_length_replay_raises_truncated_and_halts_without_panicking() {
+    let mut replay = liver_replay(0.0, 1);
+    replay.truncate(replay.len() - 3);
+    assert_fault(&replay, "truncated", Faults::REPLAY_TRUNCATED);
+}
+
+#[test]
+fn adc_stuck_at_full_scale_raises_saturated_and_halts() {
+    let full = DeviceConfig::default().load_cell.full_scale_counts;
+    let replay = replay_of((0..300).map(|i| Record {
+        adc_counts: if i < 100 { 0 } else { full },
+        encoder_count: i as u16,
+    }));
+    assert_fault(&replay, "saturated", Faults::ADC_SATURATED);
+}
+
+#[test]
+fn encoder_jump_beyond_the_mechanics_raises_a_fault_and_halts() {
+    let replay = replay_of((0..300u16).map(|i| Record {
+        adc_counts: 0,
+        encoder_count: if i < 150 { i * 6 } else { 20_000 + i * 6 },
+    }));
+    assert_fault(&replay, "jump", Faults::ENCODER_JUMP);
+}
+
+#[test]
+fn garbage_instead_of_a_replay_raises_bad_header_and_halts() {
+    assert_fault(
+        b"this is not a replay file at all",
+        "garbage",
+        Faults::REPLAY_BAD_HEADER,
+    );
+    assert_fault(b"", "empty", Faults::REPLAY_BAD_HEADER);
+}
+
+#[test]
+fn a_missing_replay_file_exits_with_code_2() {
+    let elf = elf(Board::Lm3s6965);
+    let dir = tempfile::tempdir().unwrap();
+    let cmd = firmware::qemu_command(
+        Board::Lm3s6965,
+        &elf,
+        &dir.path().join("does-not-exist.replay"),
+        Serial::File(&dir.path().join("frames")),
+        &[],
+    );
+    let run = firmware::run_qemu(cmd, Duration::from_secs(60)).unwrap();
+    assert_eq!(run.status.code(), Some(2));
+    assert!(defmt_print(&elf, &run.defmt).contains("cannot open replay file"));
+}
+
+/// Decode a defmt log with defmt-print, which the test command installs.
+fn defmt_print(elf: &Path, log: &[u8]) -> String {
+    use std::io::Write;
+    let mut child = Command::new("defmt-print")
+        .arg("-e")
+        .arg(elf)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("defmt-print must be installed (cargo install defmt-print --locked)");
+    child.stdin.take().unwrap().write_all(log).unwrap();
+    let out = child.wait_with_output().unwrap();
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}

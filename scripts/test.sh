@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The full test command (README, and what CI runs). Installs what a fresh
+# machine lacks, then: format, lints, firmware builds for the three targets,
+# and the host test suite, which runs the firmware in QEMU and compares it
+# byte for byte with the host twin.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n== %s\n' "$*"; }
+
+step "prerequisites"
+# rust-toolchain.toml names the thumb targets; `rustup target add` is a no-op
+# when they are there and installs them when not.
+rustup target add thumbv6m-none-eabi thumbv7m-none-eabi thumbv7em-none-eabihf
+rustup component add rustfmt clippy llvm-tools
+if ! command -v qemu-system-arm >/dev/null; then
+    SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+    $SUDO apt-get update
+    $SUDO apt-get install -y --no-install-recommends qemu-system-arm
+fi
+qemu-system-arm --version | head -n 1
+if ! command -v defmt-print >/dev/null; then
+    cargo install defmt-print --version 1.2.0 --locked
+fi
+defmt-print --version
+
+step "format"
+cargo fmt --all -- --check
+
+step "lints (host, and firmware for each board)"
+cargo clippy --workspace --all-targets -- -D warnings
+cargo clippy --target thumbv7m-none-eabi --lib --bins -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf --features board-mps2 --lib --bins -- -D warnings
+
+step "firmware builds"
+cargo fw-m0
+cargo fw-m3
+cargo fw-m4
+
+step "tests (host, QEMU, twin comparison)"
+log=$(mktemp)
+cargo test --workspace 2>&1 | tee "$log"
+# One closing line over all suites (cargo ends with the doc-test suite, which
+# may hold no test, and that last line is not the whole story).
+awk '/^test result:/ { p += $4; f += $6 } END { printf "\ntotal: %d passed, %d failed\n", p, f }' "$log"

@@ -1,0 +1,194 @@
+//! The device loop against mocked hardware: halt line transactions, frame
+//! loss accounting, and no panic for any input.
+
+use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction};
+use needle_holder::config::DeviceConfig;
+use needle_holder::device::Device;
+use needle_holder::faults::Faults;
+use needle_holder::hal::{AdcSample, EncoderCounter, LoadCellAdc};
+use needle_holder::pipeline::{PipelineState, RawSample};
+use needle_holder::protocol::{self, Frame};
+use needle_holder::replay;
+use proptest::prelude::*;
+
+struct Adc(Result<AdcSample, ()>);
+impl LoadCellAdc for Adc {
+    type Error = ();
+    fn read(&mut self) -> Result<AdcSample, ()> {
+        self.0
+    }
+}
+
+struct Enc(u16);
+impl EncoderCounter for Enc {
+    fn count(&mut self) -> u16 {
+        self.0
+    }
+}
+
+fn ok(counts: i32) -> Adc {
+    Adc(Ok(AdcSample {
+        counts,
+        saturated: false,
+    }))
+}
+
+fn frames(bytes: &[u8]) -> Vec<Frame> {
+    bytes
+        .split(|&b| b == 0)
+        .filter(|chunk| !chunk.is_empty())
+        .map(|chunk| protocol::decode(chunk).expect("valid frame"))
+        .collect()
+}
+
+#[test]
+fn halt_is_released_at_start_and_asserted_once_on_the_first_fault() {
+    let mut pin = PinMock::new(&[Transaction::set(State::Low), Transaction::set(State::High)]);
+    let mut sink = Vec::new();
+    let mut device = Device::new(DeviceConfig::default(), &mut sink, pin.clone());
+    device.tick(&mut ok(0), &mut Enc(0));
+    device.tick(&mut Adc(Err(())), &mut Enc(1));
+    // A second, different fault keeps the (already asserted) line as it is.
+    device.tick(&mut ok(0), &mut Enc(30_000));
+    let summary = device.finish();
+    assert!(summary.halt);
+    assert_eq!(
+        summary.faults,
+        Faults::ADC_ERROR.union(Faults::ENCODER_JUMP)
+    );
+    pin.done();
+}
+
+#[test]
+fn a_fault_sends_an_event_and_a_status_right_away() {
+    let mut sink = Vec::new();
+    let mut pin = PinMock::new(&[Transaction::set(State::Low), Transaction::set(State::High)]);
+    let mut device = Device::new(DeviceConfig::default(), &mut sink, pin.clone());
+    device.tick(
+        &mut Adc(Ok(AdcSample {
+            counts: 1 << 23,
+            saturated: true,
+        })),
+        &mut Enc(0),
+    );
+    drop(device);
+    pin.done();
+    let frames = frames(&sink);
+    assert!(matches!(frames[0], Frame::Header(_)));
+    assert!(matches!(frames[1], Frame::Sample(_)));
+    assert!(matches!(frames[2], Frame::Event(e) if e.kind == protocol::EventKind::Fault));
+    assert!(
+        matches!(frames[3], Frame::Status(s) if s.halt && s.faults.contains(Faults::ADC_SATURATED))
+    );
+}
+
+/// A sink that refuses every other write, like a full TX buffer would.
+struct Flaky {
+    calls: u32,
+    accepted: Vec<u8>,
+}
+impl embedded_io::ErrorType for Flaky {
+    type Error = embedded_io::ErrorKind;
+}
+impl embedded_io::Write for Flaky {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        self.calls += 1;
+        if self.calls.is_multiple_of(2) {
+            return Err(embedded_io::ErrorKind::Other);
+        }
+        self.accepted.extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+#[test]
+fn refused_frames_are_counted_and_show_as_index_gaps() {
+    let mut sink = Flaky {
+        calls: 0,
+        accepted: Vec::new(),
+    };
+    let mut pin = PinMock::new(&[Transaction::set(State::Low)]);
+    let mut device = Device::new(DeviceConfig::default(), &mut sink, pin.clone());
+    for i in 0..100 {
+        device.tick(&mut ok(0), &mut Enc(i));
+    }
+    let summary = device.finish();
+    pin.done();
+    // Header accepted (call 1); samples alternate refused/accepted; the
+    // final status is call 102 and refused too.
+    assert_eq!(summary.frames_dropped, 51);
+    let indices: Vec<u32> = frames(&sink.accepted)
+        .iter()
+        .filter_map(|f| {
+            if let Frame::Sample(s) = f {
+                Some(s.index)
+            } else {
+                None
+            }
+        })
+        .collect();
+    assert_eq!(indices, (1..100).step_by(2).collect::<Vec<_>>());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Any readings, including errors, saturation and wild encoder
+    /// values: no panic, indices count up, and faults never fire events
+    /// other than `fault`.
+    #[test]
+    fn the_pipeline_never_panics_and_faulty_samples_fire_no_events(
+        samples in prop::collection::vec((any::<Option<i32>>(), any::<bool>(), any::<u16>()), 1..400)
+    ) {
+        let config = DeviceConfig::default();
+        let mut state = PipelineState::default();
+        for (i, (counts, saturated, encoder_count)) in samples.into_iter().enumerate() {
+            let adc = counts.map(|counts| AdcSample { counts, saturated });
+            let out = config.step(&mut state, RawSample { adc, encoder_count });
+            prop_assert_eq!(out.sample.index, i as u32);
+            prop_assert_eq!(out.sample.residual, out.sample.force.sub(out.sample.model));
+            if !out.faults.is_empty() {
+                prop_assert!(out.event.is_none());
+            }
+        }
+    }
+
+    /// Any bytes as a replay file: no panic, and anything that is not a
+    /// whole number of records after a valid header raises a fault.
+    #[test]
+    fn any_replay_bytes_run_without_panic(bytes in prop::collection::vec(any::<u8>(), 0..2000)) {
+        let mut sink = Vec::new();
+        let mut halt = RecordingPin::default();
+        let summary = replay::run(bytes.as_slice(), DeviceConfig::default(), &mut sink, &mut halt);
+        let valid_header = bytes.len() >= 8 && replay::ReplayHeader::parse(bytes[..8].try_into().unwrap()).is_some();
+        if !valid_header {
+            prop_assert!(summary.faults.contains(Faults::REPLAY_BAD_HEADER));
+        } else if (bytes.len() - 8) % 6 != 0 {
+            prop_assert!(summary.faults.contains(Faults::REPLAY_TRUNCATED));
+        }
+        prop_assert_eq!(summary.halt, !summary.faults.is_empty());
+        prop_assert_eq!(halt.high, summary.halt);
+    }
+}
+
+/// A pin for random input, whose transactions cannot be listed in advance.
+#[derive(Default)]
+struct RecordingPin {
+    high: bool,
+}
+impl embedded_hal::digital::ErrorType for RecordingPin {
+    type Error = core::convert::Infallible;
+}
+impl embedded_hal::digital::OutputPin for RecordingPin {
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        self.high = true;
+        Ok(())
+    }
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        self.high = false;
+        Ok(())
+    }
+}
