@@ -3,6 +3,7 @@
 use crate::calibration::{Encoder, LoadCell};
 use crate::detect::DetectConfig;
 use crate::kinematics::VelocityConfig;
+use crate::model::params::{ParamError, TissueParams, LIVER1};
 use crate::model::ModelConfig;
 
 /// Configuration of the whole per-sample pipeline.
@@ -20,25 +21,40 @@ pub struct DeviceConfig {
     pub detect: DetectConfig,
 }
 
+/// The firmware's default: liver 1 of the paper, converted at compile time.
+pub const DEFAULT: DeviceConfig = match DeviceConfig::for_tissue(&LIVER1) {
+    Ok(config) => config,
+    Err(_) => panic!("liver1 in the tissue library is invalid"),
+};
+
 impl Default for DeviceConfig {
-    /// The bench setup of the paper: 10 N load cell, 1 µm encoder, 500 Hz.
     fn default() -> Self {
-        Self {
+        DEFAULT
+    }
+}
+
+impl DeviceConfig {
+    /// The bench setup of the paper (10 N load cell, 1 µm encoder, 500 Hz,
+    /// velocity over 10 samples) with the model and detectors of `tissue`.
+    pub const fn for_tissue(tissue: &TissueParams) -> Result<Self, ParamError> {
+        let model = match ModelConfig::from_params(tissue) {
+            Ok(model) => model,
+            Err(e) => return Err(e),
+        };
+        Ok(Self {
             load_cell: LoadCell::TEN_NEWTON_24_BIT,
             encoder: Encoder::ONE_MICRON,
             velocity: VelocityConfig {
                 sample_rate_hz: 500,
                 window: 10,
             },
-            model: ModelConfig,
-            detect: DetectConfig::default(),
-        }
+            model,
+            detect: DetectConfig::for_tissue(tissue),
+        })
     }
-}
 
-impl DeviceConfig {
     /// The same configuration at another sample rate.
-    pub fn with_sample_rate(mut self, sample_rate_hz: u16) -> Self {
+    pub const fn with_sample_rate(mut self, sample_rate_hz: u16) -> Self {
         self.velocity.sample_rate_hz = sample_rate_hz;
         self
     }

@@ -6,6 +6,8 @@ use crate::detect::{DetectInput, DetectState};
 use crate::faults::Faults;
 use crate::hal::AdcSample;
 use crate::kinematics::{EncoderTracker, VelocityState};
+use crate::model::phase::PhaseState;
+use crate::model::ModelState;
 use crate::protocol::{Event, Sample};
 use crate::units::MicroNewtons;
 
@@ -25,6 +27,8 @@ pub struct PipelineState {
     encoder: EncoderTracker,
     velocity: VelocityState,
     detect: DetectState,
+    phase: PhaseState,
+    model: ModelState,
     last_force: MicroNewtons,
 }
 
@@ -40,7 +44,8 @@ pub struct StepOutput {
 }
 
 impl DeviceConfig {
-    /// Process one raw sample.
+    /// Process one raw sample: calibrate, kinematics, detectors, phase,
+    /// model.
     ///
     /// A sample whose force is unknown (ADC error or saturation) or whose
     /// position is doubtful (encoder jump) is still reported, but the
@@ -74,13 +79,21 @@ impl DeviceConfig {
         let v = state.velocity.update(&self.velocity, x);
 
         let event = if faults.is_empty() {
-            self.detect
-                .update(&mut state.detect, DetectInput { index, x, v, force })
+            let input = DetectInput {
+                index,
+                phase: state.phase.phase,
+                x,
+                v,
+                force,
+            };
+            self.detect.update(&mut state.detect, input)
         } else {
             None
         };
-        let phase = state.detect.phase();
-        let model = self.model.expected(phase, x, v);
+        let placed = event.map(|e| (e.kind, e.x));
+        self.model.phase.update(&mut state.phase, placed, x, v);
+        let model = self.model.expected(&mut state.model, &state.phase, x, v);
+        let phase = state.phase.phase;
         let sample = Sample {
             index,
             x,

@@ -63,9 +63,10 @@ macro_rules! quantity {
             pub fn $si_fn(self) -> f64 {
                 self.0 as f64 / $per_si as f64
             }
-            /// From SI units, rounded to nearest and saturated. Host side
-            /// and configuration only (uses floating point).
-            pub fn $from_si(si: f64) -> Self {
+            /// From SI units, rounded to nearest and saturated (NaN to 0).
+            /// Host side and configuration only (floating point); `const`
+            /// so compiled-in parameters convert at compile time.
+            pub const fn $from_si(si: f64) -> Self {
                 let scaled = si * $per_si as f64;
                 // `as` saturates and maps NaN to 0, which is what we want here.
                 Self(if scaled >= 0.0 { scaled + 0.5 } else { scaled - 0.5 } as i32)

@@ -15,7 +15,8 @@ use needle_holder::protocol::{Event, EventKind, Frame, Sample};
 use crate::decode::{describe, summary_line};
 use crate::firmware::{self, Board, Serial};
 use crate::frames::{Item, StreamDecoder};
-use crate::sim::{self, Plan, Tissue};
+use crate::sim::{self, Plan};
+use needle_holder::model::params::LIVER1;
 
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
@@ -30,7 +31,7 @@ pub struct DemoArgs {
 const QEMU_TIMEOUT: Duration = Duration::from_secs(120);
 
 pub fn run(args: &DemoArgs) -> Result<()> {
-    let tissue = Tissue::LIVER_1;
+    let tissue = LIVER1;
     let plan = Plan::PAPER;
     println!(
         "needle demo: liver 1 of the paper (a1 = {} N/m, a2 = {} N/m², puncture at {:.2} mm), {} mm/s, {} Hz",

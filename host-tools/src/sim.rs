@@ -1,9 +1,8 @@
 //! Insertion generator: one trial of the paper's protocol with known truth,
 //! and its conversion to a firmware replay (raw ADC and encoder counts).
 //!
-//! The force law here is the paper's model written directly in `f64`
-//! (stiffness eq. 4 before puncture; damping friction b·l·v and constant
-//! cutting after). It serves the demo; the simulator issue grows it.
+//! The force law is the core's `f64` reference model
+//! (`needle_holder::model::reference`) driven by the true geometry.
 
 use needle_holder::calibration::{Encoder, LoadCell};
 use needle_holder::replay::{Record, ReplayHeader};
@@ -13,45 +12,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use crate::trial::Trial;
-
-/// Tissue parameters, SI.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Tissue {
-    /// Stiffness eq. 4, linear term, N/m.
-    pub a1_n_per_m: f64,
-    /// Stiffness eq. 4, quadratic term, N/m².
-    pub a2_n_per_m2: f64,
-    /// Deformation at which the capsule gives way, m.
-    pub puncture_depth_m: f64,
-    /// Surface relaxation ρ: x_s3 = x_s1 + ρ·(x_s2 − x_s1).
-    pub relaxation: f64,
-    /// Cutting force, N.
-    pub cutting_force_n: f64,
-    /// Damping per unit length, inserting, N·s/m².
-    pub bp_ns_per_m2: f64,
-    /// Damping per unit length, withdrawing, N·s/m².
-    pub bn_ns_per_m2: f64,
-}
-
-impl Tissue {
-    /// Liver 1 of the paper: Table 1 read in mm (DESIGN.md §1), cutting
-    /// 0.94 N, b_p = 1327 (slow insertion), b_n = 458 N·s/m². The paper
-    /// gives no relaxation; 0.5 is our assumption.
-    pub const LIVER_1: Self = Self {
-        a1_n_per_m: 48.0,
-        a2_n_per_m2: 5200.0,
-        puncture_depth_m: 0.01665,
-        relaxation: 0.5,
-        cutting_force_n: 0.94,
-        bp_ns_per_m2: 1327.0,
-        bn_ns_per_m2: 458.0,
-    };
-
-    /// Capsule force at deformation `d_m` (eq. 4).
-    pub fn stiffness_n(&self, d_m: f64) -> f64 {
-        self.a1_n_per_m * d_m + self.a2_n_per_m2 * d_m * d_m
-    }
-}
+pub use needle_holder::model::params::TissueParams;
 
 /// The motion of one trial.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -93,7 +54,7 @@ pub struct Truth {
 }
 
 /// Generate one insertion: in, dwell, out, at constant speed.
-pub fn insertion(tissue: &Tissue, plan: &Plan) -> (Trial, Truth) {
+pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
     let dt = 1.0 / plan.rate_hz;
     let deepest = plan.surface_x_m + plan.depth_m;
     let t_in = deepest / plan.speed_mps;
@@ -106,6 +67,7 @@ pub fn insertion(tissue: &Tissue, plan: &Plan) -> (Trial, Truth) {
     let mut truth = Truth::default();
     let mut punctured_at: Option<f64> = None;
     let mut cut_to_m = 0.0_f64;
+    let mut last_sliding_n = 0.0;
     for i in 0..n {
         let t = i as f64 * dt;
         let (x, v) = if t < t_in {
@@ -138,19 +100,11 @@ pub fn insertion(tissue: &Tissue, plan: &Plan) -> (Trial, Truth) {
             }
             Some(x_s2) => {
                 let x_s3 = plan.surface_x_m + tissue.relaxation * (x_s2 - plan.surface_x_m);
-                let l = (x - x_s3).max(0.0);
-                let b = if v >= 0.0 {
-                    tissue.bp_ns_per_m2
-                } else {
-                    tissue.bn_ns_per_m2
-                };
-                let cutting = if v > 0.0 && x > cut_to_m {
-                    tissue.cutting_force_n
-                } else {
-                    0.0
-                };
+                let (friction, last) = tissue.friction_n(v, x - x_s3, last_sliding_n);
+                last_sliding_n = last;
+                let cutting = tissue.cutting_n(v, x >= cut_to_m);
                 cut_to_m = cut_to_m.max(x);
-                b * l * v + cutting
+                friction + cutting
             }
         };
         trial.push(t, x, f + noise.sample(&mut rng));
@@ -181,6 +135,7 @@ pub fn to_replay(trial: &Trial, rate_hz: u16, load_cell: &LoadCell, encoder: &En
 #[cfg(test)]
 mod tests {
     use super::*;
+    use needle_holder::model::params::LIVER1;
 
     #[test]
     fn liver_1_punctures_at_the_papers_force_and_depth() {
@@ -188,7 +143,7 @@ mod tests {
             noise_n: 0.0,
             ..Plan::PAPER
         };
-        let (trial, truth) = insertion(&Tissue::LIVER_1, &plan);
+        let (trial, truth) = insertion(&LIVER1, &plan);
         assert!((truth.puncture_force_n - 2.24).abs() < 0.01, "{truth:?}");
         assert!((truth.puncture_x_m - truth.contact_x_m - 0.01665).abs() < 1e-5);
         // After puncture the force falls to cutting plus a little friction.
@@ -206,8 +161,8 @@ mod tests {
 
     #[test]
     fn same_seed_same_bytes() {
-        let a = insertion(&Tissue::LIVER_1, &Plan::PAPER).0;
-        let b = insertion(&Tissue::LIVER_1, &Plan::PAPER).0;
+        let a = insertion(&LIVER1, &Plan::PAPER).0;
+        let b = insertion(&LIVER1, &Plan::PAPER).0;
         assert_eq!(a, b);
     }
 }

@@ -2,9 +2,10 @@
 
 use std::process::Command;
 
-use host_tools::sim::{self, Plan, Tissue};
+use host_tools::sim::{self, Plan};
 use host_tools::twin;
 use needle_holder::config::DeviceConfig;
+use needle_holder::model::params::LIVER1;
 use rand::{RngCore, SeedableRng};
 
 fn needle(args: &[&std::ffi::OsStr]) -> std::process::Output {
@@ -37,7 +38,7 @@ fn capture_to_trial_csv_round_trips_the_simulated_trial() {
         noise_n: 0.0,
         ..Plan::PAPER
     };
-    let (trial, _) = sim::insertion(&Tissue::LIVER_1, &plan);
+    let (trial, _) = sim::insertion(&LIVER1, &plan);
     let config = DeviceConfig::default();
     let replay = sim::to_replay(&trial, 500, &config.load_cell, &config.encoder);
     let capture = twin::run(&replay).frames;

@@ -9,10 +9,11 @@ use std::time::Duration;
 
 use host_tools::firmware::{self, Board, Serial};
 use host_tools::frames::decode_all;
-use host_tools::sim::{self, Plan, Tissue};
+use host_tools::sim::{self, Plan};
 use host_tools::twin;
 use needle_holder::config::DeviceConfig;
 use needle_holder::faults::Faults;
+use needle_holder::model::params::LIVER1;
 use needle_holder::protocol::{EventKind, Frame, Status};
 use needle_holder::replay::{Record, ReplayHeader};
 
@@ -57,7 +58,7 @@ fn liver_replay(noise_n: f64, seed: u64) -> Vec<u8> {
         seed,
         ..Plan::PAPER
     };
-    let (trial, _) = sim::insertion(&Tissue::LIVER_1, &plan);
+    let (trial, _) = sim::insertion(&LIVER1, &plan);
     let config = DeviceConfig::default();
     sim::to_replay(&trial, 500, &config.load_cell, &config.encoder)
 }

@@ -1,19 +1,105 @@
-//! The force the tissue should produce at the needle's current state.
+//! The force the tissue should produce at the needle's current state: the
+//! paper's model (eqs. 1–4) in fixed point, every sample.
 //!
-//! Placeholder seam: the paper's model (capsule stiffness, Karnopp friction,
-//! cutting) replaces [`ModelConfig::expected`] in the model issue. Until
-//! then the model expects no force, so the residual is the measured force.
+//! f = stiffness(x − x_s1) while loading the capsule; after puncture
+//! f = friction(v, l) + cutting, with l = x − x_s3 the needle length in
+//! tissue (Karnopp friction per unit length, see [`friction`]) and cutting
+//! a constant while the tip advances into uncut tissue. Zero out of tissue.
+//!
+//! Configuration ([`ModelConfig`], built from [`params::TissueParams`] at
+//! compile time for the firmware) is apart from state ([`ModelState`]).
+//! The `f64` twin in [`reference`] is the test oracle; the fixed-point
+//! error against it is bounded by the property tests in `tests/model.rs`.
 
+pub mod fixed;
+pub mod friction;
+pub mod params;
+pub mod phase;
+pub mod reference;
+pub mod stiffness;
+
+use self::fixed::FractionQ16;
+use self::friction::{Friction, FrictionState};
+use self::params::{ParamError, TissueParams};
+use self::phase::{PhaseConfig, PhaseState};
+use self::stiffness::Stiffness;
 use crate::protocol::Phase;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
-/// Model parameters (none yet).
+/// The model's parameters in fixed point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ModelConfig {
+    /// Capsule stiffness.
+    pub stiffness: Stiffness,
+    /// Friction along the needle.
+    pub friction: Friction,
+    /// Cutting force.
+    pub cutting: MicroNewtons,
+    /// Phase machine.
+    pub phase: PhaseConfig,
+}
+
+/// Model state.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct ModelConfig;
+pub struct ModelState {
+    /// Karnopp memory.
+    pub friction: FrictionState,
+}
+
+/// Outward speed that marks a withdrawal: 0.5 mm/s, well above the
+/// velocity noise (20 µm/s at 500 Hz) and below the slowest insertions.
+pub const WITHDRAWAL_SPEED: NanometresPerSecond = NanometresPerSecond(500_000);
 
 impl ModelConfig {
-    /// Expected force for the needle at `x` moving at `v` in `phase`.
-    pub fn expected(&self, _phase: Phase, _x: Nanometres, _v: NanometresPerSecond) -> MicroNewtons {
-        MicroNewtons::ZERO
+    /// Convert and check SI parameters. `const`: the firmware's defaults
+    /// are converted by the compiler, so no float code reaches the chip.
+    pub const fn from_params(p: &TissueParams) -> Result<Self, ParamError> {
+        if let Err(e) = p.validate() {
+            return Err(e);
+        }
+        Ok(Self {
+            stiffness: Stiffness::from_params(p),
+            friction: Friction::from_params(p),
+            cutting: MicroNewtons::from_n(p.cutting_force_n),
+            phase: PhaseConfig {
+                relaxation: FractionQ16::from_ratio(p.relaxation),
+                withdrawal_speed: WITHDRAWAL_SPEED,
+            },
+        })
+    }
+
+    /// Expected force for the needle at `x` moving at `v`, given the phase
+    /// and surface positions.
+    pub fn expected(
+        &self,
+        state: &mut ModelState,
+        phase: &PhaseState,
+        x: Nanometres,
+        v: NanometresPerSecond,
+    ) -> MicroNewtons {
+        match phase.phase {
+            Phase::Out => MicroNewtons::ZERO,
+            Phase::Loading => self.stiffness.force(phase.deformation(x)),
+            Phase::Inserted | Phase::Withdrawal => {
+                let l = phase.length_in_tissue(x);
+                let friction = self.friction.force(&mut state.friction, v, l);
+                friction.add(self.cutting_now(phase, x, v))
+            }
+        }
+    }
+
+    /// Cutting force now: only while advancing (v ≥ Δv/2) at the deepest
+    /// point reached, i.e. into tissue not cut before.
+    fn cutting_now(
+        &self,
+        phase: &PhaseState,
+        x: Nanometres,
+        v: NanometresPerSecond,
+    ) -> MicroNewtons {
+        if v.0 >= self.friction.half_band.0 && x >= phase.deepest {
+            self.cutting
+        } else {
+            MicroNewtons::ZERO
+        }
     }
 }

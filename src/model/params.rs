@@ -1,0 +1,243 @@
+//! Tissue parameters in SI units: what the tissue library (`tissues.toml`)
+//! holds, what `needle fit` estimates, and what the fixed-point model is
+//! built from ([`super::ModelConfig::from_params`]).
+//!
+//! Signs: force is positive when it resists insertion; `cn ≤ 0 ≤ cp`,
+//! `dn ≤ 0 ≤ dp`, `bp, bn ≥ 0` (DESIGN.md §1).
+
+use serde::{Deserialize, Serialize};
+
+/// Which stiffness law the capsule follows before puncture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StiffnessLaw {
+    /// f = a1·x + a2·x² (paper eq. 4).
+    Polynomial,
+    /// f = x/(a·x + b) (paper eq. 3).
+    Rational,
+}
+
+/// One tissue's parameter set.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TissueParams {
+    /// Stiffness law in use.
+    pub stiffness_law: StiffnessLaw,
+    /// Eq. 4 linear term, N/m.
+    pub a1_n_per_m: f64,
+    /// Eq. 4 quadratic term, N/m².
+    pub a2_n_per_m2: f64,
+    /// Eq. 3 `a`, 1/N.
+    pub rational_a_per_n: f64,
+    /// Eq. 3 `b`, m/N (1/b is the stiffness at contact).
+    pub rational_b_m_per_n: f64,
+    /// Expected peak force at capsule puncture, N.
+    pub puncture_force_n: f64,
+    /// Expected deformation at puncture (x_s2 − x_s1), m.
+    pub puncture_depth_m: f64,
+    /// Expected force right after the puncture drop, N.
+    pub puncture_drop_to_n: f64,
+    /// Surface relaxation ρ in x_s3 = x_s1 + ρ·(x_s2 − x_s1), 0–1.
+    pub relaxation: f64,
+    /// Cutting force while advancing into uncut tissue, N.
+    pub cutting_force_n: f64,
+    /// Dynamic friction per unit length, inserting, N/m (≥ 0).
+    pub cp_n_per_m: f64,
+    /// Dynamic friction per unit length, withdrawing, N/m (≤ 0).
+    pub cn_n_per_m: f64,
+    /// Damping per unit length, inserting, N·s/m² (≥ 0).
+    pub bp_ns_per_m2: f64,
+    /// Damping per unit length, withdrawing, N·s/m² (≥ 0).
+    pub bn_ns_per_m2: f64,
+    /// Static friction bound per unit length, inserting side, N/m (≥ 0).
+    pub dp_n_per_m: f64,
+    /// Static friction bound per unit length, withdrawing side, N/m (≤ 0).
+    pub dn_n_per_m: f64,
+    /// Half width Δv/2 of the zero-velocity band, m/s (> 0).
+    pub half_band_mps: f64,
+    /// Force that marks contact with the surface, N (> 0).
+    pub contact_force_n: f64,
+}
+
+/// A parameter that cannot be used, and why.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ParamError {
+    /// The offending key, as in the TOML file.
+    pub field: &'static str,
+    /// What is wrong with it.
+    pub problem: &'static str,
+}
+
+impl core::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "`{}` {}", self.field, self.problem)
+    }
+}
+
+const fn check(ok: bool, field: &'static str, problem: &'static str) -> Result<(), ParamError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ParamError { field, problem })
+    }
+}
+
+/// Fails the enclosing `const fn` with the first error.
+macro_rules! check_all {
+    ($($e:expr),* $(,)?) => {
+        $(if let Err(e) = $e { return Err(e); })*
+    };
+}
+
+impl TissueParams {
+    /// Check every field; the error names the first bad one. `const` so the
+    /// firmware's compiled-in library is checked at compile time.
+    pub const fn validate(&self) -> Result<(), ParamError> {
+        const NOT_FINITE: &str = "is not a finite number";
+        let p = self;
+        let fields: [(f64, &str); 17] = [
+            (p.a1_n_per_m, "a1_n_per_m"),
+            (p.a2_n_per_m2, "a2_n_per_m2"),
+            (p.rational_a_per_n, "rational_a_per_n"),
+            (p.rational_b_m_per_n, "rational_b_m_per_n"),
+            (p.puncture_force_n, "puncture_force_n"),
+            (p.puncture_depth_m, "puncture_depth_m"),
+            (p.puncture_drop_to_n, "puncture_drop_to_n"),
+            (p.relaxation, "relaxation"),
+            (p.cutting_force_n, "cutting_force_n"),
+            (p.cp_n_per_m, "cp_n_per_m"),
+            (p.cn_n_per_m, "cn_n_per_m"),
+            (p.bp_ns_per_m2, "bp_ns_per_m2"),
+            (p.bn_ns_per_m2, "bn_ns_per_m2"),
+            (p.dp_n_per_m, "dp_n_per_m"),
+            (p.dn_n_per_m, "dn_n_per_m"),
+            (p.half_band_mps, "half_band_mps"),
+            (p.contact_force_n, "contact_force_n"),
+        ];
+        let mut i = 0;
+        while i < fields.len() {
+            check_all!(check(fields[i].0.is_finite(), fields[i].1, NOT_FINITE));
+            i += 1;
+        }
+        check_all!(
+            check(
+                p.a1_n_per_m >= 0.0,
+                "a1_n_per_m",
+                "is negative (stiffness must resist)"
+            ),
+            check(
+                p.a2_n_per_m2 >= 0.0,
+                "a2_n_per_m2",
+                "is negative (stiffness must resist)"
+            ),
+            check(
+                p.puncture_force_n > 0.0,
+                "puncture_force_n",
+                "must be positive"
+            ),
+            check(
+                p.puncture_depth_m > 0.0,
+                "puncture_depth_m",
+                "must be positive"
+            ),
+            check(
+                p.puncture_drop_to_n >= 0.0,
+                "puncture_drop_to_n",
+                "is negative"
+            ),
+            check(
+                p.puncture_drop_to_n < p.puncture_force_n,
+                "puncture_drop_to_n",
+                "must be below puncture_force_n"
+            ),
+            check(
+                p.relaxation >= 0.0 && p.relaxation <= 1.0,
+                "relaxation",
+                "must be within 0..=1"
+            ),
+            check(p.cutting_force_n >= 0.0, "cutting_force_n", "is negative"),
+            check(
+                p.cp_n_per_m >= 0.0,
+                "cp_n_per_m",
+                "is negative (need cn <= 0 <= cp)"
+            ),
+            check(
+                p.cn_n_per_m <= 0.0,
+                "cn_n_per_m",
+                "is positive (need cn <= 0 <= cp)"
+            ),
+            check(p.bp_ns_per_m2 >= 0.0, "bp_ns_per_m2", "is negative"),
+            check(p.bn_ns_per_m2 >= 0.0, "bn_ns_per_m2", "is negative"),
+            check(
+                p.dp_n_per_m >= 0.0,
+                "dp_n_per_m",
+                "is negative (need dn <= 0 <= dp)"
+            ),
+            check(
+                p.dn_n_per_m <= 0.0,
+                "dn_n_per_m",
+                "is positive (need dn <= 0 <= dp)"
+            ),
+            check(
+                p.half_band_mps > 0.0,
+                "half_band_mps",
+                "must be positive (a band of zero width)"
+            ),
+            check(
+                p.contact_force_n > 0.0,
+                "contact_force_n",
+                "must be positive"
+            ),
+        );
+        match p.stiffness_law {
+            StiffnessLaw::Polynomial => check(
+                p.a1_n_per_m > 0.0 || p.a2_n_per_m2 > 0.0,
+                "a1_n_per_m",
+                "and a2_n_per_m2 are both zero: the capsule would have no stiffness",
+            ),
+            StiffnessLaw::Rational => check(
+                p.rational_b_m_per_n > 0.0,
+                "rational_b_m_per_n",
+                "must be positive (1/b is the stiffness at contact)",
+            ),
+        }
+    }
+}
+
+include!(concat!(env!("OUT_DIR"), "/tissues.rs"));
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_library_is_valid_and_liver_1_matches_the_paper() {
+        for (name, params) in LIBRARY {
+            assert_eq!(params.validate(), Ok(()), "{name}");
+        }
+        assert_eq!(LIVER1.a1_n_per_m, 48.0);
+        assert_eq!(LIVER1.a2_n_per_m2, 5200.0);
+        assert_eq!(LIVER1.bp_ns_per_m2, 1327.0);
+        assert_eq!(tissue("liver1_journal").map(|p| p.cp_n_per_m), Some(10.57));
+        assert!(tissue("spleen").is_none());
+    }
+
+    #[test]
+    fn invalid_parameters_are_rejected_naming_the_field() {
+        type Spoil = fn(&mut TissueParams);
+        let cases: [(Spoil, &str); 7] = [
+            (|p| p.a1_n_per_m = f64::NAN, "a1_n_per_m"),
+            (|p| p.a2_n_per_m2 = -1.0, "a2_n_per_m2"),
+            (|p| p.dp_n_per_m = -0.1, "dp_n_per_m"),
+            (|p| p.dn_n_per_m = 0.1, "dn_n_per_m"),
+            (|p| p.half_band_mps = 0.0, "half_band_mps"),
+            (|p| p.relaxation = 1.5, "relaxation"),
+            (|p| p.bp_ns_per_m2 = f64::INFINITY, "bp_ns_per_m2"),
+        ];
+        for (spoil, field) in cases {
+            let mut p = LIVER1;
+            spoil(&mut p);
+            assert_eq!(p.validate().map_err(|e| e.field), Err(field));
+        }
+    }
+}
