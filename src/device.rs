@@ -10,8 +10,7 @@ use crate::faults::Faults;
 use crate::hal::{EncoderCounter, LoadCellAdc};
 use crate::pipeline::{PipelineState, RawSample};
 use crate::protocol::{
-    encode, Event, EventKind, Frame, FrameBuffer, Header, Status, MAX_ENCODED_FRAME,
-    PROTOCOL_VERSION, STATUS_PERIOD_SAMPLES,
+    Event, EventKind, Frame, FrameEncoder, Header, Status, PROTOCOL_VERSION, STATUS_PERIOD_SAMPLES,
 };
 use crate::units::{MicroNewtons, Nanometres};
 
@@ -22,6 +21,7 @@ pub struct Device<W: Write, H: OutputPin> {
     config: DeviceConfig,
     state: PipelineState,
     sink: W,
+    encoder: FrameEncoder,
     halt: H,
     halt_asserted: bool,
     faults: Faults,
@@ -50,6 +50,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             config,
             state: PipelineState::default(),
             sink,
+            encoder: FrameEncoder::default(),
             halt,
             halt_asserted: false,
             faults: Faults::NONE,
@@ -150,8 +151,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
     }
 
     fn send(&mut self, frame: &Frame) {
-        let mut buf: FrameBuffer = [0; MAX_ENCODED_FRAME];
-        let bytes = encode(frame, &mut buf);
+        let bytes = self.encoder.encode(frame);
         if bytes.is_empty() || self.sink.write_all(bytes).is_err() {
             self.frames_dropped = self.frames_dropped.saturating_add(1);
         }

@@ -96,12 +96,18 @@ impl VelocityState {
         // Cannot fail: at most `window` ≤ capacity − 1 entries remain.
         let _ = self.history.push_back(x.0);
         let oldest = self.history.front().copied().unwrap_or(x.0);
-        let span = (self.history.len() - 1) as i64;
+        let span = (self.history.len() - 1) as i32;
         if span == 0 {
             return NanometresPerSecond::ZERO;
         }
-        let dx = x.0 as i64 - oldest as i64;
-        NanometresPerSecond(saturate_i32(dx * config.sample_rate_hz as i64 / span))
+        let scaled = (x.0 as i64 - oldest as i64) * config.sample_rate_hz as i64;
+        // 64-bit division is a library call on Cortex-M (~100 instructions);
+        // the product fits 32 bits for any speed below 2^31/N nm/s, and both
+        // divisions truncate toward zero, so the result is the same.
+        NanometresPerSecond(match i32::try_from(scaled) {
+            Ok(s) => s / span,
+            Err(_) => saturate_i32(scaled / span as i64),
+        })
     }
 }
 

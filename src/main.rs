@@ -23,7 +23,8 @@ fn main() -> ! {
     );
     let source = hardware::ReplayFile::open_from_args();
     let (uart, halt) = hardware::take_peripherals();
-    let summary = replay::run(source, DeviceConfig::default(), uart, halt);
+    let mut probe = hardware::BenchMarkers::calibrated();
+    let summary = replay::run_probed(source, DeviceConfig::default(), uart, halt, &mut probe);
     defmt::info!(
         "replay done: {=u32} samples, {=u32} frames dropped, faults {=u16:#06x}, halt {=bool}",
         summary.samples,

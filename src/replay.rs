@@ -167,13 +167,31 @@ impl EncoderCounter for ReplayEncoder {
     }
 }
 
+/// Hooks around each sample's processing. The firmware uses them to mark
+/// the per-sample path for the instruction-count benchmark; `()` does
+/// nothing.
+pub trait TickProbe {
+    /// Just before [`Device::tick`].
+    fn before_tick(&mut self) {}
+    /// Just after [`Device::tick`].
+    fn after_tick(&mut self) {}
+}
+
+impl TickProbe for () {}
+
 /// Run a whole replay through a [`Device`] built from `config` (its sample
 /// rate replaced by the replay's), sending frames to `sink`.
-pub fn run<R: Read, W: Write, H: OutputPin>(
+pub fn run<R: Read, W: Write, H: OutputPin>(reader: R, config: DeviceConfig, sink: W, halt: H) -> Summary {
+    run_probed(reader, config, sink, halt, &mut ())
+}
+
+/// [`run`], calling `probe` around every sample.
+pub fn run_probed<R: Read, W: Write, H: OutputPin, P: TickProbe>(
     mut reader: R,
     config: DeviceConfig,
     sink: W,
     halt: H,
+    probe: &mut P,
 ) -> Summary {
     let header = read_header(&mut reader);
     let rate = match header {
@@ -195,7 +213,9 @@ pub fn run<R: Read, W: Write, H: OutputPin>(
             Ok(Some(record)) => {
                 adc.counts = record.adc_counts;
                 encoder.count = record.encoder_count;
+                probe.before_tick();
                 device.tick(&mut adc, &mut encoder);
+                probe.after_tick();
             }
             Ok(None) => break,
             Err(_) => {

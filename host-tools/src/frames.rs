@@ -174,12 +174,11 @@ pub fn decode_all(bytes: &[u8]) -> Result<(Vec<Item>, StreamStats), VersionMisma
 #[cfg(test)]
 mod tests {
     use super::*;
-    use needle_holder::protocol::{encode, Header, Phase, Sample};
+    use needle_holder::protocol::{FrameEncoder, Header, Phase, Sample};
     use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
     fn bytes_of(frame: Frame) -> Vec<u8> {
-        let mut buf = [0; MAX_ENCODED_FRAME];
-        encode(&frame, &mut buf).to_vec()
+        FrameEncoder::default().encode(&frame).to_vec()
     }
 
     fn sample(index: u32) -> Frame {

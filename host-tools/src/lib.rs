@@ -1,6 +1,7 @@
 //! Host tools for the instrumented needle holder, as a library so the
 //! `needle` command and the integration tests share them.
 
+pub mod bench;
 pub mod decode;
 pub mod demo;
 pub mod firmware;

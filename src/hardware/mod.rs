@@ -13,7 +13,9 @@
 use cortex_m as _;
 use defmt_semihosting as _;
 
+mod bench;
 mod replay_file;
+pub use bench::BenchMarkers;
 pub use replay_file::ReplayFile;
 
 #[cfg(not(feature = "board-mps2"))]
