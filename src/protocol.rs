@@ -157,7 +157,11 @@ const CRC16_TABLE: [u16; 256] = {
         let mut crc = i as u16;
         let mut bit = 0;
         while bit < 8 {
-            crc = if crc & 1 != 0 { (crc >> 1) ^ 0x8408 } else { crc >> 1 };
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0x8408
+            } else {
+                crc >> 1
+            };
             bit += 1;
         }
         table[i] = crc;
@@ -192,7 +196,9 @@ pub struct FrameEncoder {
 
 impl Default for FrameEncoder {
     fn default() -> Self {
-        Self { out: [0; MAX_ENCODED_FRAME] }
+        Self {
+            out: [0; MAX_ENCODED_FRAME],
+        }
     }
 }
 
@@ -202,7 +208,12 @@ impl FrameEncoder {
     /// slice would mean a bug in that bound; the caller counts it as a
     /// dropped frame.
     pub fn encode(&mut self, frame: &Frame) -> &[u8] {
-        let flavor = WireFlavor { out: &mut self.out, crc: 0xFFFF, code_at: 0, len: 1 };
+        let flavor = WireFlavor {
+            out: &mut self.out,
+            crc: 0xFFFF,
+            code_at: 0,
+            len: 1,
+        };
         match postcard::serialize_with_flavor(frame, flavor) {
             Ok(len) => &self.out[..len],
             Err(_) => &[],
@@ -231,7 +242,10 @@ struct WireFlavor<'a> {
 impl WireFlavor<'_> {
     #[inline(always)]
     fn put(&mut self, at: usize, byte: u8) -> postcard::Result<()> {
-        *self.out.get_mut(at).ok_or(postcard::Error::SerializeBufferFull)? = byte;
+        *self
+            .out
+            .get_mut(at)
+            .ok_or(postcard::Error::SerializeBufferFull)? = byte;
         Ok(())
     }
 
@@ -346,8 +360,15 @@ mod tests {
 
     #[test]
     fn the_fused_encoder_matches_postcard_crc_and_the_cobs_crate() {
-        for frame in [sample(), Frame::Header(Header { protocol_version: 1, sample_rate_hz: 0 })] {
-            let mut raw = std::vec::Vec::from(postcard::to_slice(&frame, &mut [0u8; 64]).unwrap() as &[u8]);
+        for frame in [
+            sample(),
+            Frame::Header(Header {
+                protocol_version: 1,
+                sample_rate_hz: 0,
+            }),
+        ] {
+            let mut raw =
+                std::vec::Vec::from(postcard::to_slice(&frame, &mut [0u8; 64]).unwrap() as &[u8]);
             raw.extend(FRAME_CRC.checksum(&raw).to_le_bytes());
             let mut expected = std::vec![0; cobs::max_encoding_length(raw.len())];
             let n = cobs::encode(&raw, &mut expected);
@@ -361,7 +382,9 @@ mod tests {
     fn the_device_crc_agrees_with_the_crc_crate() {
         let data: std::vec::Vec<u8> = (0..600u32).map(|i| (i * 7919 % 251) as u8).collect();
         for len in [0, 1, 2, 9, 25, 255, 600] {
-            let ours = !data[..len].iter().fold(0xFFFF, |crc, &b| crc16_update(crc, b));
+            let ours = !data[..len]
+                .iter()
+                .fold(0xFFFF, |crc, &b| crc16_update(crc, b));
             assert_eq!(ours, FRAME_CRC.checksum(&data[..len]), "length {len}");
         }
     }

@@ -181,7 +181,12 @@ impl TickProbe for () {}
 
 /// Run a whole replay through a [`Device`] built from `config` (its sample
 /// rate replaced by the replay's), sending frames to `sink`.
-pub fn run<R: Read, W: Write, H: OutputPin>(reader: R, config: DeviceConfig, sink: W, halt: H) -> Summary {
+pub fn run<R: Read, W: Write, H: OutputPin>(
+    reader: R,
+    config: DeviceConfig,
+    sink: W,
+    halt: H,
+) -> Summary {
     run_probed(reader, config, sink, halt, &mut ())
 }
 

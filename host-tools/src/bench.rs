@@ -67,11 +67,20 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let replay_path = dir.join("liver1.replay");
     let (trial, _) = sim::insertion(&LIVER1, &Plan::PAPER);
     let config = DeviceConfig::default();
-    std::fs::write(&replay_path, sim::to_replay(&trial, 500, &config.load_cell, &config.encoder))?;
-    println!("recorded insertion: liver 1, 3 mm/s, {} samples at 500 Hz", trial.len());
+    std::fs::write(
+        &replay_path,
+        sim::to_replay(&trial, 500, &config.load_cell, &config.encoder),
+    )?;
+    println!(
+        "recorded insertion: liver 1, 3 mm/s, {} samples at 500 Hz",
+        trial.len()
+    );
 
     let mut means = Vec::new();
-    for (board, core) in [(Board::Lm3s6965, "cortex-m3"), (Board::Lm3s6965M0, "cortex-m0")] {
+    for (board, core) in [
+        (Board::Lm3s6965, "cortex-m3"),
+        (Board::Lm3s6965M0, "cortex-m0"),
+    ] {
         let elf = firmware::build(board)?;
         let started = Instant::now();
         let counts = count_instructions(board, &elf, &replay_path)?;
@@ -88,7 +97,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     let elf = firmware::build(Board::Lm3s6965)?;
     let size = image_size(&elf)?;
-    println!("CI board image: {} bytes flash, {} bytes static RAM", size.flash_bytes, size.ram_bytes);
+    println!(
+        "CI board image: {} bytes flash, {} bytes static RAM",
+        size.flash_bytes, size.ram_bytes
+    );
     if args.json {
         let json = serde_json::json!({
             "instructions_per_sample": means.iter().map(|(k, v)| (k.to_string(), serde_json::Value::from(*v))).collect::<serde_json::Map<_, _>>(),
@@ -111,8 +123,12 @@ fn symbol_address(file: &object::File<'_>, name: &str) -> Result<u64> {
 /// Flash and static RAM of a firmware ELF, from its allocated sections.
 pub fn image_size(elf: &Path) -> Result<ImageSize> {
     let data = std::fs::read(elf).with_context(|| format!("{}: cannot read", elf.display()))?;
-    let file = object::File::parse(&*data).with_context(|| format!("{}: not an ELF", elf.display()))?;
-    let mut size = ImageSize { flash_bytes: 0, ram_bytes: 0 };
+    let file =
+        object::File::parse(&*data).with_context(|| format!("{}: not an ELF", elf.display()))?;
+    let mut size = ImageSize {
+        flash_bytes: 0,
+        ram_bytes: 0,
+    };
     for section in file.sections() {
         let name = section.name().unwrap_or("");
         let bytes = section.size();
@@ -143,7 +159,13 @@ pub fn count_instructions(board: Board, elf: &Path, replay: &Path) -> Result<Ins
     let end = symbol_address(&file, "needle_bench_end")?;
 
     let extra = ["-singlestep", "-d", "exec,nochain", "-D", "/dev/stderr"];
-    let mut cmd = firmware::qemu_command(board, elf, replay, Serial::File(Path::new("/dev/null")), &extra);
+    let mut cmd = firmware::qemu_command(
+        board,
+        elf,
+        replay,
+        Serial::File(Path::new("/dev/null")),
+        &extra,
+    );
     let mut child = cmd
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
@@ -183,7 +205,10 @@ pub fn count_instructions(board: Board, elf: &Path, replay: &Path) -> Result<Ins
         bail!("no marked regions in the instruction log: is this a firmware image with bench markers?");
     };
     let per_region = samples.iter().map(|n| n.saturating_sub(overhead)).collect();
-    Ok(InstructionCounts { overhead, per_region })
+    Ok(InstructionCounts {
+        overhead,
+        per_region,
+    })
 }
 
 /// The guest PC of one `-d exec` line: `Trace N: 0xHOST [xxxxxxxx/PC/...] sym`.

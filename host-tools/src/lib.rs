@@ -7,5 +7,6 @@ pub mod demo;
 pub mod firmware;
 pub mod frames;
 pub mod sim;
+pub mod tissue;
 pub mod trial;
 pub mod twin;
