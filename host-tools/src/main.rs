@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{bench, decode, demo};
+use host_tools::{bench, decode, demo, sim};
 
 #[derive(Parser)]
 #[command(
@@ -25,6 +25,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Count instructions per sample under QEMU; measure flash and RAM.
     Bench(bench::BenchArgs),
+    /// Simulate trials (CSV + firmware replays + truth.json), with effects.
+    Simulate(sim::SimulateArgs),
 }
 
 fn main() -> ExitCode {
@@ -33,6 +35,7 @@ fn main() -> ExitCode {
         Command::Decode(args) => decode::run(args),
         Command::Demo(args) => demo::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Simulate(args) => sim::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -74,6 +74,24 @@ pub fn read(path: &Path) -> Result<Trial> {
     Ok(trial)
 }
 
+/// Write a trial CSV (`t_s,x_m,f_n`; µs, nm and µN resolution).
+pub fn write(path: &Path, trial: &Trial) -> Result<()> {
+    use std::io::Write;
+    let file = std::fs::File::create(path)
+        .with_context(|| format!("{}: cannot create", path.display()))?;
+    let mut out = std::io::BufWriter::new(file);
+    writeln!(out, "t_s,x_m,f_n")?;
+    for i in 0..trial.len() {
+        writeln!(
+            out,
+            "{:.6},{:.9},{:.6}",
+            trial.t_s[i], trial.x_m[i], trial.f_n[i]
+        )?;
+    }
+    out.flush()
+        .with_context(|| format!("{}: cannot write", path.display()))
+}
+
 /// All `*.csv` files of a dataset directory, sorted by name.
 pub fn dataset_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)

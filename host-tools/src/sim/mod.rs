@@ -1,0 +1,549 @@
+//! `needle simulate`: trials of the paper's protocol with known truth, the
+//! unmodelled effects of [`effects`] switchable, and firmware replays.
+//!
+//! The force law is the core's `f64` reference model
+//! (`needle_holder::model::reference`) driven by the true geometry, plus
+//! whatever effects are on, plus sensor noise and encoder quantisation.
+
+pub mod effects;
+pub mod motion;
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use needle_holder::calibration::{Encoder, LoadCell};
+use needle_holder::replay::{Record, ReplayHeader};
+use needle_holder::units::{MicroNewtons, Nanometres};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use serde::Serialize;
+
+use self::effects::Effect;
+use self::motion::Segment;
+use crate::trial::Trial;
+pub use needle_holder::model::params::TissueParams;
+
+/// Sensor realism.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Sensor {
+    pub rate_hz: f64,
+    /// Force noise, N (standard deviation, white).
+    pub noise_n: f64,
+    /// Encoder resolution, m (positions are whole counts).
+    pub encoder_m: f64,
+}
+
+/// What one trial does: where the surface is and how the robot moves.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Protocol {
+    pub surface_x_m: f64,
+    pub segments: Vec<Segment>,
+}
+
+/// A ground-truth event.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TruthEvent {
+    pub kind: &'static str,
+    pub t_s: f64,
+    pub x_m: f64,
+}
+
+/// Ground truth of one simulated trial.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TrialTruth {
+    pub protocol: Protocol,
+    /// x_s2, where the capsule gave way (needle position), m.
+    pub puncture_x_m: Option<f64>,
+    /// Peak force at puncture, N.
+    pub puncture_force_n: Option<f64>,
+    /// x_s3, the relaxed surface, m (tissue frame).
+    pub relaxed_surface_x_m: Option<f64>,
+    /// Vessel walls: depth (tissue frame, m) and rupture force (N).
+    pub structures: Vec<(f64, f64)>,
+    pub events: Vec<TruthEvent>,
+}
+
+/// The paper's protocol with variety: approach, puncture, insertion to
+/// depth, dwell, retract by the oscillation amplitude, oscillate (reversals)
+/// up to the deepest point without cutting, dwell, withdraw, rest outside.
+pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
+    let surface = rng.gen_range(0.003..0.008);
+    let speed = rng.gen_range(0.002..0.006);
+    let deepest = surface + rng.gen_range(0.025..0.040);
+    let amplitude = rng.gen_range(0.002..0.004);
+    let freq = rng.gen_range(0.2..1.2);
+    let cycles = if rng.gen_bool(0.5) { 2.0 } else { 2.5 };
+    Protocol {
+        surface_x_m: surface,
+        segments: vec![
+            Segment::Move {
+                to_m: deepest,
+                speed_mps: speed,
+            },
+            Segment::Dwell {
+                duration_s: rng.gen_range(1.0..2.0),
+            },
+            Segment::Move {
+                to_m: deepest - amplitude,
+                speed_mps: speed,
+            },
+            Segment::Oscillate {
+                amplitude_m: amplitude,
+                freq_hz: freq,
+                cycles,
+            },
+            Segment::Dwell { duration_s: 1.0 },
+            Segment::Move {
+                to_m: 0.0,
+                speed_mps: speed,
+            },
+            Segment::Dwell { duration_s: 0.5 },
+        ],
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Contact {
+    Out,
+    Loading,
+    Inserted,
+}
+
+/// Simulate one trial of `protocol` in `tissue` with `effects`.
+pub fn simulate_trial(
+    tissue: &TissueParams,
+    protocol: &Protocol,
+    effects: &[Effect],
+    sensor: &Sensor,
+    rng: &mut impl Rng,
+) -> (Trial, TrialTruth) {
+    let m = motion::sample(&protocol.segments, 0.0, sensor.rate_hz);
+    let dt = 1.0 / sensor.rate_hz;
+    let s1 = protocol.surface_x_m;
+    let noise = Normal::new(0.0, sensor.noise_n.max(0.0)).unwrap_or(Normal::new(0.0, 0.0).unwrap());
+    let deepest_planned = m.x_m.iter().copied().fold(0.0, f64::max);
+    let mut truth = TrialTruth {
+        protocol: protocol.clone(),
+        puncture_x_m: None,
+        puncture_force_n: None,
+        relaxed_surface_x_m: None,
+        structures: Vec::new(),
+        events: Vec::new(),
+    };
+    for effect in effects {
+        if let Effect::InternalStructures {
+            max_count,
+            rupture_min_n,
+            rupture_max_n,
+            ..
+        } = *effect
+        {
+            let lo = s1 + tissue.puncture_depth_m + 0.003;
+            let hi = deepest_planned - 0.002;
+            if hi > lo {
+                for _ in 0..rng.gen_range(1..=max_count.max(1)) {
+                    let rupture = rng.gen_range(rupture_min_n..=rupture_max_n.max(rupture_min_n));
+                    truth.structures.push((rng.gen_range(lo..hi), rupture));
+                }
+            }
+        }
+    }
+    truth.structures.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut ruptured = vec![false; truth.structures.len()];
+
+    let mut trial = Trial::default();
+    let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
+    let (mut last_sliding, mut friction, mut maxwell) = (0.0, 0.0, 0.0);
+    let mut prev_p = 0.0;
+    for i in 0..m.t_s.len() {
+        let (t, x, v, a) = (m.t_s[i], m.x_m[i], m.v_mps[i], m.a_mps2[i]);
+        // Position and velocity relative to the tissue.
+        let (mut p, mut vr) = (x, v);
+        for effect in effects {
+            if let Effect::TissueMotion {
+                amplitude_m,
+                freq_hz,
+            } = *effect
+            {
+                let w = std::f64::consts::TAU * freq_hz;
+                p -= amplitude_m * (w * t).sin();
+                vr -= amplitude_m * w * (w * t).cos();
+            }
+        }
+        let mut f = 0.0;
+        if phase == Contact::Out && p >= s1 && x_s3 == 0.0 {
+            phase = Contact::Loading;
+            truth.events.push(TruthEvent {
+                kind: "contact",
+                t_s: t,
+                x_m: x,
+            });
+        }
+        if phase == Contact::Loading {
+            let d = p - s1;
+            if d < 0.0 {
+                phase = Contact::Out;
+            } else {
+                f = tissue.stiffness_n(d);
+                if d >= tissue.puncture_depth_m {
+                    phase = Contact::Inserted;
+                    x_s3 = s1 + tissue.relaxation * d;
+                    deepest = p;
+                    truth.puncture_x_m = Some(x);
+                    truth.puncture_force_n = Some(f);
+                    truth.relaxed_surface_x_m = Some(x_s3);
+                    truth.events.push(TruthEvent {
+                        kind: "puncture",
+                        t_s: t,
+                        x_m: x,
+                    });
+                }
+            }
+        } else if phase == Contact::Inserted {
+            let l = p - x_s3;
+            if l <= 0.0 {
+                phase = Contact::Out;
+            } else {
+                let target = friction_target(tissue, effects, vr, l, &mut last_sliding);
+                friction = match effects.iter().find_map(|e| match *e {
+                    Effect::PreslidingHysteresis { x_c_m } if x_c_m > 0.0 => Some(x_c_m),
+                    _ => None,
+                }) {
+                    Some(x_c) => {
+                        friction + (target - friction) * ((p - prev_p).abs() / x_c).min(1.0)
+                    }
+                    None => target,
+                };
+                let mut cutting = tissue.cutting_n(vr, p >= deepest);
+                for effect in effects {
+                    if let Effect::DepthDependentCutting { g_per_m } = *effect {
+                        cutting *= 1.0 + g_per_m * (p - s1);
+                    }
+                }
+                deepest = deepest.max(p);
+                f = friction + cutting;
+                for (k, &(depth, rupture)) in truth.structures.iter().enumerate() {
+                    let k_v = effects.iter().find_map(|e| match *e {
+                        Effect::InternalStructures { k_n_per_m, .. } => Some(k_n_per_m),
+                        _ => None,
+                    });
+                    if ruptured[k] || p <= depth {
+                        continue;
+                    }
+                    let wall = k_v.unwrap_or(0.0) * (p - depth);
+                    if wall >= rupture {
+                        ruptured[k] = true;
+                        truth.events.push(TruthEvent {
+                            kind: "structure",
+                            t_s: t,
+                            x_m: x,
+                        });
+                    } else {
+                        f += wall;
+                    }
+                }
+            }
+        }
+        if phase == Contact::Out {
+            friction = 0.0;
+        }
+        for effect in effects {
+            match *effect {
+                Effect::Viscoelasticity { k_n_per_m, tau_s } => {
+                    maxwell = if phase == Contact::Out {
+                        0.0
+                    } else {
+                        maxwell + (k_n_per_m * vr - maxwell / tau_s) * dt
+                    };
+                    f += maxwell;
+                }
+                Effect::HolderInertia { mass_kg } => f += mass_kg * a,
+                Effect::SensorDrift { rate_n_per_s } => f += rate_n_per_s * t,
+                _ => {}
+            }
+        }
+        prev_p = p;
+        let x_counts = (x / sensor.encoder_m).round() * sensor.encoder_m;
+        trial.push(t, x_counts, f + noise.sample(rng));
+    }
+    (trial, truth)
+}
+
+/// Karnopp friction with the rate-dependent damping effect applied.
+fn friction_target(
+    tissue: &TissueParams,
+    effects: &[Effect],
+    v: f64,
+    l: f64,
+    last: &mut f64,
+) -> f64 {
+    let mut p = *tissue;
+    for effect in effects {
+        if let Effect::RateDependentFriction {
+            exponent,
+            v_ref_mps,
+        } = *effect
+        {
+            let scale = (v.abs().max(tissue.half_band_mps) / v_ref_mps).powf(exponent - 1.0);
+            p.bp_ns_per_m2 *= scale;
+            p.bn_ns_per_m2 *= scale;
+        }
+    }
+    let (f, new_last) = p.friction_n(v, l, *last);
+    *last = new_last;
+    f
+}
+
+/// The motion of one trial of the paper's plain protocol.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plan {
+    pub rate_hz: f64,
+    pub speed_mps: f64,
+    /// Position of the tissue surface, m.
+    pub surface_x_m: f64,
+    /// Deepest point past the surface, m.
+    pub depth_m: f64,
+    /// Rest at the deepest point, s.
+    pub dwell_s: f64,
+    /// Force noise, N (standard deviation).
+    pub noise_n: f64,
+    pub seed: u64,
+}
+
+impl Plan {
+    /// The paper's protocol: 3 mm/s at 500 Hz, 5 mm of approach.
+    pub const PAPER: Self = Self {
+        rate_hz: 500.0,
+        speed_mps: 0.003,
+        surface_x_m: 0.005,
+        depth_m: 0.03,
+        dwell_s: 2.0,
+        noise_n: 0.002,
+        seed: 1,
+    };
+}
+
+/// Ground truth of a plain insertion.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Truth {
+    pub contact_t_s: f64,
+    pub contact_x_m: f64,
+    pub puncture_t_s: f64,
+    pub puncture_x_m: f64,
+    pub puncture_force_n: f64,
+}
+
+/// One plain insertion (in at constant speed, dwell, out), no effects.
+pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
+    let deepest = plan.surface_x_m + plan.depth_m;
+    let protocol = Protocol {
+        surface_x_m: plan.surface_x_m,
+        segments: vec![
+            Segment::Move {
+                to_m: deepest,
+                speed_mps: plan.speed_mps,
+            },
+            Segment::Dwell {
+                duration_s: plan.dwell_s,
+            },
+            Segment::Move {
+                to_m: 0.0,
+                speed_mps: plan.speed_mps,
+            },
+        ],
+    };
+    let sensor = Sensor {
+        rate_hz: plan.rate_hz,
+        noise_n: plan.noise_n,
+        encoder_m: 1e-9,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(plan.seed);
+    let (trial, full) = simulate_trial(tissue, &protocol, &[], &sensor, &mut rng);
+    let event = |kind| full.events.iter().find(|e| e.kind == kind);
+    let truth = Truth {
+        contact_t_s: event("contact").map_or(0.0, |e| e.t_s),
+        contact_x_m: event("contact").map_or(0.0, |e| e.x_m),
+        puncture_t_s: event("puncture").map_or(0.0, |e| e.t_s),
+        puncture_x_m: full.puncture_x_m.unwrap_or(0.0),
+        puncture_force_n: full.puncture_force_n.unwrap_or(0.0),
+    };
+    (trial, truth)
+}
+
+/// `needle simulate` options.
+#[derive(Debug, clap::Args)]
+pub struct SimulateArgs {
+    /// Directory for the trial CSVs, replays and truth.json.
+    #[arg(long)]
+    pub out: std::path::PathBuf,
+    /// Tissue from the library (default liver1).
+    #[arg(long)]
+    pub tissue: Option<String>,
+    /// Tissue library file to take the tissue from.
+    #[arg(long)]
+    pub params: Option<std::path::PathBuf>,
+    /// Unmodelled effects to add, comma-separated, optionally `name=strength`.
+    #[arg(long, default_value = "")]
+    pub effects: String,
+    #[arg(long, default_value_t = 10)]
+    pub trials: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    #[arg(long, default_value_t = 500.0)]
+    pub rate_hz: f64,
+    /// Force noise standard deviation, N.
+    #[arg(long, default_value_t = 0.002)]
+    pub noise_n: f64,
+}
+
+#[derive(Serialize)]
+struct TruthFile<'a> {
+    tissue: &'a str,
+    params: &'a TissueParams,
+    effects: &'a [Effect],
+    seed: u64,
+    sensor: Sensor,
+    trials: Vec<TruthTrial<'a>>,
+}
+
+#[derive(Serialize)]
+struct TruthTrial<'a> {
+    file: String,
+    replay: String,
+    #[serde(flatten)]
+    truth: &'a TrialTruth,
+}
+
+/// Run `needle simulate`.
+pub fn run(args: &SimulateArgs) -> Result<()> {
+    if !(args.rate_hz >= 100.0 && args.rate_hz <= 65_535.0) {
+        bail!("--rate-hz must be within 100..=65535");
+    }
+    if !(args.noise_n.is_finite() && args.noise_n >= 0.0) {
+        bail!("--noise-n must be a finite number ≥ 0");
+    }
+    let tissue = crate::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
+    let effects = effects::parse_list(&args.effects)?;
+    let sensor = Sensor {
+        rate_hz: args.rate_hz,
+        noise_n: args.noise_n,
+        encoder_m: 1e-6,
+    };
+    let written = simulate_dataset(
+        &args.out,
+        &tissue.name,
+        &tissue.params,
+        &effects,
+        args.trials,
+        args.seed,
+        &sensor,
+    )?;
+    eprintln!("wrote {written} trials to {}", args.out.display());
+    Ok(())
+}
+
+/// Simulate `trials` trials into `dir`: trial CSVs, firmware replays and
+/// truth.json. Same seed, same bytes.
+pub fn simulate_dataset(
+    dir: &Path,
+    tissue_name: &str,
+    tissue: &TissueParams,
+    effects: &[Effect],
+    trials: usize,
+    seed: u64,
+    sensor: &Sensor,
+) -> Result<usize> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let config = needle_holder::config::DeviceConfig::default();
+    let mut truths = Vec::new();
+    for k in 0..trials {
+        let mut rng =
+            ChaCha8Rng::seed_from_u64(seed.wrapping_mul(1_000_003).wrapping_add(k as u64));
+        let protocol = random_protocol(&mut rng);
+        let (trial, truth) = simulate_trial(tissue, &protocol, effects, sensor, &mut rng);
+        let name = format!("trial_{k:03}");
+        crate::trial::write(&dir.join(format!("{name}.csv")), &trial)?;
+        let replay = to_replay(
+            &trial,
+            sensor.rate_hz.round() as u16,
+            &config.load_cell,
+            &config.encoder,
+        );
+        std::fs::write(dir.join(format!("{name}.replay")), replay)?;
+        truths.push((name, truth));
+    }
+    let file = TruthFile {
+        tissue: tissue_name,
+        params: tissue,
+        effects,
+        seed,
+        sensor: *sensor,
+        trials: truths
+            .iter()
+            .map(|(name, truth)| TruthTrial {
+                file: format!("{name}.csv"),
+                replay: format!("{name}.replay"),
+                truth,
+            })
+            .collect(),
+    };
+    let json = serde_json::to_string_pretty(&file)?;
+    std::fs::write(dir.join("truth.json"), json + "\n")?;
+    Ok(trials)
+}
+
+/// A trial as a firmware replay file for the given sensor calibration.
+pub fn to_replay(trial: &Trial, rate_hz: u16, load_cell: &LoadCell, encoder: &Encoder) -> Vec<u8> {
+    let mut bytes = ReplayHeader {
+        sample_rate_hz: rate_hz,
+    }
+    .to_bytes()
+    .to_vec();
+    for (&x_m, &f_n) in trial.x_m.iter().zip(&trial.f_n) {
+        let counts =
+            (Nanometres::from_m(x_m).0 as f64 / encoder.nm_per_count as f64).round() as i64;
+        let record = Record {
+            adc_counts: load_cell.counts_for(MicroNewtons::from_n(f_n)),
+            // The hardware counter keeps the low 16 bits.
+            encoder_count: counts as u16,
+        };
+        bytes.extend_from_slice(&record.to_bytes());
+    }
+    bytes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use needle_holder::model::params::LIVER1;
+
+    #[test]
+    fn liver_1_punctures_at_the_papers_force_and_depth() {
+        let plan = Plan {
+            noise_n: 0.0,
+            ..Plan::PAPER
+        };
+        let (trial, truth) = insertion(&LIVER1, &plan);
+        assert!((truth.puncture_force_n - 2.24).abs() < 0.01, "{truth:?}");
+        assert!((truth.puncture_x_m - truth.contact_x_m - 0.01665).abs() < 1e-5);
+        // After puncture the force falls to cutting plus a little friction.
+        let after = trial
+            .t_s
+            .iter()
+            .position(|&t| t > truth.puncture_t_s)
+            .unwrap();
+        assert!(
+            (trial.f_n[after] - 0.94).abs() < 0.05,
+            "{}",
+            trial.f_n[after]
+        );
+    }
+
+    #[test]
+    fn same_seed_same_bytes() {
+        let a = insertion(&LIVER1, &Plan::PAPER).0;
+        let b = insertion(&LIVER1, &Plan::PAPER).0;
+        assert_eq!(a, b);
+    }
+}
