@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{bench, decode, demo, sim};
+use host_tools::{bench, decode, demo, fit, sim};
 
 #[derive(Parser)]
 #[command(
@@ -27,6 +27,8 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Simulate trials (CSV + firmware replays + truth.json), with effects.
     Simulate(sim::SimulateArgs),
+    /// Estimate the model's parameters from a directory of trials.
+    Fit(fit::FitArgs),
 }
 
 fn main() -> ExitCode {
@@ -36,6 +38,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => demo::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Simulate(args) => sim::run(args),
+        Command::Fit(args) => fit::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,95 @@
+//! Small linear least squares by normal equations (2–3 unknowns), the only
+//! regression the fits need. Written here: pulling a linear-algebra crate
+//! in for 3×3 systems would cost more build time than these lines.
+
+/// Accumulates `y ≈ Σ c_k·φ_k` and solves for `c`.
+#[derive(Clone, Debug)]
+pub struct Lsq<const N: usize> {
+    ata: [[f64; N]; N],
+    aty: [f64; N],
+    yy: f64,
+}
+
+impl<const N: usize> Default for Lsq<N> {
+    fn default() -> Self {
+        Self {
+            ata: [[0.0; N]; N],
+            aty: [0.0; N],
+            yy: 0.0,
+        }
+    }
+}
+
+impl<const N: usize> Lsq<N> {
+    pub fn add(&mut self, phi: [f64; N], y: f64) {
+        for i in 0..N {
+            for j in 0..N {
+                self.ata[i][j] += phi[i] * phi[j];
+            }
+            self.aty[i] += phi[i] * y;
+        }
+        self.yy += y * y;
+    }
+
+    /// The coefficients, or `None` when the system is singular.
+    pub fn solve(&self) -> Option<[f64; N]> {
+        let mut m = self.ata;
+        let mut b = self.aty;
+        for col in 0..N {
+            let pivot = (col..N).max_by(|&a, &c| m[a][col].abs().total_cmp(&m[c][col].abs()))?;
+            let scale = m.iter().map(|r| r[col].abs()).fold(0.0, f64::max);
+            if m[pivot][col].abs() <= 1e-12 * scale.max(f64::MIN_POSITIVE) {
+                return None;
+            }
+            m.swap(col, pivot);
+            b.swap(col, pivot);
+            for row in 0..N {
+                if row != col {
+                    let k = m[row][col] / m[col][col];
+                    let pivot_row = m[col];
+                    for (mj, pj) in m[row].iter_mut().zip(pivot_row).skip(col) {
+                        *mj -= k * pj;
+                    }
+                    b[row] -= k * b[col];
+                }
+            }
+        }
+        Some(std::array::from_fn(|i| b[i] / m[i][i]))
+    }
+
+    /// Sum of squared residuals at `c` (from the accumulated sums).
+    pub fn sse(&self, c: &[f64; N]) -> f64 {
+        let mut s = self.yy;
+        for i in 0..N {
+            s -= 2.0 * c[i] * self.aty[i];
+            for j in 0..N {
+                s += c[i] * c[j] * self.ata[i][j];
+            }
+        }
+        s.max(0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recovers_an_exact_quadratic_and_refuses_a_singular_system() {
+        let mut lsq = Lsq::<3>::default();
+        for i in 0..20 {
+            let x = i as f64 * 0.001;
+            lsq.add([1.0, x, x * x], 0.5 - 3.0 * x + 5200.0 * x * x);
+        }
+        let c = lsq.solve().unwrap();
+        assert!(
+            (c[0] - 0.5).abs() < 1e-9 && (c[1] + 3.0).abs() < 1e-6 && (c[2] - 5200.0).abs() < 1e-3
+        );
+        assert!(lsq.sse(&c) < 1e-12);
+        let mut flat = Lsq::<2>::default();
+        for _ in 0..5 {
+            flat.add([1.0, 1.0], 2.0);
+        }
+        assert!(flat.solve().is_none());
+    }
+}

@@ -1,0 +1,223 @@
+//! `needle fit`: the model's parameters from recorded trials alone (paper
+//! §3), as JSON and as a tissue-library entry the firmware can load.
+
+mod lsq;
+pub mod trial;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use serde_json::{json, Value};
+
+pub use self::trial::{fit_trial, TrialFit};
+
+#[derive(Debug, clap::Args)]
+pub struct FitArgs {
+    /// Dataset directory (all *.csv trials in it).
+    pub dir: PathBuf,
+    /// Write the estimates as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write a tissue-library entry (TOML, section [fitted]) here.
+    #[arg(long)]
+    pub toml: Option<PathBuf>,
+}
+
+/// Mean and sample standard deviation (None for one value).
+fn mean_sd(values: &[f64]) -> (f64, Option<f64>) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let sd = (values.len() > 1)
+        .then(|| (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt());
+    (mean, sd)
+}
+
+/// `{"value": mean, "sd": sd}`, or a bare number for a single trial.
+fn estimate(values: &[f64]) -> Value {
+    match mean_sd(values) {
+        (mean, Some(sd)) => json!({ "value": mean, "sd": sd }),
+        (mean, None) => json!(mean),
+    }
+}
+
+/// The value of an estimate (`value` of an object, or the number).
+pub fn value_of(v: &Value) -> Option<f64> {
+    v.get("value")
+        .and_then(Value::as_f64)
+        .or_else(|| v.as_f64())
+}
+
+/// Static friction over trials: identified where any trial reached the
+/// band, otherwise the most extreme held force is only a bound.
+fn static_estimate(
+    fits: &[&TrialFit],
+    pick: fn(&TrialFit) -> Option<(f64, bool)>,
+    positive: bool,
+) -> Value {
+    let clamped: Vec<f64> = fits
+        .iter()
+        .filter_map(|t| pick(t))
+        .filter(|e| e.1)
+        .map(|e| e.0)
+        .collect();
+    if !clamped.is_empty() {
+        return estimate(&clamped);
+    }
+    let held = fits.iter().filter_map(|t| pick(t)).map(|e| e.0);
+    let bound = if positive {
+        held.fold(f64::NAN, f64::max)
+    } else {
+        held.fold(f64::NAN, f64::min)
+    };
+    json!({
+        "value": Value::Null,
+        if positive { "lower_bound" } else { "upper_bound" }: if bound.is_finite() { json!(bound) } else { Value::Null },
+        "note": "not identified: the needle never stopped from a sliding friction beyond the static band"
+    })
+}
+
+/// Fit every trial of a dataset and aggregate. Files that cannot be
+/// fitted are reported in `skipped` and left out.
+pub fn fit_dataset(dir: &Path) -> Result<Value> {
+    let files = crate::trial::dataset_files(dir)?;
+    let mut fits = Vec::new();
+    let mut skipped = Vec::new();
+    for file in &files {
+        let fitted = crate::trial::read(file)
+            .and_then(|t| fit_trial(&t).with_context(|| format!("{}: cannot fit", file.display())));
+        match fitted {
+            Ok(fit) => fits.push((file.clone(), fit)),
+            Err(err) => {
+                eprintln!("needle fit: {err:#} (left out)");
+                skipped.push(json!({ "file": name_of(file), "reason": format!("{err:#}") }));
+            }
+        }
+    }
+    if fits.is_empty() {
+        bail!(
+            "{}: none of {} trials could be fitted",
+            dir.display(),
+            files.len()
+        );
+    }
+    let all: Vec<&TrialFit> = fits.iter().map(|(_, f)| f).collect();
+    let col = |get: fn(&TrialFit) -> f64| all.iter().map(|t| get(t)).collect::<Vec<f64>>();
+    let stats = |fit: fn(&TrialFit) -> trial::StiffnessFit| {
+        let (rms, _) = mean_sd(&all.iter().map(|t| fit(t).rms_n).collect::<Vec<_>>());
+        let (r2, _) = mean_sd(&all.iter().map(|t| fit(t).r2).collect::<Vec<_>>());
+        (rms, r2)
+    };
+    let (poly_rms, poly_r2) = stats(|t| t.polynomial);
+    let (rat_rms, rat_r2) = stats(|t| t.rational);
+    Ok(json!({
+        "trials": all.len(),
+        "a1_n_per_m": estimate(&col(|t| t.polynomial.p1)),
+        "a2_n_per_m2": estimate(&col(|t| t.polynomial.p2)),
+        "rational_a_per_n": estimate(&col(|t| t.rational.p1)),
+        "rational_b_m_per_n": estimate(&col(|t| t.rational.p2)),
+        "stiffness_fit": {
+            "polynomial": { "rms_n": poly_rms, "r2": poly_r2 },
+            "rational": { "rms_n": rat_rms, "r2": rat_r2 },
+            "better": if poly_rms <= rat_rms { "polynomial" } else { "rational" },
+        },
+        "puncture_force_n": estimate(&col(|t| t.puncture_force_n)),
+        "puncture_depth_m": estimate(&col(|t| t.puncture_depth_m)),
+        "puncture_drop_to_n": estimate(&col(|t| t.puncture_drop_to_n)),
+        "cutting_force_n": estimate(&col(|t| t.cutting_force_n)),
+        "cp_n_per_m": estimate(&col(|t| t.cp_n_per_m)),
+        "cn_n_per_m": estimate(&col(|t| t.cn_n_per_m)),
+        "bp_ns_per_m2": estimate(&col(|t| t.bp_ns_per_m2)),
+        "bn_ns_per_m2": estimate(&col(|t| t.bn_ns_per_m2)),
+        "dp_n_per_m": static_estimate(&all, |t| t.dp, true),
+        "dn_n_per_m": static_estimate(&all, |t| t.dn, false),
+        "relaxation": estimate(&col(|t| t.relaxation)),
+        "noise_n": estimate(&col(|t| t.noise_n)),
+        "per_trial": fits.iter().map(|(file, t)| json!({
+            "file": name_of(file),
+            "contact_x_m": t.contact_x_m,
+            "puncture_x_m": t.puncture_x_m,
+            "puncture_force_n": t.puncture_force_n,
+            "relaxed_surface_x_m": t.relaxed_x_m,
+        })).collect::<Vec<_>>(),
+        "skipped": skipped,
+    }))
+}
+
+fn name_of(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+/// The estimates as a tissue-library entry (keys of `TissueParams`).
+pub fn to_toml(fit: &Value) -> String {
+    let get = |key: &str| fit.get(key).and_then(value_of);
+    let bound = |key: &str, side: &str| {
+        fit.get(key)
+            .and_then(|v| v.get(side))
+            .and_then(Value::as_f64)
+    };
+    let law = fit["stiffness_fit"]["better"]
+        .as_str()
+        .unwrap_or("polynomial");
+    let mut out = String::from("# Written by `needle fit`.\n[fitted]\n");
+    out += &format!("source = \"needle fit over {} trials\"\n", fit["trials"]);
+    out += &format!("stiffness_law = \"{law}\"\n");
+    let keys = [
+        ("a1_n_per_m", get("a1_n_per_m").map(|v| v.max(0.0))),
+        ("a2_n_per_m2", get("a2_n_per_m2").map(|v| v.max(0.0))),
+        ("rational_a_per_n", get("rational_a_per_n")),
+        ("rational_b_m_per_n", get("rational_b_m_per_n")),
+        ("puncture_force_n", get("puncture_force_n")),
+        ("puncture_depth_m", get("puncture_depth_m")),
+        (
+            "puncture_drop_to_n",
+            get("puncture_drop_to_n").map(|v| v.max(0.0)),
+        ),
+        ("relaxation", get("relaxation")),
+        (
+            "cutting_force_n",
+            get("cutting_force_n").map(|v| v.max(0.0)),
+        ),
+        ("cp_n_per_m", get("cp_n_per_m").map(|v| v.max(0.0))),
+        ("cn_n_per_m", get("cn_n_per_m").map(|v| v.min(0.0))),
+        ("bp_ns_per_m2", get("bp_ns_per_m2").map(|v| v.max(0.0))),
+        ("bn_ns_per_m2", get("bn_ns_per_m2").map(|v| v.max(0.0))),
+        // Not identified: the bound the data gives (what was seen held).
+        (
+            "dp_n_per_m",
+            get("dp_n_per_m")
+                .or(bound("dp_n_per_m", "lower_bound"))
+                .map(|v| v.max(0.0)),
+        ),
+        (
+            "dn_n_per_m",
+            get("dn_n_per_m")
+                .or(bound("dn_n_per_m", "upper_bound"))
+                .map(|v| v.min(0.0)),
+        ),
+        // The data cannot resolve these: the library's usual values.
+        ("half_band_mps", Some(5e-6)),
+        ("contact_force_n", Some(0.05)),
+    ];
+    for (key, value) in keys {
+        out += &format!("{key} = {:?}\n", value.unwrap_or(0.0));
+    }
+    out
+}
+
+pub fn run(args: &FitArgs) -> Result<()> {
+    let fit = fit_dataset(&args.dir)?;
+    let text = serde_json::to_string_pretty(&fit)?;
+    match &args.json {
+        Some(path) => std::fs::write(path, text + "\n")
+            .with_context(|| format!("{}: cannot write", path.display()))?,
+        None => println!("{text}"),
+    }
+    if let Some(path) = &args.toml {
+        std::fs::write(path, to_toml(&fit))
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    Ok(())
+}

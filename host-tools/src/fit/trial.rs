@@ -1,0 +1,377 @@
+//! Property estimation on one trial, the way the paper's §3 does it:
+//! stiffness from the loading curve before puncture, friction and surface
+//! relaxation from the strokes inside the already-cut track (reversals and
+//! withdrawal), cutting as what is left while advancing into new tissue,
+//! static friction from the force held at rest.
+
+use anyhow::{bail, Result};
+
+use super::lsq::Lsq;
+use crate::trial::Trial;
+
+/// Estimates from one trial (SI).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrialFit {
+    /// Noise of the force, N (robust, from sample-to-sample differences).
+    pub noise_n: f64,
+    /// x_s1 (where the stiffness curve starts).
+    pub contact_x_m: f64,
+    pub puncture_index: usize,
+    pub puncture_x_m: f64,
+    pub puncture_force_n: f64,
+    pub puncture_depth_m: f64,
+    pub puncture_drop_to_n: f64,
+    /// Eq. 4: a1, a2, rms, r².
+    pub polynomial: StiffnessFit,
+    /// Eq. 3: a, b, rms, r².
+    pub rational: StiffnessFit,
+    /// x_s3.
+    pub relaxed_x_m: f64,
+    pub relaxation: f64,
+    pub cp_n_per_m: f64,
+    pub bp_ns_per_m2: f64,
+    pub cn_n_per_m: f64,
+    pub bn_ns_per_m2: f64,
+    pub cutting_force_n: f64,
+    /// Static friction per length seen at rest: `(value, clamped)`; when the
+    /// held force was below the sliding force it stopped from, the band was
+    /// reached and the value is D; otherwise it is only a bound on D.
+    pub dp: Option<Held>,
+    pub dn: Option<Held>,
+}
+
+/// Static friction seen at a stop: held force per length, and whether it
+/// was clamped (so it is D itself rather than a bound on it).
+pub type Held = (f64, bool);
+
+/// A stiffness law fitted to the loading curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StiffnessFit {
+    pub p1: f64,
+    pub p2: f64,
+    pub rms_n: f64,
+    pub r2: f64,
+}
+
+/// Speed below which the needle counts as at rest, m/s.
+const REST_MPS: f64 = 0.0002;
+/// Speed above which it counts as sliding for the friction fit, m/s.
+const SLIDING_MPS: f64 = 0.0005;
+
+/// Velocity by central differences over ±10 ms.
+fn velocity(trial: &Trial) -> Vec<f64> {
+    let n = trial.len();
+    let dt = (trial.t_s[n - 1] - trial.t_s[0]) / (n - 1).max(1) as f64;
+    let k = ((0.01 / dt).round() as usize).max(1);
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(k), (i + k).min(n - 1));
+            if b > a {
+                (trial.x_m[b] - trial.x_m[a]) / (trial.t_s[b] - trial.t_s[a])
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Robust noise estimate: MAD of first differences / √2.
+fn noise(f: &[f64]) -> f64 {
+    let mut d: Vec<f64> = f.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let mid = d.len() / 2;
+    let (_, median, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    1.4826 * *median / std::f64::consts::SQRT_2
+}
+
+/// The capsule puncture: the first sharp fall (below 60 % of the running
+/// peak, the peak well above noise); returns the peak's index.
+fn find_puncture(f: &[f64], noise_n: f64) -> Option<usize> {
+    let mut peak = 0;
+    for i in 0..f.len() {
+        if f[i] > f[peak] {
+            peak = i;
+        }
+        if f[peak] > 0.1 + 10.0 * noise_n && f[i] < 0.6 * f[peak] {
+            return Some(peak);
+        }
+    }
+    None
+}
+
+/// Gauss–Newton on f = d/(a·d + b), d = x − x_s1, in force space, over
+/// a, b and the contact point together: the linearised fit of d/f weighs
+/// the noisy small forces too much, and the quadratic's root is not this
+/// law's contact point. Returns [a, b, x_s1].
+fn refine_rational(loading: &[(f64, f64)], contact_x_m: f64, start: [f64; 2]) -> [f64; 3] {
+    let mut p = [start[0], start[1], contact_x_m];
+    for _ in 0..30 {
+        let mut step = Lsq::<3>::default();
+        for &(x, f) in loading {
+            let d = x - p[2];
+            let den = p[0] * d + p[1];
+            if d <= 0.0 || den <= 0.0 {
+                continue;
+            }
+            let den2 = den * den;
+            step.add([-d * d / den2, -d / den2, -p[1] / den2], f - d / den);
+        }
+        let Some(delta) = step.solve() else { break };
+        p = [p[0] + delta[0], p[1] + delta[1], p[2] + delta[2]];
+        if delta[2].abs() < 1e-9 && delta[1].abs() < 1e-9 * p[1].abs() {
+            break;
+        }
+    }
+    p
+}
+
+/// R² of predictions against data.
+fn r_squared(data: &[(f64, f64)], predict: impl Fn(f64) -> f64) -> (f64, f64) {
+    let n = data.len() as f64;
+    let mean = data.iter().map(|p| p.1).sum::<f64>() / n;
+    let sse: f64 = data.iter().map(|&(d, f)| (f - predict(d)).powi(2)).sum();
+    let sst: f64 = data.iter().map(|&(_, f)| (f - mean).powi(2)).sum();
+    ((sse / n).sqrt(), 1.0 - sse / sst.max(f64::MIN_POSITIVE))
+}
+
+/// Estimate everything one trial can tell.
+pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
+    if trial.len() < 50 {
+        bail!("only {} samples", trial.len());
+    }
+    let (x, f) = (&trial.x_m, &trial.f_n);
+    let v = velocity(trial);
+    let noise_n = noise(f);
+    let Some(ip) = find_puncture(f, noise_n) else {
+        bail!("no capsule puncture (no peak followed by a sharp drop)");
+    };
+
+    // Loading curve: the rise into the peak, above the noise.
+    let thr = (6.0 * noise_n).max(0.02 * f[ip]);
+    let mut j0 = ip;
+    while j0 > 0 && f[j0 - 1] > thr {
+        j0 -= 1;
+    }
+    if ip - j0 < 20 {
+        bail!("too few samples on the loading curve before the puncture");
+    }
+    // General quadratic through the rise; its root below the data is x_s1.
+    let mut quad = Lsq::<3>::default();
+    for j in j0..=ip {
+        quad.add([1.0, x[j], x[j] * x[j]], f[j]);
+    }
+    let [c0, c1, c2] = quad
+        .solve()
+        .ok_or_else(|| anyhow::anyhow!("loading curve is degenerate"))?;
+    let contact = if c2.abs() > 1e-9 {
+        let disc = (c1 * c1 - 4.0 * c2 * c0).max(0.0);
+        let roots = [
+            (-c1 + disc.sqrt()) / (2.0 * c2),
+            (-c1 - disc.sqrt()) / (2.0 * c2),
+        ];
+        roots
+            .into_iter()
+            .filter(|r| *r <= x[j0] + 1e-9)
+            .fold(f64::NEG_INFINITY, f64::max)
+    } else {
+        -c0 / c1
+    };
+    let contact_x_m = if contact.is_finite() { contact } else { x[j0] };
+    let curve: Vec<(f64, f64)> = (j0..=ip).map(|j| (x[j] - contact_x_m, f[j])).collect();
+    let mut poly = Lsq::<2>::default();
+    let mut rational = Lsq::<2>::default();
+    for &(d, fj) in &curve {
+        poly.add([d, d * d], fj);
+        if d > 0.0 && fj > thr {
+            rational.add([d, 1.0], d / fj);
+        }
+    }
+    let [a1, a2] = poly.solve().unwrap_or([0.0, 0.0]);
+    let (rms, r2) = r_squared(&curve, |d| a1 * d + a2 * d * d);
+    let polynomial = StiffnessFit {
+        p1: a1,
+        p2: a2,
+        rms_n: rms,
+        r2,
+    };
+    let loading: Vec<(f64, f64)> = (j0..=ip).map(|j| (x[j], f[j])).collect();
+    let [ra, rb, rational_contact] = refine_rational(
+        &loading,
+        contact_x_m,
+        rational.solve().unwrap_or([0.0, 0.0]),
+    );
+    let rational_curve: Vec<(f64, f64)> = loading
+        .iter()
+        .map(|&(xj, fj)| (xj - rational_contact, fj))
+        .collect();
+    let (rms, r2) = r_squared(&rational_curve, |d| {
+        if d <= 0.0 {
+            0.0
+        } else if ra * d + rb > 0.0 {
+            d / (ra * d + rb)
+        } else {
+            f64::NAN
+        }
+    });
+    let rational = StiffnessFit {
+        p1: ra,
+        p2: rb,
+        rms_n: rms,
+        r2,
+    };
+    // The contact point of whichever law fits better.
+    let contact_x_m = if rational.rms_n < polynomial.rms_n {
+        rational_contact
+    } else {
+        contact_x_m
+    };
+
+    let rate = 1.0 / ((trial.t_s[trial.len() - 1] - trial.t_s[0]) / (trial.len() - 1) as f64);
+    let after = |s: f64| (ip + (s * rate) as usize).min(trial.len() - 1);
+    let drop_window = &f[after(0.02)..after(0.1).max(after(0.02) + 1)];
+    let puncture_drop_to_n = drop_window.iter().sum::<f64>() / drop_window.len() as f64;
+
+    // Friction and x_s3: strokes inside the cut track, plus the samples
+    // after the needle left (which must read zero): grid over ρ.
+    let start = after(0.05);
+    let mut deepest = x[ip];
+    let mut track = Vec::new(); // (x, v, f) moving inside the cut track
+    let mut advancing = Vec::new(); // (x, v, f) cutting new tissue
+    let mut rests = Vec::new(); // (index) at rest
+    for i in start..trial.len() {
+        let new_tissue = x[i] >= deepest;
+        deepest = deepest.max(x[i]);
+        if v[i].abs() >= SLIDING_MPS {
+            if new_tissue && v[i] > 0.0 {
+                advancing.push((x[i], v[i], f[i]));
+            } else {
+                track.push((x[i], v[i], f[i]));
+            }
+        } else if v[i].abs() < REST_MPS {
+            rests.push(i);
+        }
+    }
+    let fit_at = |x_s3: f64| {
+        let (mut pos, mut neg, mut outside) = (Lsq::<2>::default(), Lsq::<2>::default(), 0.0);
+        for &(xi, vi, fi) in &track {
+            let l = xi - x_s3;
+            if l <= 0.0 {
+                outside += fi * fi;
+            } else if vi > 0.0 {
+                pos.add([l, vi * l], fi);
+            } else {
+                neg.add([l, vi * l], fi);
+            }
+        }
+        let cp = pos.solve();
+        let cn = neg.solve();
+        let sse = outside + cp.map_or(0.0, |c| pos.sse(&c)) + cn.map_or(0.0, |c| neg.sse(&c));
+        (sse, cp, cn)
+    };
+    let x_s2 = x[ip];
+    let (mut best, mut best_rho) = (f64::INFINITY, 0.0);
+    for k in 0..=200 {
+        let rho = k as f64 / 200.0;
+        let (sse, cp, cn) = fit_at(contact_x_m + rho * (x_s2 - contact_x_m));
+        if cp.is_some() && cn.is_some() && sse < best {
+            (best, best_rho) = (sse, rho);
+        }
+    }
+    if !best.is_finite() {
+        bail!("no strokes both ways inside the tissue to fit friction on");
+    }
+    let relaxed_x_m = contact_x_m + best_rho * (x_s2 - contact_x_m);
+    let (_, cp, cn) = fit_at(relaxed_x_m);
+    let ([cp, bp], [cn, bn]) = (cp.unwrap_or_default(), cn.unwrap_or_default());
+
+    let cutting: Vec<f64> = advancing
+        .iter()
+        .map(|&(xi, vi, fi)| fi - (cp + bp * vi) * (xi - relaxed_x_m).max(0.0))
+        .collect();
+    let cutting_force_n = if cutting.is_empty() {
+        0.0
+    } else {
+        cutting.iter().sum::<f64>() / cutting.len() as f64
+    };
+
+    // Static band: the force held at rest, per length, against the sliding
+    // force just before the stop.
+    let (mut dp, mut dn): (Option<Held>, Option<Held>) = (None, None);
+    for &i in &rests {
+        let l = x[i] - relaxed_x_m;
+        if l < 0.002 || i < 1 || v[i - 1].abs() < REST_MPS {
+            continue;
+        }
+        // The sliding friction before the stop, read 30 ms back, where the
+        // ±10 ms velocity estimate is not yet dragged down by the stop.
+        let k = i.saturating_sub((0.03 * rate) as usize).max(start);
+        if v[k].abs() < SLIDING_MPS {
+            continue;
+        }
+        let lk = x[k] - relaxed_x_m;
+        let sliding = if v[k] > 0.0 {
+            (cp + bp * v[k]) * lk
+        } else {
+            (cn + bn * v[k]) * lk
+        };
+        // A real stop, not the turning point of an oscillation.
+        let end = (i + (0.2 * rate) as usize).min(trial.len());
+        if end - i < (0.1 * rate) as usize || v[i..end].iter().any(|u| u.abs() >= REST_MPS) {
+            continue;
+        }
+        let window = &f[i..end];
+        let held = window.iter().sum::<f64>() / window.len().max(1) as f64;
+        // Clamped: the tissue holds clearly less than it slid with.
+        let clamped = sliding.abs() - held.abs() > 5.0 * noise_n + 0.1 * sliding.abs();
+        let entry = Some((held / l, clamped));
+        if v[k] > 0.0 {
+            dp = dp.max_by_key_f(entry);
+        } else {
+            dn = dn.min_by_key_f(entry);
+        }
+    }
+
+    Ok(TrialFit {
+        noise_n,
+        contact_x_m,
+        puncture_index: ip,
+        puncture_x_m: x_s2,
+        puncture_force_n: f[ip],
+        puncture_depth_m: x_s2 - contact_x_m,
+        puncture_drop_to_n,
+        polynomial,
+        rational,
+        relaxed_x_m,
+        relaxation: best_rho,
+        cp_n_per_m: cp,
+        bp_ns_per_m2: bp,
+        cn_n_per_m: cn,
+        bn_ns_per_m2: bn,
+        cutting_force_n,
+        dp,
+        dn,
+    })
+}
+
+/// Keep the more extreme static estimate, preferring clamped ones.
+trait Extreme {
+    fn max_by_key_f(self, other: Self) -> Self;
+    fn min_by_key_f(self, other: Self) -> Self;
+}
+
+impl Extreme for Option<Held> {
+    fn max_by_key_f(self, other: Self) -> Self {
+        match (self, other) {
+            (Some(a), Some(b)) => Some(if (b.1, b.0) > (a.1, a.0) { b } else { a }),
+            (a, b) => a.or(b),
+        }
+    }
+    fn min_by_key_f(self, other: Self) -> Self {
+        match (self, other) {
+            (Some(a), Some(b)) => Some(if (b.1, -b.0) > (a.1, -a.0) { b } else { a }),
+            (a, b) => a.or(b),
+        }
+    }
+}
