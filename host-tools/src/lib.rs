@@ -7,6 +7,7 @@ pub mod demo;
 pub mod firmware;
 pub mod fit;
 pub mod frames;
+pub mod plot;
 pub mod sim;
 pub mod tissue;
 pub mod trial;

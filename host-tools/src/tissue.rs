@@ -29,10 +29,16 @@ pub fn builtin() -> Vec<Tissue> {
 /// Read and check a library file. Errors name the file, the line and the
 /// entry; invalid values name the field.
 pub fn load(path: &Path) -> Result<Vec<Tissue>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    parse(&text, path)
+}
+
+/// Parse and check library text; `path` names it in errors.
+pub fn parse(text: &str, path: &Path) -> Result<Vec<Tissue>> {
     let shown = path.display();
-    let text = std::fs::read_to_string(path).with_context(|| format!("{shown}: cannot read"))?;
     let table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
-        let line = e.span().map(|s| line_of(&text, s.start)).unwrap_or(0);
+        let line = e.span().map(|s| line_of(text, s.start)).unwrap_or(0);
         anyhow!("{shown}:{line}: {}", e.message())
     })?;
     let mut tissues = Vec::new();
@@ -40,14 +46,14 @@ pub fn load(path: &Path) -> Result<Vec<Tissue>> {
         let toml::Value::Table(mut entry) = entry else {
             bail!(
                 "{shown}:{}: `{name}` is not a [table]",
-                key_line(&text, None, &name)
+                key_line(text, None, &name)
             );
         };
         let source = match entry.remove("source") {
             Some(toml::Value::String(s)) => Some(s),
             Some(_) => bail!(
                 "{shown}:{}: [{name}] source must be a string",
-                key_line(&text, Some(&name), "source")
+                key_line(text, Some(&name), "source")
             ),
             None => None,
         };
@@ -57,14 +63,14 @@ pub fn load(path: &Path) -> Result<Vec<Tissue>> {
                 .map_err(|e: toml::de::Error| {
                     anyhow!(
                         "{shown}:{}: [{name}] {}",
-                        section_line(&text, &name),
+                        section_line(text, &name),
                         e.message()
                     )
                 })?;
         params.validate().map_err(|e| {
             anyhow!(
                 "{shown}:{}: [{name}] {e}",
-                key_line(&text, Some(&name), e.field)
+                key_line(text, Some(&name), e.field)
             )
         })?;
         tissues.push(Tissue {

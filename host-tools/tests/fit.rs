@@ -190,3 +190,36 @@ fn the_fitted_toml_is_a_valid_library_entry_close_to_the_truth() {
     assert!((p.a2_n_per_m2 - 5200.0).abs() < 520.0);
     assert!(needle_holder::config::DeviceConfig::for_tissue(&p).is_ok());
 }
+
+#[test]
+fn the_plot_shows_measured_and_fitted_force_with_the_events() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate_dataset(dir.path(), "t", &LIVER1, &[], 2, 12, &SENSOR).unwrap();
+    let svg = dir.path().join("fit.svg");
+    let out = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .arg("fit")
+        .arg(dir.path())
+        .arg("--json")
+        .arg(dir.path().join("fit.json"))
+        .arg("--plot")
+        .arg(&svg)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for label in [
+        "measured",
+        "fitted model",
+        "contact",
+        "puncture",
+        "needle position, mm",
+        "force, N",
+    ] {
+        assert!(text.contains(label), "plot lacks {label}");
+    }
+    assert!(text.matches("<polyline").count() >= 2, "two force curves");
+}

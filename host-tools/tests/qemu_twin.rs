@@ -122,6 +122,23 @@ fn cortex_m3_in_qemu_matches_the_host_twin_byte_for_byte() {
 }
 
 #[test]
+fn a_simulated_trial_with_effects_replays_in_qemu_like_on_the_host() {
+    use host_tools::sim::{effects, simulate_dataset, Sensor};
+    let dir = tempfile::tempdir().unwrap();
+    let sensor = Sensor {
+        rate_hz: 1000.0,
+        noise_n: 0.005,
+        encoder_m: 1e-6,
+    };
+    let effects = effects::parse_list("internal_structures,tissue_motion").unwrap();
+    simulate_dataset(dir.path(), "liver1", &LIVER1, &effects, 1, 11, &sensor).unwrap();
+    let replay = std::fs::read(dir.path().join("trial_000.replay")).unwrap();
+    let (qemu, _) = assert_twin(Board::Lm3s6965, &replay, "simulated");
+    let (_, stats) = decode_all(&qemu.frames).unwrap();
+    assert_eq!(stats.samples as usize, (replay.len() - 8) / 6);
+}
+
+#[test]
 fn cortex_m0_image_matches_the_host_twin() {
     assert_twin(Board::Lm3s6965M0, &liver_replay(0.005, 8), "liver1-m0");
 }

@@ -2,6 +2,7 @@
 //! §3), as JSON and as a tissue-library entry the firmware can load.
 
 mod lsq;
+pub mod predict;
 pub mod trial;
 
 use std::path::{Path, PathBuf};
@@ -21,6 +22,10 @@ pub struct FitArgs {
     /// Write a tissue-library entry (TOML, section [fitted]) here.
     #[arg(long)]
     pub toml: Option<PathBuf>,
+    /// Draw force against position of the first trial, with the fitted
+    /// model over it and the events marked, to this SVG file.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
 }
 
 /// Mean and sample standard deviation (None for one value).
@@ -215,9 +220,68 @@ pub fn run(args: &FitArgs) -> Result<()> {
             .with_context(|| format!("{}: cannot write", path.display()))?,
         None => println!("{text}"),
     }
+    let toml = to_toml(&fit);
     if let Some(path) = &args.toml {
-        std::fs::write(path, to_toml(&fit))
-            .with_context(|| format!("{}: cannot write", path.display()))?;
+        std::fs::write(path, &toml).with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    if let Some(path) = &args.plot {
+        plot_first_trial(&args.dir, &fit, &toml, path)?;
     }
     Ok(())
+}
+
+/// The first fitted trial with the fitted model over it.
+fn plot_first_trial(dir: &Path, fit: &Value, toml: &str, path: &Path) -> Result<()> {
+    use crate::plot::{force_vs_position, Marker, Series};
+    let first = fit["per_trial"][0]["file"]
+        .as_str()
+        .context("no fitted trial to plot")?;
+    let trial = crate::trial::read(&dir.join(first))?;
+    let geometry = fit_trial(&trial)?;
+    let params = crate::tissue::parse(toml, Path::new("fitted.toml"))?
+        .remove(0)
+        .params;
+    let model = predict::predict(&params, &geometry, &trial);
+    let measured: Vec<(f64, f64)> = trial
+        .x_m
+        .iter()
+        .copied()
+        .zip(trial.f_n.iter().copied())
+        .collect();
+    let fitted: Vec<(f64, f64)> = trial.x_m.iter().copied().zip(model).collect();
+    let markers = [
+        Marker {
+            label: "contact",
+            x_m: geometry.contact_x_m,
+            f_n: 0.0,
+        },
+        Marker {
+            label: "puncture",
+            x_m: geometry.puncture_x_m,
+            f_n: geometry.puncture_force_n,
+        },
+        Marker {
+            label: "relaxed surface",
+            x_m: geometry.relaxed_x_m,
+            f_n: 0.0,
+        },
+    ];
+    let series = [
+        Series {
+            label: "measured",
+            color: plotters::style::RGBColor(70, 110, 200),
+            points: measured,
+        },
+        Series {
+            label: "fitted model",
+            color: plotters::style::RGBColor(220, 60, 40),
+            points: fitted,
+        },
+    ];
+    force_vs_position(
+        path,
+        &format!("{first}: force against position"),
+        &series,
+        &markers,
+    )
 }

@@ -59,7 +59,7 @@ const REST_MPS: f64 = 0.0002;
 const SLIDING_MPS: f64 = 0.0005;
 
 /// Velocity by central differences over ±10 ms.
-fn velocity(trial: &Trial) -> Vec<f64> {
+pub fn velocity(trial: &Trial) -> Vec<f64> {
     let n = trial.len();
     let dt = (trial.t_s[n - 1] - trial.t_s[0]) / (n - 1).max(1) as f64;
     let k = ((0.01 / dt).round() as usize).max(1);
