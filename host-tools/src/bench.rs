@@ -13,7 +13,6 @@
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -166,12 +165,7 @@ pub fn count_instructions(board: Board, elf: &Path, replay: &Path) -> Result<Ins
         Serial::File(Path::new("/dev/null")),
         &extra,
     );
-    let mut child = cmd
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .context("cannot start qemu-system-arm")?;
+    let mut child = firmware::spawn_qemu(&mut cmd)?;
     let mut stdout = child.stdout.take().context("no QEMU stdout")?;
     let drain = std::thread::spawn(move || std::io::copy(&mut stdout, &mut std::io::sink()));
     let log = BufReader::with_capacity(1 << 20, child.stderr.take().context("no QEMU stderr")?);

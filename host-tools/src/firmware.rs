@@ -191,15 +191,19 @@ impl QemuRun {
     }
 }
 
-/// Run a prepared QEMU command to completion, killing it after `timeout`.
-/// A non-zero exit is returned, not an error: see [`QemuRun::success`].
-pub fn run_qemu(mut cmd: Command, timeout: Duration) -> Result<QemuRun> {
-    let mut child = cmd
-        .stdin(Stdio::null())
+/// Start a prepared QEMU command with stdout (defmt) and stderr piped.
+pub fn spawn_qemu(cmd: &mut Command) -> Result<std::process::Child> {
+    cmd.stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .context("cannot start qemu-system-arm")?;
+        .context("cannot start qemu-system-arm")
+}
+
+/// Run a prepared QEMU command to completion, killing it after `timeout`.
+/// A non-zero exit is returned, not an error: see [`QemuRun::success`].
+pub fn run_qemu(mut cmd: Command, timeout: Duration) -> Result<QemuRun> {
+    let mut child = spawn_qemu(&mut cmd)?;
     let mut stdout = child.stdout.take().context("no QEMU stdout")?;
     let reader = std::thread::spawn(move || {
         let mut buf = Vec::new();
