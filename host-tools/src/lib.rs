@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod decode;
 pub mod demo;
+pub mod detect;
 pub mod firmware;
 pub mod fit;
 pub mod frames;

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{bench, decode, demo, fit, sim};
+use host_tools::{bench, decode, demo, detect, fit, sim};
 
 #[derive(Parser)]
 #[command(
@@ -29,6 +29,8 @@ enum Command {
     Simulate(sim::SimulateArgs),
     /// Estimate the model's parameters from a directory of trials.
     Fit(fit::FitArgs),
+    /// Run the device's event detectors over trials (and score them against truth.json).
+    Detect(detect::DetectArgs),
 }
 
 fn main() -> ExitCode {
@@ -39,6 +41,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(args),
         Command::Simulate(args) => sim::run(args),
         Command::Fit(args) => fit::run(args),
+        Command::Detect(args) => detect::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,254 @@
+//! `needle detect`: the core's detectors (the same code as the firmware)
+//! over trial CSVs, and, when the directory holds a simulator truth.json,
+//! their evaluation against it: latency, misses and false alarms per kind.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use needle_holder::config::DeviceConfig;
+use needle_holder::hal::AdcSample;
+use needle_holder::pipeline::{PipelineState, RawSample};
+use needle_holder::protocol::{Event, EventKind};
+use needle_holder::units::MicroNewtons;
+use serde::Serialize;
+use serde_json::Value;
+
+use crate::decode::event_name;
+use crate::trial::Trial;
+
+#[derive(Debug, clap::Args)]
+pub struct DetectArgs {
+    /// Dataset directory (all *.csv trials in it; truth.json if simulated).
+    pub dir: PathBuf,
+    /// Write the events as JSON here (default: standard output).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Tissue from the library (default liver1).
+    #[arg(long)]
+    pub tissue: Option<String>,
+    /// Tissue library file.
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+}
+
+/// One detected event, in SI units.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Detected {
+    pub kind: &'static str,
+    pub t_s: f64,
+    pub x_m: f64,
+    pub f_n: f64,
+    pub confidence: f64,
+}
+
+/// Sample rate of a trial, Hz, from its median time step.
+fn rate_hz(trial: &Trial) -> f64 {
+    let mut dt: Vec<f64> = trial.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    let mid = dt.len() / 2;
+    1.0 / *dt.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// Run the device pipeline over a trial, as raw readings through the
+/// configured calibration, and return the events it fires.
+pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> Vec<Detected> {
+    let rate = rate_hz(trial).round().clamp(1.0, 65_535.0) as u16;
+    let config = config.with_sample_rate(rate);
+    let nm_per_count = f64::from(config.encoder.nm_per_count);
+    let mut state = PipelineState::default();
+    let mut events = Vec::new();
+    for i in 0..trial.len() {
+        let counts = config
+            .load_cell
+            .counts_for(MicroNewtons::from_n(trial.f_n[i]));
+        let raw = RawSample {
+            adc: Some(AdcSample {
+                counts,
+                saturated: counts.unsigned_abs()
+                    >= config.load_cell.full_scale_counts.unsigned_abs(),
+            }),
+            encoder_count: (trial.x_m[i] * 1e9 / nm_per_count).round() as i64 as u16,
+        };
+        let out = config.step(&mut state, raw);
+        if let Some(Event {
+            index,
+            kind,
+            x,
+            force,
+            confidence_permille,
+        }) = out.event
+        {
+            if kind != EventKind::Fault {
+                events.push(Detected {
+                    kind: event_name(kind),
+                    t_s: trial.t_s[index as usize],
+                    x_m: x.as_m(),
+                    f_n: force.as_n(),
+                    confidence: f64::from(confidence_permille) / 1000.0,
+                });
+            }
+        }
+    }
+    events
+}
+
+/// Detection quality for one event kind.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct KindScore {
+    pub kind: String,
+    pub true_events: usize,
+    pub detected: usize,
+    pub misses: usize,
+    pub false_alarms: usize,
+    pub latency_samples_mean: f64,
+    pub latency_samples_max: f64,
+    pub latency_ms_mean: f64,
+    pub latency_ms_max: f64,
+}
+
+/// A detection this long before the true event still counts (s): the
+/// device reports a puncture at the peak it confirmed, a contact at the
+/// surface it placed back along the curve, so times can sit a little early.
+const EARLY_S: f64 = 0.05;
+/// …and this long after it.
+const LATE_S: f64 = 1.0;
+
+/// Score detections against truth events, per kind.
+pub fn score(
+    truth: &[(String, f64)],
+    found: &[(String, f64)],
+    rate_hz: f64,
+    kinds: &[&str],
+) -> Vec<KindScore> {
+    kinds
+        .iter()
+        .map(|&kind| {
+            let true_t: Vec<f64> = truth.iter().filter(|e| e.0 == kind).map(|e| e.1).collect();
+            let mut used = vec![false; true_t.len()];
+            let mut s = KindScore {
+                kind: kind.to_owned(),
+                true_events: true_t.len(),
+                ..Default::default()
+            };
+            let mut latencies = Vec::new();
+            for (_, t) in found.iter().filter(|e| e.0 == kind) {
+                s.detected += 1;
+                let hit = (0..true_t.len())
+                    .find(|&k| !used[k] && *t >= true_t[k] - EARLY_S && *t <= true_t[k] + LATE_S);
+                match hit {
+                    Some(k) => {
+                        used[k] = true;
+                        latencies.push(t - true_t[k]);
+                    }
+                    None => s.false_alarms += 1,
+                }
+            }
+            s.misses = used.iter().filter(|u| !**u).count();
+            if !latencies.is_empty() {
+                let mean = latencies.iter().sum::<f64>() / latencies.len() as f64;
+                let max = latencies.iter().copied().fold(f64::MIN, f64::max);
+                (s.latency_ms_mean, s.latency_ms_max) = (mean * 1e3, max * 1e3);
+                (s.latency_samples_mean, s.latency_samples_max) = (mean * rate_hz, max * rate_hz);
+            }
+            s
+        })
+        .collect()
+}
+
+/// Merge per-trial scores.
+fn merge(total: &mut [KindScore], part: &[KindScore]) {
+    for (t, p) in total.iter_mut().zip(part) {
+        let (n0, n1) = (
+            (t.true_events - t.misses) as f64,
+            (p.true_events - p.misses) as f64,
+        );
+        if n0 + n1 > 0.0 {
+            t.latency_samples_mean =
+                (t.latency_samples_mean * n0 + p.latency_samples_mean * n1) / (n0 + n1);
+            t.latency_ms_mean = (t.latency_ms_mean * n0 + p.latency_ms_mean * n1) / (n0 + n1);
+        }
+        t.latency_samples_max = t.latency_samples_max.max(p.latency_samples_max);
+        t.latency_ms_max = t.latency_ms_max.max(p.latency_ms_max);
+        t.true_events += p.true_events;
+        t.detected += p.detected;
+        t.misses += p.misses;
+        t.false_alarms += p.false_alarms;
+    }
+}
+
+/// Detect over a dataset; with truth.json, also score. Returns the JSON.
+pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
+    let truth: Option<Value> = match std::fs::read_to_string(dir.join("truth.json")) {
+        Ok(text) => Some(serde_json::from_str(&text).context("truth.json: not valid JSON")?),
+        Err(_) => None,
+    };
+    let kinds = ["contact", "puncture", "structure", "exit"];
+    let mut total: Vec<KindScore> = score(&[], &[], 1.0, &kinds);
+    let mut trials = Vec::new();
+    for file in crate::trial::dataset_files(dir)? {
+        let trial = crate::trial::read(&file)?;
+        let events = detect_trial(&trial, config);
+        let name = file
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if let Some(t) = truth
+            .as_ref()
+            .and_then(|t| t["trials"].as_array())
+            .and_then(|ts| ts.iter().find(|t| t["file"] == name.as_str()))
+        {
+            let true_events: Vec<(String, f64)> = t["events"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|e| Some((e["kind"].as_str()?.to_owned(), e["t_s"].as_f64()?)))
+                .collect();
+            let found: Vec<(String, f64)> =
+                events.iter().map(|e| (e.kind.to_owned(), e.t_s)).collect();
+            merge(
+                &mut total,
+                &score(&true_events, &found, rate_hz(&trial), &kinds),
+            );
+        }
+        trials.push(serde_json::json!({ "file": name, "events": events }));
+    }
+    let mut out = serde_json::json!({ "trials": trials });
+    if truth.is_some() {
+        out["evaluation"] = serde_json::to_value(&total)?;
+    }
+    Ok(out)
+}
+
+pub fn run(args: &DetectArgs) -> Result<()> {
+    let tissue = crate::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
+    let config = DeviceConfig::for_tissue(&tissue.params)
+        .map_err(|e| anyhow::anyhow!("tissue `{}`: {e}", tissue.name))?;
+    let out = detect_dataset(&args.dir, &config)?;
+    if let Some(eval) = out.get("evaluation").and_then(Value::as_array) {
+        eprintln!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");
+        eprintln!("|---|---|---|---|---|---|---|");
+        for k in eval {
+            eprintln!(
+                "| {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} |",
+                k["kind"].as_str().unwrap_or("?"),
+                k["true_events"],
+                k["detected"],
+                k["misses"],
+                k["false_alarms"],
+                k["latency_samples_mean"].as_f64().unwrap_or(0.0),
+                k["latency_ms_mean"].as_f64().unwrap_or(0.0),
+                k["latency_samples_max"].as_f64().unwrap_or(0.0),
+                k["latency_ms_max"].as_f64().unwrap_or(0.0),
+            );
+        }
+    }
+    let text = serde_json::to_string_pretty(&out)? + "\n";
+    match &args.json {
+        Some(path) => {
+            std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
+        }
+        None => {
+            print!("{text}");
+            Ok(())
+        }
+    }
+}
