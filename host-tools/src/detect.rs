@@ -6,14 +6,15 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use needle_holder::config::DeviceConfig;
-use needle_holder::hal::AdcSample;
+use needle_holder::hal::LoadCellAdc;
 use needle_holder::pipeline::{PipelineState, RawSample};
 use needle_holder::protocol::{Event, EventKind};
-use needle_holder::units::MicroNewtons;
+use needle_holder::replay::ReplayAdc;
 use serde::Serialize;
 use serde_json::Value;
 
 use crate::decode::event_name;
+use crate::sim::raw_record;
 use crate::trial::Trial;
 
 #[derive(Debug, clap::Args)]
@@ -41,32 +42,27 @@ pub struct Detected {
     pub confidence: f64,
 }
 
-/// Sample rate of a trial, Hz, from its median time step.
-fn rate_hz(trial: &Trial) -> f64 {
-    let mut dt: Vec<f64> = trial.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    let mid = dt.len() / 2;
-    1.0 / *dt.select_nth_unstable_by(mid, f64::total_cmp).1
-}
-
 /// Run the device pipeline over a trial, as raw readings through the
 /// configured calibration, and return the events it fires.
 pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> Vec<Detected> {
-    let rate = rate_hz(trial).round().clamp(1.0, 65_535.0) as u16;
+    let rate = trial.rate_hz().round().clamp(1.0, 65_535.0) as u16;
     let config = config.with_sample_rate(rate);
-    let nm_per_count = f64::from(config.encoder.nm_per_count);
     let mut state = PipelineState::default();
     let mut events = Vec::new();
     for i in 0..trial.len() {
-        let counts = config
-            .load_cell
-            .counts_for(MicroNewtons::from_n(trial.f_n[i]));
+        let record = raw_record(
+            trial.x_m[i],
+            trial.f_n[i],
+            &config.load_cell,
+            &config.encoder,
+        );
+        let mut adc = ReplayAdc {
+            counts: record.adc_counts,
+            full_scale_counts: config.load_cell.full_scale_counts,
+        };
         let raw = RawSample {
-            adc: Some(AdcSample {
-                counts,
-                saturated: counts.unsigned_abs()
-                    >= config.load_cell.full_scale_counts.unsigned_abs(),
-            }),
-            encoder_count: (trial.x_m[i] * 1e9 / nm_per_count).round() as i64 as u16,
+            adc: adc.read().ok(),
+            encoder_count: record.encoder_count,
         };
         let out = config.step(&mut state, raw);
         if let Some(Event {
@@ -206,7 +202,7 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
                 events.iter().map(|e| (e.kind.to_owned(), e.t_s)).collect();
             merge(
                 &mut total,
-                &score(&true_events, &found, rate_hz(&trial), &kinds),
+                &score(&true_events, &found, trial.rate_hz(), &kinds),
             );
         }
         trials.push(serde_json::json!({ "file": name, "events": events }));

@@ -22,6 +22,16 @@ impl Trial {
         self.t_s.is_empty()
     }
 
+    /// Sample rate, Hz, from the median time step (robust to a late sample).
+    pub fn rate_hz(&self) -> f64 {
+        let mut dt: Vec<f64> = self.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+        if dt.is_empty() {
+            return 0.0;
+        }
+        let mid = dt.len() / 2;
+        1.0 / *dt.select_nth_unstable_by(mid, f64::total_cmp).1
+    }
+
     pub fn push(&mut self, t_s: f64, x_m: f64, f_n: f64) {
         self.t_s.push(t_s);
         self.x_m.push(x_m);

@@ -61,8 +61,7 @@ const SLIDING_MPS: f64 = 0.0005;
 /// Velocity by central differences over ±10 ms.
 pub fn velocity(trial: &Trial) -> Vec<f64> {
     let n = trial.len();
-    let dt = (trial.t_s[n - 1] - trial.t_s[0]) / (n - 1).max(1) as f64;
-    let k = ((0.01 / dt).round() as usize).max(1);
+    let k = ((0.01 * trial.rate_hz()).round() as usize).max(1);
     (0..n)
         .map(|i| {
             let (a, b) = (i.saturating_sub(k), (i + k).min(n - 1));
@@ -228,7 +227,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         contact_x_m
     };
 
-    let rate = 1.0 / ((trial.t_s[trial.len() - 1] - trial.t_s[0]) / (trial.len() - 1) as f64);
+    let rate = trial.rate_hz();
     let after = |s: f64| (ip + (s * rate) as usize).min(trial.len() - 1);
     let drop_window = &f[after(0.02)..after(0.1).max(after(0.02) + 1)];
     let puncture_drop_to_n = drop_window.iter().sum::<f64>() / drop_window.len() as f64;
@@ -325,11 +324,11 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         let held = window.iter().sum::<f64>() / window.len().max(1) as f64;
         // Clamped: the tissue holds clearly less than it slid with.
         let clamped = sliding.abs() - held.abs() > 5.0 * noise_n + 0.1 * sliding.abs();
-        let entry = Some((held / l, clamped));
+        let entry = (held / l, clamped);
         if v[k] > 0.0 {
-            dp = dp.max_by_key_f(entry);
+            dp = stronger(dp, entry, 1.0);
         } else {
-            dn = dn.min_by_key_f(entry);
+            dn = stronger(dn, entry, -1.0);
         }
     }
 
@@ -355,23 +354,11 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     })
 }
 
-/// Keep the more extreme static estimate, preferring clamped ones.
-trait Extreme {
-    fn max_by_key_f(self, other: Self) -> Self;
-    fn min_by_key_f(self, other: Self) -> Self;
-}
-
-impl Extreme for Option<Held> {
-    fn max_by_key_f(self, other: Self) -> Self {
-        match (self, other) {
-            (Some(a), Some(b)) => Some(if (b.1, b.0) > (a.1, a.0) { b } else { a }),
-            (a, b) => a.or(b),
-        }
-    }
-    fn min_by_key_f(self, other: Self) -> Self {
-        match (self, other) {
-            (Some(a), Some(b)) => Some(if (b.1, -b.0) > (a.1, -a.0) { b } else { a }),
-            (a, b) => a.or(b),
-        }
+/// Of two static-friction readings, the one that says most: a clamped one
+/// over a bound, then the larger on `sign`'s side.
+fn stronger(kept: Option<Held>, new: Held, sign: f64) -> Option<Held> {
+    match kept {
+        Some(k) if (k.1, sign * k.0) >= (new.1, sign * new.0) => Some(k),
+        _ => Some(new),
     }
 }

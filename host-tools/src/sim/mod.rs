@@ -493,6 +493,17 @@ pub fn simulate_dataset(
     Ok(trials)
 }
 
+/// What the sensors read for a needle at `x_m` under `f_n`: ADC counts
+/// through the load-cell calibration, and the encoder's 16-bit count.
+pub fn raw_record(x_m: f64, f_n: f64, load_cell: &LoadCell, encoder: &Encoder) -> Record {
+    let counts = (Nanometres::from_m(x_m).0 as f64 / encoder.nm_per_count as f64).round() as i64;
+    Record {
+        adc_counts: load_cell.counts_for(MicroNewtons::from_n(f_n)),
+        // The hardware counter keeps the low 16 bits.
+        encoder_count: counts as u16,
+    }
+}
+
 /// A trial as a firmware replay file for the given sensor calibration.
 pub fn to_replay(trial: &Trial, rate_hz: u16, load_cell: &LoadCell, encoder: &Encoder) -> Vec<u8> {
     let mut bytes = ReplayHeader {
@@ -501,13 +512,7 @@ pub fn to_replay(trial: &Trial, rate_hz: u16, load_cell: &LoadCell, encoder: &En
     .to_bytes()
     .to_vec();
     for (&x_m, &f_n) in trial.x_m.iter().zip(&trial.f_n) {
-        let counts =
-            (Nanometres::from_m(x_m).0 as f64 / encoder.nm_per_count as f64).round() as i64;
-        let record = Record {
-            adc_counts: load_cell.counts_for(MicroNewtons::from_n(f_n)),
-            // The hardware counter keeps the low 16 bits.
-            encoder_count: counts as u16,
-        };
+        let record = raw_record(x_m, f_n, load_cell, encoder);
         bytes.extend_from_slice(&record.to_bytes());
     }
     bytes
