@@ -25,9 +25,14 @@ impl Faults {
     pub const SAMPLE_OVERRUN: Self = Self(1 << 5);
     /// The halt output could not be driven.
     pub const HALT_OUTPUT: Self = Self(1 << 6);
+    /// Force held above the contact threshold with the needle not
+    /// advancing and out of the tissue: nothing there can push or pull.
+    pub const FORCE_WITHOUT_CONTACT: Self = Self(1 << 7);
+    /// Force rose while loading the capsule with the encoder standing still.
+    pub const ENCODER_STUCK: Self = Self(1 << 8);
 
     /// Names of the bits, lowest first, for host-side display.
-    pub const NAMES: [(Self, &'static str); 7] = [
+    pub const NAMES: [(Self, &'static str); 9] = [
         (Self::ADC_SATURATED, "adc_saturated"),
         (Self::ADC_ERROR, "adc_error"),
         (Self::ENCODER_JUMP, "encoder_jump"),
@@ -35,6 +40,8 @@ impl Faults {
         (Self::REPLAY_BAD_HEADER, "replay_bad_header"),
         (Self::SAMPLE_OVERRUN, "sample_overrun"),
         (Self::HALT_OUTPUT, "halt_output"),
+        (Self::FORCE_WITHOUT_CONTACT, "force_without_contact"),
+        (Self::ENCODER_STUCK, "encoder_stuck"),
     ];
 
     /// Union of two sets.

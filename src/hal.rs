@@ -12,6 +12,9 @@ pub struct AdcSample {
     pub counts: i32,
     /// The converter was at (or beyond) its full scale: the force is unknown.
     pub saturated: bool,
+    /// The converter's overrun flag: a conversion was overwritten before it
+    /// was read, so the sample loop ran late and a sample is lost.
+    pub overrun: bool,
 }
 
 /// A load-cell ADC that returns one conversion per sample period.

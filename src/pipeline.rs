@@ -56,6 +56,11 @@ impl DeviceConfig {
 
         let mut faults = Faults::NONE;
         let force = match raw.adc {
+            // A late sample's timing is unknown: keep the last force.
+            Some(adc) if adc.overrun => {
+                faults = faults.union(Faults::SAMPLE_OVERRUN);
+                state.last_force
+            }
             Some(adc) => {
                 if adc.saturated {
                     faults = faults.union(Faults::ADC_SATURATED);
@@ -85,8 +90,12 @@ impl DeviceConfig {
                 x,
                 v,
                 force,
+                at_cutting_front: x >= state.phase.deepest,
             };
-            self.detect.update(&mut state.detect, input)
+            let found = self.detect.update(&mut state.detect, input);
+            faults = faults.union(found.faults);
+            // A sample that raises a fault fires no event.
+            found.event.filter(|_| found.faults.is_empty())
         } else {
             None
         };

@@ -12,6 +12,10 @@
 //! | 6..8 | sample rate, Hz, `u16` |
 //! | then 6 per sample | ADC counts `i32`, encoder count `u16` |
 //!
+//! ADC counts of [`OVERRUN_MARK`] (`i32::MIN`, which a 24-bit converter
+//! never returns) mark a sample the acquisition flagged as late: the ADC
+//! reports its overrun flag for it.
+//!
 //! A file that ends inside a record raises `REPLAY_TRUNCATED` after the last
 //! whole record; a bad header raises `REPLAY_BAD_HEADER` and nothing runs.
 
@@ -33,6 +37,8 @@ pub const FORMAT_VERSION: u8 = 1;
 pub const HEADER_LEN: usize = 8;
 /// Record length, bytes.
 pub const RECORD_LEN: usize = 6;
+/// ADC counts that mark a late (overrun) sample in a replay.
+pub const OVERRUN_MARK: i32 = i32::MIN;
 
 /// The replay header.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -134,7 +140,8 @@ pub fn read_record<R: Read>(reader: &mut R) -> Result<Option<Record>, ReplayErro
 }
 
 /// The load-cell ADC during a replay: returns the current record's counts,
-/// and reports saturation at the calibrated full scale.
+/// reports saturation at the calibrated full scale and an overrun at
+/// [`OVERRUN_MARK`].
 #[derive(Clone, Copy, Debug)]
 pub struct ReplayAdc {
     /// Counts returned by the next read.
@@ -146,10 +153,13 @@ pub struct ReplayAdc {
 impl LoadCellAdc for ReplayAdc {
     type Error = Infallible;
     fn read(&mut self) -> Result<AdcSample, Infallible> {
-        let saturated = self.counts.unsigned_abs() >= self.full_scale_counts.unsigned_abs();
+        let overrun = self.counts == OVERRUN_MARK;
+        let saturated =
+            !overrun && self.counts.unsigned_abs() >= self.full_scale_counts.unsigned_abs();
         Ok(AdcSample {
             counts: self.counts,
             saturated,
+            overrun,
         })
     }
 }

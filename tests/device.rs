@@ -30,6 +30,7 @@ fn ok(counts: i32) -> Adc {
     Adc(Ok(AdcSample {
         counts,
         saturated: false,
+        overrun: false,
     }))
 }
 
@@ -68,6 +69,7 @@ fn a_fault_sends_an_event_and_a_status_right_away() {
         &mut Adc(Ok(AdcSample {
             counts: 1 << 23,
             saturated: true,
+            overrun: false,
         })),
         &mut Enc(0),
     );
@@ -141,12 +143,12 @@ proptest! {
     /// other than `fault`.
     #[test]
     fn the_pipeline_never_panics_and_faulty_samples_fire_no_events(
-        samples in prop::collection::vec((any::<Option<i32>>(), any::<bool>(), any::<u16>()), 1..400)
+        samples in prop::collection::vec((any::<Option<i32>>(), any::<bool>(), any::<bool>(), any::<u16>()), 1..400)
     ) {
         let config = DeviceConfig::default();
         let mut state = PipelineState::default();
-        for (i, (counts, saturated, encoder_count)) in samples.into_iter().enumerate() {
-            let adc = counts.map(|counts| AdcSample { counts, saturated });
+        for (i, (counts, saturated, overrun, encoder_count)) in samples.into_iter().enumerate() {
+            let adc = counts.map(|counts| AdcSample { counts, saturated, overrun });
             let out = config.step(&mut state, RawSample { adc, encoder_count });
             prop_assert_eq!(out.sample.index, i as u32);
             prop_assert_eq!(out.sample.residual, out.sample.force.sub(out.sample.model));

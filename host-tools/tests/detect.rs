@@ -23,6 +23,7 @@ fn evaluate(rate_hz: f64, noise_n: f64, effect_list: &str, trials: usize, seed: 
         trials,
         seed,
         &sensor,
+        false,
     )
     .unwrap();
     let out = detect_dataset(dir.path(), &DeviceConfig::default()).unwrap();

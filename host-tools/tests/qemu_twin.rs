@@ -131,7 +131,7 @@ fn a_simulated_trial_with_effects_replays_in_qemu_like_on_the_host() {
         encoder_m: 1e-6,
     };
     let effects = effects::parse_list("internal_structures,tissue_motion").unwrap();
-    simulate_dataset(dir.path(), "liver1", &LIVER1, &effects, 1, 11, &sensor).unwrap();
+    simulate_dataset(dir.path(), "liver1", &LIVER1, &effects, 1, 11, &sensor, false).unwrap();
     let replay = std::fs::read(dir.path().join("trial_000.replay")).unwrap();
     let (qemu, _) = assert_twin(Board::Lm3s6965, &replay, "simulated");
     let (_, stats) = decode_all(&qemu.frames).unwrap();

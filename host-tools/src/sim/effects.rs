@@ -7,7 +7,7 @@
 //! | `viscoelasticity` | Maxwell branch in parallel: dF/dt = k·v − F/τ while in tissue | k = 20 N/m, τ = 1 s | standard linear solid (Fung); relaxes during dwells |
 //! | `rate_dependent_friction` | damping b·(\|v\|/v_ref)^(n−1) | n = 0.5, v_ref = 3 mm/s | the paper's b_p falls from 1327 to 377 between 0.2 and 0.8 Hz |
 //! | `presliding_hysteresis` | friction follows the Karnopp value with a Dahl-like lag over x_c of travel | x_c = 0.3 mm | pre-sliding displacement, paper §3.2 / Fig. 8b |
-//! | `internal_structures` | vessel walls at random depths: k_v·(x − depth) until rupture at F_r | 1–3 walls, k_v = 200 N/m, F_r 0.15–0.4 N | paper §3, Figs. 2–3 |
+//! | `internal_structures` | vessel walls at random depths: k_v·(x − depth) until rupture at F_r | 1–3 walls, k_v = 200 N/m, F_r 0.15–0.4 N, each ≥ 1 mm clear of the next one’s loading | paper §3, Figs. 2–3 |
 //! | `depth_dependent_cutting` | cutting·(1 + g·depth) | g = 15 /m | paper §3.3: cutting "increased slightly with depth" |
 //! | `holder_inertia` | m·a of the moving holder | m = 0.15 kg | load cell between drive and needle holder |
 //! | `sensor_drift` | load-cell offset drifting linearly in time | 3 mN/s | thermal drift of a bridge |

@@ -38,6 +38,10 @@ pub struct Sensor {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Protocol {
     pub surface_x_m: f64,
+    /// Far side of the tissue sample, if the needle goes through it into
+    /// air (the paper's "control tissue", §4.3): no cutting beyond it, and
+    /// no more needle in tissue.
+    pub far_surface_x_m: Option<f64>,
     pub segments: Vec<Segment>,
 }
 
@@ -75,6 +79,7 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
     let freq = rng.gen_range(0.2..1.2);
     let cycles = if rng.gen_bool(0.5) { 2.0 } else { 2.5 };
     Protocol {
+        far_surface_x_m: None,
         surface_x_m: surface,
         segments: vec![
             Segment::Move {
@@ -110,6 +115,9 @@ enum Contact {
     Inserted,
 }
 
+/// Least distance between one wall's rupture and the next wall (m).
+const WALL_GAP_M: f64 = 0.001;
+
 /// Simulate one trial of `protocol` in `tissue` with `effects`.
 pub fn simulate_trial(
     tissue: &TissueParams,
@@ -134,17 +142,32 @@ pub fn simulate_trial(
     for effect in effects {
         if let Effect::InternalStructures {
             max_count,
+            k_n_per_m,
             rupture_min_n,
             rupture_max_n,
-            ..
         } = *effect
         {
             let lo = s1 + tissue.puncture_depth_m + 0.003;
-            let hi = deepest_planned - 0.002;
+            let hi = protocol.far_surface_x_m.unwrap_or(deepest_planned) - 0.002;
+            // Walls do not overlap: each is clear of the others by
+            // WALL_GAP_M beyond the travel it takes to rupture. Two walls
+            // loading together are one force bump, to a detector and to
+            // anyone reading the trace, so they would not be two events.
+            let reach = |(depth, rupture): (f64, f64)| depth + rupture / k_n_per_m.max(1.0);
             if hi > lo {
                 for _ in 0..rng.gen_range(1..=max_count.max(1)) {
-                    let rupture = rng.gen_range(rupture_min_n..=rupture_max_n.max(rupture_min_n));
-                    truth.structures.push((rng.gen_range(lo..hi), rupture));
+                    for _attempt in 0..20 {
+                        let rupture =
+                            rng.gen_range(rupture_min_n..=rupture_max_n.max(rupture_min_n));
+                        let wall = (rng.gen_range(lo..hi), rupture);
+                        let clear = truth.structures.iter().all(|&other| {
+                            wall.0 > reach(other) + WALL_GAP_M || other.0 > reach(wall) + WALL_GAP_M
+                        });
+                        if clear {
+                            truth.structures.push(wall);
+                            break;
+                        }
+                    }
                 }
             }
         }
@@ -201,7 +224,15 @@ pub fn simulate_trial(
                 }
             }
         } else if phase == Contact::Inserted {
-            let l = p - x_s3;
+            let far = protocol.far_surface_x_m.unwrap_or(f64::INFINITY);
+            let l = p.min(far) - x_s3;
+            if p >= far && deepest < far {
+                truth.events.push(TruthEvent {
+                    kind: "exit",
+                    t_s: t,
+                    x_m: x,
+                });
+            }
             if l <= 0.0 {
                 phase = Contact::Out;
             } else {
@@ -215,7 +246,7 @@ pub fn simulate_trial(
                     }
                     None => target,
                 };
-                let mut cutting = tissue.cutting_n(vr, p >= deepest);
+                let mut cutting = tissue.cutting_n(vr, p >= deepest && p < far);
                 for effect in effects {
                     if let Effect::DepthDependentCutting { g_per_m } = *effect {
                         cutting *= 1.0 + g_per_m * (p - s1);
@@ -339,6 +370,7 @@ pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
     let deepest = plan.surface_x_m + plan.depth_m;
     let protocol = Protocol {
         surface_x_m: plan.surface_x_m,
+        far_surface_x_m: None,
         segments: vec![
             Segment::Move {
                 to_m: deepest,
@@ -395,6 +427,10 @@ pub struct SimulateArgs {
     /// Force noise standard deviation, N.
     #[arg(long, default_value_t = 0.002)]
     pub noise_n: f64,
+    /// The needle goes through the sample: its far side lies 8 mm past the
+    /// puncture depth or deeper, 4 mm short of the deepest point at most.
+    #[arg(long)]
+    pub through: bool,
 }
 
 #[derive(Serialize)]
@@ -438,6 +474,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         args.trials,
         args.seed,
         &sensor,
+        args.through,
     )?;
     eprintln!("wrote {written} trials to {}", args.out.display());
     Ok(())
@@ -453,6 +490,7 @@ pub fn simulate_dataset(
     trials: usize,
     seed: u64,
     sensor: &Sensor,
+    through: bool,
 ) -> Result<usize> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let config = needle_holder::config::DeviceConfig::default();
@@ -460,7 +498,10 @@ pub fn simulate_dataset(
     for k in 0..trials {
         let mut rng =
             ChaCha8Rng::seed_from_u64(seed.wrapping_mul(1_000_003).wrapping_add(k as u64));
-        let protocol = random_protocol(&mut rng);
+        let mut protocol = random_protocol(&mut rng);
+        if through {
+            protocol.far_surface_x_m = far_surface(tissue, &protocol, &mut rng);
+        }
         let (trial, truth) = simulate_trial(tissue, &protocol, effects, sensor, &mut rng);
         let name = format!("trial_{k:03}");
         crate::trial::write(&dir.join(format!("{name}.csv")), &trial)?;
@@ -491,6 +532,18 @@ pub fn simulate_dataset(
     let json = serde_json::to_string_pretty(&file)?;
     std::fs::write(dir.join("truth.json"), json + "\n")?;
     Ok(trials)
+}
+
+/// A far side for the sample, between 8 mm past the puncture depth and
+/// 4 mm short of the deepest point of the motion (`None` if no room).
+fn far_surface(tissue: &TissueParams, protocol: &Protocol, rng: &mut impl Rng) -> Option<f64> {
+    let deepest = motion::sample(&protocol.segments, 0.0, 100.0)
+        .x_m
+        .into_iter()
+        .fold(0.0, f64::max);
+    let lo = protocol.surface_x_m + tissue.puncture_depth_m + 0.008;
+    let hi = deepest - 0.004;
+    (hi > lo).then(|| rng.gen_range(lo..hi))
 }
 
 /// What the sensors read for a needle at `x_m` under `f_n`: ADC counts

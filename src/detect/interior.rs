@@ -1,0 +1,140 @@
+//! After the capsule: interior structures and exit, both seen as a sharp
+//! fall of the force while the needle advances.
+//!
+//! - structure: a rise of at least `structure_rise` above a slowly
+//!   following baseline, built over at least [`STRUCTURE_RISE_SAMPLES`],
+//!   then a fall of at least `structure_drop` below the highest of the last
+//!   [`SHARP_SAMPLES`] — a vessel wall loading up and giving way. The
+//!   baseline follows the force upwards with a time constant of 2^10
+//!   samples, so the slow growth of friction with depth is not a wall.
+//! - exit: at the cutting front, a fall of at least `exit_drop` (half the
+//!   cutting force) that takes the force that far below the baseline: the
+//!   tip left the tissue, so cutting stopped (the paper's air "control
+//!   tissue", §4.3). A wall's fall ends near the baseline; an exit's ends
+//!   a cutting force under it.
+//!
+//! Either fall is only *pending* until the encoder has moved past where it
+//! happened with the force still down: when the robot stops, cutting and
+//! sliding friction vanish in one sample too, and that is neither. A
+//! sample that is not advancing restarts the search.
+
+use super::{confidence_permille, event, DetectConfig, DetectInput};
+use crate::protocol::{Event, EventKind};
+use crate::units::{MicroNewtons, Nanometres};
+
+/// Samples over which a fall must come.
+pub const SHARP_SAMPLES: usize = 3;
+/// Samples a structure's rise must take at least.
+pub const STRUCTURE_RISE_SAMPLES: u32 = 10;
+/// The baseline follows the force upwards by 2^-this per sample.
+pub const BASELINE_SHIFT: u32 = 10;
+
+/// A fall waiting for the encoder to move on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Pending {
+    event: Event,
+    /// Position at the fall.
+    x: Nanometres,
+    /// The force must stay at or below this until confirmed.
+    ceiling: MicroNewtons,
+}
+
+/// Interior detector state.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct InteriorState {
+    baseline: MicroNewtons,
+    baseline_index: u32,
+    peak_force: MicroNewtons,
+    peak_x: Nanometres,
+    peak_index: u32,
+    /// Forces of the last samples while advancing, newest first.
+    recent_force: [MicroNewtons; SHARP_SAMPLES],
+    pending: Option<Pending>,
+}
+
+impl InteriorState {
+    /// Start afresh from this sample (also drops a pending fall).
+    pub fn restart(&mut self, s: DetectInput) {
+        *self = Self {
+            baseline: s.force,
+            baseline_index: s.index,
+            peak_force: s.force,
+            peak_x: s.x,
+            peak_index: s.index,
+            recent_force: [s.force; SHARP_SAMPLES],
+            pending: None,
+        };
+    }
+}
+
+/// One sample after puncture, with the needle advancing.
+pub fn update(c: &DetectConfig, st: &mut InteriorState, s: DetectInput) -> Option<Event> {
+    if let Some(p) = st.pending.take() {
+        if s.force <= p.ceiling {
+            if s.x > p.x {
+                st.restart(s);
+                return Some(Event {
+                    index: s.index,
+                    ..p.event
+                });
+            }
+            st.pending = Some(p);
+            return None;
+        }
+    }
+    if let Some(p) = fall(c, st, s) {
+        st.pending = Some(p);
+        return None;
+    }
+    follow(st, s);
+    None
+}
+
+/// A sharp fall at this sample, classified.
+fn fall(c: &DetectConfig, st: &InteriorState, s: DetectInput) -> Option<Pending> {
+    let before = st.recent_force.iter().copied().max().unwrap_or(s.force);
+    let fall = before.sub(s.force);
+    let below_baseline = st.baseline.sub(s.force);
+    let exit = s.at_cutting_front
+        && fall >= c.exit_drop
+        && below_baseline.0 >= c.exit_drop.0 / 2;
+    if exit {
+        let confidence = confidence_permille(fall, c.exit_drop);
+        return Some(Pending {
+            event: event(&s, EventKind::Exit, s.x, s.force, confidence),
+            x: s.x,
+            ceiling: before.sub(MicroNewtons(c.exit_drop.0 / 2)),
+        });
+    }
+    let rise = before.sub(st.baseline);
+    let rise_samples = st.peak_index.wrapping_sub(st.baseline_index);
+    let wall = rise >= c.structure_rise
+        && fall >= c.structure_drop
+        && rise_samples >= STRUCTURE_RISE_SAMPLES;
+    wall.then(|| {
+        let confidence = confidence_permille(fall, c.structure_drop);
+        Pending {
+            event: event(&s, EventKind::Structure, st.peak_x, st.peak_force, confidence),
+            x: s.x,
+            ceiling: before.sub(MicroNewtons(c.structure_drop.0 / 2)),
+        }
+    })
+}
+
+/// No fall: move the baseline, the peak and the recent forces on.
+fn follow(st: &mut InteriorState, s: DetectInput) {
+    if s.force < st.baseline {
+        st.restart(s);
+        return;
+    }
+    // The baseline creeps up towards the force (rounding up, so it moves).
+    let gap = s.force.sub(st.baseline).0;
+    st.baseline.0 += (gap + (1 << BASELINE_SHIFT) - 1) >> BASELINE_SHIFT;
+    if s.force > st.peak_force {
+        st.peak_force = s.force;
+        st.peak_x = s.x;
+        st.peak_index = s.index;
+    }
+    st.recent_force.rotate_right(1);
+    st.recent_force[0] = s.force;
+}
