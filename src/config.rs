@@ -1,5 +1,6 @@
 //! Device configuration: everything fixed for a session, apart from state.
 
+use crate::assist::{AssistConfig, AssistModes};
 use crate::calibration::{Encoder, LoadCell};
 use crate::detect::DetectConfig;
 use crate::kinematics::VelocityConfig;
@@ -19,7 +20,33 @@ pub struct DeviceConfig {
     pub model: ModelConfig,
     /// Event detectors.
     pub detect: DetectConfig,
+    /// Robot assist: what halts the robot besides faults.
+    pub assist: AssistConfig,
 }
+
+/// Assist modes of the firmware image, chosen by cargo features
+/// (`stop-on-puncture`, `stop-on-structure`, `stop-on-exit`, `back-off`,
+/// `speed-limit`); none by default, so the device records and only faults
+/// halt the robot.
+pub const FIRMWARE_ASSIST: AssistModes = {
+    let mut m = AssistModes::NONE;
+    if cfg!(feature = "stop-on-puncture") {
+        m = m.union(AssistModes::STOP_ON_PUNCTURE);
+    }
+    if cfg!(feature = "stop-on-structure") {
+        m = m.union(AssistModes::STOP_ON_STRUCTURE);
+    }
+    if cfg!(feature = "stop-on-exit") {
+        m = m.union(AssistModes::STOP_ON_EXIT);
+    }
+    if cfg!(feature = "back-off") {
+        m = m.union(AssistModes::BACK_OFF);
+    }
+    if cfg!(feature = "speed-limit") {
+        m = m.union(AssistModes::SPEED_LIMIT);
+    }
+    m
+};
 
 /// The firmware's default: liver 1 of the paper, converted at compile time.
 pub const DEFAULT: DeviceConfig = match DeviceConfig::for_tissue(&LIVER1) {
@@ -50,7 +77,14 @@ impl DeviceConfig {
             },
             model,
             detect: DetectConfig::for_tissue(tissue),
+            assist: AssistConfig::for_tissue(tissue, FIRMWARE_ASSIST),
         })
+    }
+
+    /// The same configuration with other assist modes.
+    pub const fn with_assist(mut self, modes: AssistModes) -> Self {
+        self.assist.modes = modes;
+        self
     }
 
     /// The same configuration at another sample rate.

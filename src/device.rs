@@ -10,7 +10,8 @@ use crate::faults::Faults;
 use crate::hal::{EncoderCounter, LoadCellAdc};
 use crate::pipeline::{PipelineState, RawSample};
 use crate::protocol::{
-    Event, EventKind, Frame, FrameEncoder, Header, Status, PROTOCOL_VERSION, STATUS_PERIOD_SAMPLES,
+    Event, EventKind, Frame, FrameEncoder, Halt, HaltReason, Header, Status, PROTOCOL_VERSION,
+    STATUS_PERIOD_SAMPLES,
 };
 use crate::units::{MicroNewtons, Nanometres};
 
@@ -79,6 +80,9 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         if let Some(event) = out.event {
             self.send(&Frame::Event(event));
         }
+        if let Some(halt) = out.halt {
+            self.assert_halt(halt);
+        }
         let at = (out.sample.index, out.sample.x, out.sample.force);
         if !self.raise_at(out.faults, at) && self.samples.is_multiple_of(STATUS_PERIOD_SAMPLES) {
             self.send_status();
@@ -107,7 +111,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         }
     }
 
-    /// Latch new faults, assert halt, send a fault event and a status.
+    /// Latch new faults, send a fault event, assert halt, send a status.
     /// `at` is the sample (index, position, force) that raised them.
     /// Returns whether a status was sent.
     fn raise_at(&mut self, faults: Faults, at: (u32, Nanometres, MicroNewtons)) -> bool {
@@ -116,7 +120,6 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             return false;
         }
         self.faults = self.faults.union(new);
-        self.assert_halt();
         self.send(&Frame::Event(Event {
             index: at.0,
             kind: EventKind::Fault,
@@ -124,11 +127,18 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             force: at.2,
             confidence_permille: 1000,
         }));
+        self.assert_halt(Halt {
+            index: at.0,
+            reason: HaltReason::Fault,
+            x: at.1,
+            hold_x: at.1,
+        });
         self.send_status();
         true
     }
 
-    fn assert_halt(&mut self) {
+    /// Raise the halt line (latched) and say why, once.
+    fn assert_halt(&mut self, why: Halt) {
         if self.halt_asserted {
             return;
         }
@@ -136,6 +146,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         if self.halt.set_high().is_err() {
             self.faults = self.faults.union(Faults::HALT_OUTPUT);
         }
+        self.send(&Frame::Halt(why));
     }
 
     fn send_status(&mut self) {

@@ -19,6 +19,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod assist;
 pub mod calibration;
 pub mod config;
 pub mod detect;

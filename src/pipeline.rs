@@ -8,7 +8,7 @@ use crate::hal::AdcSample;
 use crate::kinematics::{EncoderTracker, VelocityState};
 use crate::model::phase::PhaseState;
 use crate::model::ModelState;
-use crate::protocol::{Event, Sample};
+use crate::protocol::{Event, Halt, Sample};
 use crate::units::MicroNewtons;
 
 /// What the sensors gave for one sample period.
@@ -30,6 +30,8 @@ pub struct PipelineState {
     phase: PhaseState,
     model: ModelState,
     last_force: MicroNewtons,
+    /// Every fault raised so far: once there is one, the detectors stop.
+    faults_seen: Faults,
 }
 
 /// Result of one step.
@@ -41,15 +43,19 @@ pub struct StepOutput {
     pub event: Option<Event>,
     /// Faults this sample raised (not latched here; the device latches).
     pub faults: Faults,
+    /// The robot-assist stop this sample calls for, if any.
+    pub halt: Option<Halt>,
 }
 
 impl DeviceConfig {
     /// Process one raw sample: calibrate, kinematics, detectors, phase,
-    /// model.
+    /// model, robot assist.
     ///
-    /// A sample whose force is unknown (ADC error or saturation) or whose
-    /// position is doubtful (encoder jump) is still reported, but the
-    /// detectors skip it, so a fault never fires an event by itself.
+    /// A sample whose force is unknown (ADC error, saturation, overrun) or
+    /// whose position is doubtful (encoder jump) is still reported, but
+    /// from the first fault on the detectors stop: the halt line is latched
+    /// by then, and their inputs can no longer be trusted, so a fault never
+    /// fires an event (above all, never a puncture).
     pub fn step(&self, state: &mut PipelineState, raw: RawSample) -> StepOutput {
         let index = state.index;
         state.index = state.index.saturating_add(1);
@@ -83,7 +89,7 @@ impl DeviceConfig {
         let x = self.encoder.position(enc.total_counts);
         let v = state.velocity.update(&self.velocity, x);
 
-        let event = if faults.is_empty() {
+        let event = if faults.union(state.faults_seen).is_empty() {
             let input = DetectInput {
                 index,
                 phase: state.phase.phase,
@@ -99,6 +105,7 @@ impl DeviceConfig {
         } else {
             None
         };
+        state.faults_seen = state.faults_seen.union(faults);
         let placed = event.map(|e| (e.kind, e.x));
         self.model.phase.update(&mut state.phase, placed, x, v);
         let model = self.model.expected(&mut state.model, &state.phase, x, v);
@@ -112,10 +119,14 @@ impl DeviceConfig {
             residual: force.sub(model),
             phase,
         };
+        let halt = self
+            .assist
+            .check(&state.phase, &sample, event.map(|e| e.kind));
         StepOutput {
             sample,
             event,
             faults,
+            halt,
         }
     }
 }

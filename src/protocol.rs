@@ -22,7 +22,7 @@ use crate::faults::Faults;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// Version of the frame format; the host refuses other versions.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Samples between two status heartbeats.
 pub const STATUS_PERIOD_SAMPLES: u32 = 250;
@@ -121,6 +121,53 @@ pub struct Status {
     pub halt: bool,
 }
 
+/// Why the device asserted the halt line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum HaltReason {
+    /// A fault (see the status frame).
+    Fault,
+    /// Stop on contact.
+    Contact,
+    /// Stop on capsule puncture.
+    Puncture,
+    /// Stop on an interior structure.
+    Structure,
+    /// Stop on exit from the tissue.
+    Exit,
+    /// The target depth past the surface was reached.
+    TargetDepth,
+    /// Faster than the speed limit before puncture.
+    SpeedLimit,
+}
+
+impl From<EventKind> for HaltReason {
+    fn from(kind: EventKind) -> Self {
+        match kind {
+            EventKind::Contact => Self::Contact,
+            EventKind::Puncture => Self::Puncture,
+            EventKind::Structure => Self::Structure,
+            EventKind::Exit => Self::Exit,
+            EventKind::Fault => Self::Fault,
+        }
+    }
+}
+
+/// Sent when the halt line goes up: why, and where the robot should hold
+/// the tip (behind it when the device asks for a back-off).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Halt {
+    /// Sample index at which the line went up.
+    pub index: u32,
+    /// Why.
+    pub reason: HaltReason,
+    /// Needle position then.
+    pub x: Nanometres,
+    /// Position the robot should bring the needle to and hold.
+    pub hold_x: Nanometres,
+}
+
 /// Everything the device sends.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
@@ -133,6 +180,8 @@ pub enum Frame {
     Event(Event),
     /// Heartbeat.
     Status(Status),
+    /// The halt line went up.
+    Halt(Halt),
 }
 
 impl MaxSize for Faults {
@@ -348,7 +397,8 @@ mod tests {
     fn golden_bytes_pin_the_wire_format() {
         let mut encoder = FrameEncoder::default();
         let bytes = encoder.encode(&sample());
-        assert_eq!(PROTOCOL_VERSION, 1);
+        // Version 2 added the `Halt` frame; a sample's bytes did not change.
+        assert_eq!(PROTOCOL_VERSION, 2);
         assert_eq!(
             bytes,
             &[
@@ -422,6 +472,12 @@ mod tests {
                 frames_dropped: u32::MAX,
                 faults: Faults(u16::MAX),
                 halt: true,
+            }),
+            Frame::Halt(Halt {
+                index: u32::MAX,
+                reason: HaltReason::SpeedLimit,
+                x: Nanometres::MAX,
+                hold_x: Nanometres::MIN,
             }),
         ];
         for frame in frames {

@@ -61,7 +61,7 @@ fn halt_is_released_at_start_and_asserted_once_on_the_first_fault() {
 }
 
 #[test]
-fn a_fault_sends_an_event_and_a_status_right_away() {
+fn a_fault_sends_an_event_a_halt_and_a_status_right_away() {
     let mut sink = Vec::new();
     let mut pin = PinMock::new(&[Transaction::set(State::Low), Transaction::set(State::High)]);
     let mut device = Device::new(DeviceConfig::default(), &mut sink, pin.clone());
@@ -80,7 +80,10 @@ fn a_fault_sends_an_event_and_a_status_right_away() {
     assert!(matches!(frames[1], Frame::Sample(_)));
     assert!(matches!(frames[2], Frame::Event(e) if e.kind == protocol::EventKind::Fault));
     assert!(
-        matches!(frames[3], Frame::Status(s) if s.halt && s.faults.contains(Faults::ADC_SATURATED))
+        matches!(frames[3], Frame::Halt(h) if h.reason == protocol::HaltReason::Fault && h.index == 0)
+    );
+    assert!(
+        matches!(frames[4], Frame::Status(s) if s.halt && s.faults.contains(Faults::ADC_SATURATED))
     );
 }
 
@@ -139,20 +142,22 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
 
     /// Any readings, including errors, saturation and wild encoder
-    /// values: no panic, indices count up, and faults never fire events
-    /// other than `fault`.
+    /// values: no panic, indices count up, and from the first fault on no
+    /// event fires.
     #[test]
     fn the_pipeline_never_panics_and_faulty_samples_fire_no_events(
         samples in prop::collection::vec((any::<Option<i32>>(), any::<bool>(), any::<bool>(), any::<u16>()), 1..400)
     ) {
         let config = DeviceConfig::default();
         let mut state = PipelineState::default();
+        let mut seen = Faults::NONE;
         for (i, (counts, saturated, overrun, encoder_count)) in samples.into_iter().enumerate() {
             let adc = counts.map(|counts| AdcSample { counts, saturated, overrun });
             let out = config.step(&mut state, RawSample { adc, encoder_count });
             prop_assert_eq!(out.sample.index, i as u32);
             prop_assert_eq!(out.sample.residual, out.sample.force.sub(out.sample.model));
-            if !out.faults.is_empty() {
+            seen = seen.union(out.faults);
+            if !seen.is_empty() {
                 prop_assert!(out.event.is_none());
             }
         }
@@ -193,4 +198,89 @@ impl embedded_hal::digital::OutputPin for RecordingPin {
         self.high = false;
         Ok(())
     }
+}
+
+type Shared = std::rc::Rc<std::cell::RefCell<Vec<u8>>>;
+
+/// A sink whose bytes the test can still read while the device owns it.
+struct SharedSink(Shared);
+impl embedded_io::ErrorType for SharedSink {
+    type Error = core::convert::Infallible;
+}
+impl embedded_io::Write for SharedSink {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        self.0.borrow_mut().extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+/// Halt pin that notes how many bytes had been sent when it went up.
+struct NotingPin(Shared, std::rc::Rc<std::cell::Cell<Option<usize>>>);
+impl embedded_hal::digital::ErrorType for NotingPin {
+    type Error = core::convert::Infallible;
+}
+impl embedded_hal::digital::OutputPin for NotingPin {
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        self.1.set(Some(self.0.borrow().len()));
+        Ok(())
+    }
+}
+
+/// Stop on puncture with back-off: the line goes up in the tick that
+/// flags the puncture (right after its event frame), and the halt frame
+/// asks the robot to hold x_s2 − x_s3 = (1 − ρ)(x_s2 − x_s1) behind the tip.
+#[test]
+fn stop_on_puncture_halts_in_the_same_sample_and_asks_for_the_back_off() {
+    use needle_holder::assist::AssistModes;
+    use needle_holder::model::params::LIVER1;
+    use needle_holder::protocol::{EventKind, HaltReason};
+    use needle_holder::units::MicroNewtons;
+    let config = DeviceConfig::default()
+        .with_assist(AssistModes::STOP_ON_PUNCTURE.union(AssistModes::BACK_OFF));
+    let bytes = Shared::default();
+    let high_at = std::rc::Rc::new(std::cell::Cell::new(None));
+    let pin = NotingPin(bytes.clone(), high_at.clone());
+    let mut device = Device::new(config, SharedSink(bytes.clone()), pin);
+    // Liver 1 at 3 mm/s, 500 Hz, no noise: contact at 5 mm.
+    for i in 0..4000u32 {
+        let x_m = f64::from(i) * 6e-6;
+        let d = x_m - 0.005;
+        let f = if d >= LIVER1.puncture_depth_m {
+            1.0
+        } else {
+            LIVER1.stiffness_n(d)
+        };
+        let mut adc = ok(config.load_cell.counts_for(MicroNewtons::from_n(f)));
+        device.tick(&mut adc, &mut Enc((x_m * 1e6).round() as u16));
+    }
+    let high_at = high_at.get().expect("halt asserted");
+    let bytes = bytes.borrow();
+    let (before, after) = (frames(&bytes[..high_at]), frames(&bytes[high_at..]));
+    let Some(Frame::Event(puncture)) = before.last() else {
+        panic!("the puncture event goes out just before the line goes up")
+    };
+    assert_eq!(puncture.kind, EventKind::Puncture);
+    let Some(Frame::Halt(halt)) = after.first() else {
+        panic!("a halt frame follows: {:?}", after.first())
+    };
+    assert_eq!(halt.reason, HaltReason::Puncture);
+    assert_eq!(halt.index, puncture.index);
+    let contact = before.iter().find_map(|f| match f {
+        Frame::Event(e) if e.kind == EventKind::Contact => Some(*e),
+        _ => None,
+    });
+    let (x_s1, x_s2) = (contact.unwrap().x.as_m(), puncture.x.as_m());
+    let back_off = halt.x.as_m() - halt.hold_x.as_m();
+    let expected = (1.0 - LIVER1.relaxation) * (x_s2 - x_s1);
+    assert!(
+        (back_off - expected).abs() < 1e-6,
+        "{back_off} vs {expected}"
+    );
+    assert!((expected - 0.5 * 0.01665).abs() < 2e-4, "{expected}");
 }

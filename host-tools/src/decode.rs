@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::faults::Faults;
-use needle_holder::protocol::{EventKind, Frame, Phase, Sample};
+use needle_holder::protocol::{EventKind, Frame, HaltReason, Phase, Sample};
 
 use crate::frames::{Item, StreamDecoder, StreamStats};
 
@@ -250,5 +250,25 @@ pub fn describe(frame: &Frame, rate_hz: Option<u16>) -> String {
             fault_names(s.faults),
             if s.halt { "ASSERTED" } else { "released" }
         ),
+        Frame::Halt(h) => format!(
+            "HALT    {}  {:<12} x {:8.3} mm  hold at {:8.3} mm",
+            t(h.index),
+            halt_reason_name(h.reason),
+            h.x.as_m() * 1e3,
+            h.hold_x.as_m() * 1e3
+        ),
+    }
+}
+
+/// The name of a halt reason.
+pub fn halt_reason_name(reason: HaltReason) -> &'static str {
+    match reason {
+        HaltReason::Fault => "fault",
+        HaltReason::Contact => "contact",
+        HaltReason::Puncture => "puncture",
+        HaltReason::Structure => "structure",
+        HaltReason::Exit => "exit",
+        HaltReason::TargetDepth => "target_depth",
+        HaltReason::SpeedLimit => "speed_limit",
     }
 }

@@ -5,15 +5,17 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use needle_holder::assist::AssistModes;
 use needle_holder::config::DeviceConfig;
+use needle_holder::faults::Faults;
 use needle_holder::hal::LoadCellAdc;
 use needle_holder::pipeline::{PipelineState, RawSample};
-use needle_holder::protocol::{Event, EventKind};
 use needle_holder::replay::ReplayAdc;
+use needle_holder::units::Nanometres;
 use serde::Serialize;
 use serde_json::Value;
 
-use crate::decode::event_name;
+use crate::decode::{event_name, halt_reason_name};
 use crate::sim::raw_record;
 use crate::trial::Trial;
 
@@ -30,6 +32,32 @@ pub struct DetectArgs {
     /// Tissue library file.
     #[arg(long)]
     pub params: Option<PathBuf>,
+    /// Robot-assist modes to run, comma-separated: contact, puncture,
+    /// structure, exit (stop on that event), depth (stop at
+    /// --target-depth-mm past the surface), back-off (after a puncture
+    /// stop, hold x_s2 − x_s3 behind the tip), speed-limit.
+    #[arg(long, default_value = "")]
+    pub assist: String,
+    /// Target depth past the surface for `--assist depth`, mm.
+    #[arg(long, default_value_t = 30.0)]
+    pub target_depth_mm: f64,
+}
+
+/// Parse `--assist`.
+pub fn parse_assist(list: &str) -> Result<AssistModes> {
+    list.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty() && *s != "none")
+        .try_fold(AssistModes::NONE, |modes, name| {
+            let known = AssistModes::NAMES.iter().find(|(_, n)| *n == name);
+            match known {
+                Some((mode, _)) => Ok(modes.union(*mode)),
+                None => {
+                    let names: Vec<&str> = AssistModes::NAMES.iter().map(|(_, n)| *n).collect();
+                    anyhow::bail!("unknown assist mode `{name}` (known: {})", names.join(", "))
+                }
+            }
+        })
 }
 
 /// One detected event, in SI units.
@@ -42,13 +70,35 @@ pub struct Detected {
     pub confidence: f64,
 }
 
+/// The halt line going up, in SI units.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HaltOut {
+    pub reason: &'static str,
+    pub t_s: f64,
+    pub x_m: f64,
+    pub hold_x_m: f64,
+}
+
+/// What the device made of one trial.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct TrialDetection {
+    pub events: Vec<Detected>,
+    /// The first halt (the line latches), if any.
+    pub halt: Option<HaltOut>,
+    /// Faults raised, by name.
+    pub faults: Vec<&'static str>,
+}
+
 /// Run the device pipeline over a trial, as raw readings through the
-/// configured calibration, and return the events it fires.
-pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> Vec<Detected> {
+/// configured calibration: the events it fires, the halt it asserts (a
+/// fault's or the assist's, whichever comes first, as the device latches
+/// it) and the faults it raises.
+pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
     let rate = trial.rate_hz().round().clamp(1.0, 65_535.0) as u16;
     let config = config.with_sample_rate(rate);
     let mut state = PipelineState::default();
-    let mut events = Vec::new();
+    let mut found = TrialDetection::default();
+    let mut faults = Faults::NONE;
     for i in 0..trial.len() {
         let record = raw_record(
             trial.x_m[i],
@@ -65,26 +115,33 @@ pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> Vec<Detected> {
             encoder_count: record.encoder_count,
         };
         let out = config.step(&mut state, raw);
-        if let Some(Event {
-            index,
-            kind,
-            x,
-            force,
-            confidence_permille,
-        }) = out.event
-        {
-            if kind != EventKind::Fault {
-                events.push(Detected {
-                    kind: event_name(kind),
-                    t_s: trial.t_s[index as usize],
-                    x_m: x.as_m(),
-                    f_n: force.as_n(),
-                    confidence: f64::from(confidence_permille) / 1000.0,
-                });
-            }
+        let t = |index: u32| trial.t_s[index as usize];
+        if let Some(e) = out.event {
+            found.events.push(Detected {
+                kind: event_name(e.kind),
+                t_s: t(e.index),
+                x_m: e.x.as_m(),
+                f_n: e.force.as_n(),
+                confidence: f64::from(e.confidence_permille) / 1000.0,
+            });
         }
+        let halt = match out.halt {
+            _ if !out.faults.is_empty() => Some(("fault", out.sample.x, out.sample.x)),
+            Some(h) => Some((halt_reason_name(h.reason), h.x, h.hold_x)),
+            None => None,
+        };
+        if let (None, Some((reason, x, hold_x))) = (&found.halt, halt) {
+            found.halt = Some(HaltOut {
+                reason,
+                t_s: t(out.sample.index),
+                x_m: x.as_m(),
+                hold_x_m: hold_x.as_m(),
+            });
+        }
+        faults = faults.union(out.faults);
     }
-    events
+    found.faults = faults.names().collect();
+    found
 }
 
 /// Detection quality for one event kind.
@@ -182,7 +239,8 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
     let mut trials = Vec::new();
     for file in crate::trial::dataset_files(dir)? {
         let trial = crate::trial::read(&file)?;
-        let events = detect_trial(&trial, config);
+        let detection = detect_trial(&trial, config);
+        let events = &detection.events;
         let name = file
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -205,7 +263,12 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
                 &score(&true_events, &found, trial.rate_hz(), &kinds),
             );
         }
-        trials.push(serde_json::json!({ "file": name, "events": events }));
+        trials.push(serde_json::json!({
+            "file": name,
+            "events": events,
+            "halt": detection.halt,
+            "faults": detection.faults,
+        }));
     }
     let mut out = serde_json::json!({ "trials": trials });
     if truth.is_some() {
@@ -216,8 +279,13 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
 
 pub fn run(args: &DetectArgs) -> Result<()> {
     let tissue = crate::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
-    let config = DeviceConfig::for_tissue(&tissue.params)
-        .map_err(|e| anyhow::anyhow!("tissue `{}`: {e}", tissue.name))?;
+    let mut config = DeviceConfig::for_tissue(&tissue.params)
+        .map_err(|e| anyhow::anyhow!("tissue `{}`: {e}", tissue.name))?
+        .with_assist(parse_assist(&args.assist)?);
+    if !(args.target_depth_mm.is_finite() && args.target_depth_mm > 0.0) {
+        anyhow::bail!("--target-depth-mm must be a positive number");
+    }
+    config.assist.target_depth = Nanometres::from_m(args.target_depth_mm * 1e-3);
     let out = detect_dataset(&args.dir, &config)?;
     if let Some(eval) = out.get("evaluation").and_then(Value::as_array) {
         eprintln!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");

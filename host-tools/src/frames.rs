@@ -154,7 +154,7 @@ impl StreamDecoder {
                 self.stats.samples += 1;
             }
             Frame::Event(_) => self.stats.events += 1,
-            Frame::Status(_) => {}
+            Frame::Status(_) | Frame::Halt(_) => {}
         }
         self.stats.frames += 1;
         on_item(Item::Frame(frame));

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{bench, decode, demo, detect, fit, sim};
+use host_tools::{bench, decode, demo, detect, evaluate, fit, sim};
 
 #[derive(Parser)]
 #[command(
@@ -31,6 +31,8 @@ enum Command {
     Fit(fit::FitArgs),
     /// Run the device's event detectors over trials (and score them against truth.json).
     Detect(detect::DetectArgs),
+    /// Score the detectors over simulated trials: rates × noise × structures.
+    Evaluate(evaluate::EvaluateArgs),
 }
 
 fn main() -> ExitCode {
@@ -42,6 +44,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => sim::run(args),
         Command::Fit(args) => fit::run(args),
         Command::Detect(args) => detect::run(args),
+        Command::Evaluate(args) => evaluate::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -18,7 +18,7 @@ const SENSOR: Sensor = Sensor {
 
 fn fit(tissue: &TissueParams, effects: &[Effect], seed: u64) -> Value {
     let dir = tempfile::tempdir().unwrap();
-    simulate_dataset(dir.path(), "t", tissue, effects, 10, seed, &SENSOR, false).unwrap();
+    simulate_dataset(dir.path(), "t", tissue, effects, 10, seed, &SENSOR).unwrap();
     fit_dataset(dir.path()).unwrap()
 }
 
@@ -131,7 +131,7 @@ fn each_effect_drifts_the_fit_and_the_table_prints() {
 #[test]
 fn bad_files_are_left_out_with_a_reason_and_nothing_fittable_fails() {
     let dir = tempfile::tempdir().unwrap();
-    simulate_dataset(dir.path(), "t", &LIVER1, &[], 1, 9, &SENSOR, false).unwrap();
+    simulate_dataset(dir.path(), "t", &LIVER1, &[], 1, 9, &SENSOR).unwrap();
     let write = |name: &str, text: &str| std::fs::write(dir.path().join(name), text).unwrap();
     write("nan.csv", "t_s,x_m,f_n\n0,0,0\n0.002,0,NaN\n");
     write(
@@ -194,7 +194,7 @@ fn the_fitted_toml_is_a_valid_library_entry_close_to_the_truth() {
 #[test]
 fn the_plot_shows_measured_and_fitted_force_with_the_events() {
     let dir = tempfile::tempdir().unwrap();
-    simulate_dataset(dir.path(), "t", &LIVER1, &[], 2, 12, &SENSOR, false).unwrap();
+    simulate_dataset(dir.path(), "t", &LIVER1, &[], 2, 12, &SENSOR).unwrap();
     let svg = dir.path().join("fit.svg");
     let out = Command::new(env!("CARGO_BIN_EXE_needle"))
         .arg("fit")

@@ -14,8 +14,9 @@ use host_tools::twin;
 use needle_holder::config::DeviceConfig;
 use needle_holder::faults::Faults;
 use needle_holder::model::params::LIVER1;
-use needle_holder::protocol::{EventKind, Frame, Status};
-use needle_holder::replay::{Record, ReplayHeader};
+use needle_holder::protocol::{EventKind, Frame, HaltReason, Status};
+use needle_holder::replay::{Record, ReplayHeader, OVERRUN_MARK};
+use needle_holder::units::MicroNewtons;
 
 /// One firmware build per board per test run, and one at a time (cargo
 /// serialises builds anyway; this keeps the output readable).
@@ -131,7 +132,7 @@ fn a_simulated_trial_with_effects_replays_in_qemu_like_on_the_host() {
         encoder_m: 1e-6,
     };
     let effects = effects::parse_list("internal_structures,tissue_motion").unwrap();
-    simulate_dataset(dir.path(), "liver1", &LIVER1, &effects, 1, 11, &sensor, false).unwrap();
+    simulate_dataset(dir.path(), "liver1", &LIVER1, &effects, 1, 11, &sensor).unwrap();
     let replay = std::fs::read(dir.path().join("trial_000.replay")).unwrap();
     let (qemu, _) = assert_twin(Board::Lm3s6965, &replay, "simulated");
     let (_, stats) = decode_all(&qemu.frames).unwrap();
@@ -160,8 +161,38 @@ fn replay_of(records: impl IntoIterator<Item = Record>) -> Vec<u8> {
     bytes
 }
 
+fn frames_of(bytes: &[u8]) -> Vec<Frame> {
+    let (items, _) = decode_all(bytes).unwrap();
+    items
+        .into_iter()
+        .filter_map(|i| match i {
+            host_tools::frames::Item::Frame(f) => Some(f),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The fault is latched and reported, the halt line is up with a `Halt`
+/// frame saying `fault`, and no puncture was flagged after it.
 fn assert_fault(replay: &[u8], name: &str, fault: Faults) {
     let (qemu, host) = assert_twin(Board::Lm3s6965, replay, name);
+    let frames = frames_of(&qemu.frames);
+    let first_fault = frames
+        .iter()
+        .position(|f| matches!(f, Frame::Event(e) if e.kind == EventKind::Fault))
+        .expect("a fault event");
+    assert!(
+        !frames[first_fault..]
+            .iter()
+            .any(|f| matches!(f, Frame::Event(e) if e.kind == EventKind::Puncture)),
+        "{name}: no puncture may follow a fault"
+    );
+    assert!(
+        frames
+            .iter()
+            .any(|f| matches!(f, Frame::Halt(h) if h.reason == HaltReason::Fault)),
+        "{name}: a halt frame with reason fault"
+    );
     let status = last_status(&qemu.frames);
     assert!(
         status.faults.contains(fault),
@@ -202,6 +233,66 @@ fn encoder_jump_beyond_the_mechanics_raises_a_fault_and_halts() {
         encoder_count: if i < 150 { i * 6 } else { 20_000 + i * 6 },
     }));
     assert_fault(&replay, "jump", Faults::ENCODER_JUMP);
+}
+
+#[test]
+fn a_late_sample_raises_overrun_and_halts() {
+    let replay = replay_of((0..300u16).map(|i| Record {
+        adc_counts: if i == 200 { OVERRUN_MARK } else { 0 },
+        encoder_count: i * 6,
+    }));
+    assert_fault(&replay, "overrun", Faults::SAMPLE_OVERRUN);
+}
+
+#[test]
+fn force_with_the_needle_standing_outside_raises_a_fault_not_a_contact() {
+    let load_cell = DeviceConfig::default().load_cell;
+    let replay = replay_of((0..300u16).map(|i| Record {
+        adc_counts: load_cell.counts_for(MicroNewtons(if i < 100 { 0 } else { 400_000 })),
+        encoder_count: 1000,
+    }));
+    assert_fault(&replay, "no-contact", Faults::FORCE_WITHOUT_CONTACT);
+}
+
+/// Contact and loading on liver 1, then the encoder freezes while the force
+/// goes on rising to beyond the puncture force and drops as at a puncture.
+#[test]
+fn an_encoder_stuck_while_loading_raises_a_fault_and_no_puncture() {
+    let plan = Plan {
+        noise_n: 0.0,
+        ..Plan::PAPER
+    };
+    let (trial, truth) = sim::insertion(&LIVER1, &plan);
+    let config = DeviceConfig::default();
+    let stuck_from = trial
+        .t_s
+        .iter()
+        .position(|&t| t > truth.contact_t_s + 2.0)
+        .unwrap();
+    let end = trial
+        .t_s
+        .iter()
+        .position(|&t| t > truth.puncture_t_s + 0.5)
+        .unwrap();
+    let replay = replay_of((0..end).map(|i| {
+        let mut r = sim::raw_record(
+            trial.x_m[i],
+            trial.f_n[i],
+            &config.load_cell,
+            &config.encoder,
+        );
+        if i >= stuck_from {
+            r.encoder_count = sim::raw_record(
+                trial.x_m[stuck_from],
+                0.0,
+                &config.load_cell,
+                &config.encoder,
+            )
+            .encoder_count;
+        }
+        r
+    }));
+    assert_fault(&replay, "stuck-encoder", Faults::ENCODER_STUCK);
 }
 
 #[test]

@@ -27,11 +27,7 @@ pub struct ContactState {
 }
 
 /// One sample while out of the tissue.
-pub fn update(
-    c: &DetectConfig,
-    st: &mut ContactState,
-    s: DetectInput,
-) -> (Option<Event>, Faults) {
+pub fn update(c: &DetectConfig, st: &mut ContactState, s: DetectInput) -> (Option<Event>, Faults) {
     let above = s.force.abs() > c.contact_force;
     let touching = above && s.force.0 > 0 && s.v.0 > 0;
     st.touching_samples = if touching {

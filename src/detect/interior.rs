@@ -95,9 +95,7 @@ fn fall(c: &DetectConfig, st: &InteriorState, s: DetectInput) -> Option<Pending>
     let before = st.recent_force.iter().copied().max().unwrap_or(s.force);
     let fall = before.sub(s.force);
     let below_baseline = st.baseline.sub(s.force);
-    let exit = s.at_cutting_front
-        && fall >= c.exit_drop
-        && below_baseline.0 >= c.exit_drop.0 / 2;
+    let exit = s.at_cutting_front && fall >= c.exit_drop && below_baseline.0 >= c.exit_drop.0 / 2;
     if exit {
         let confidence = confidence_permille(fall, c.exit_drop);
         return Some(Pending {
@@ -114,7 +112,13 @@ fn fall(c: &DetectConfig, st: &InteriorState, s: DetectInput) -> Option<Pending>
     wall.then(|| {
         let confidence = confidence_permille(fall, c.structure_drop);
         Pending {
-            event: event(&s, EventKind::Structure, st.peak_x, st.peak_force, confidence),
+            event: event(
+                &s,
+                EventKind::Structure,
+                st.peak_x,
+                st.peak_force,
+                confidence,
+            ),
             x: s.x,
             ceiling: before.sub(MicroNewtons(c.structure_drop.0 / 2)),
         }

@@ -124,10 +124,9 @@ impl DetectConfig {
                 }
                 (event, Faults::NONE)
             }
-            Phase::Inserted if advancing => (
-                interior::update(self, &mut state.interior, s),
-                Faults::NONE,
-            ),
+            Phase::Inserted if advancing => {
+                (interior::update(self, &mut state.interior, s), Faults::NONE)
+            }
             Phase::Inserted | Phase::Withdrawal => {
                 state.interior.restart(s);
                 (None, Faults::NONE)

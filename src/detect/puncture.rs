@@ -40,7 +40,13 @@ pub fn update(c: &DetectConfig, st: &mut PunctureState, s: DetectInput) -> Optio
     let punctured = drop >= c.puncture_drop && st.peak_force >= c.puncture_min_peak;
     punctured.then(|| {
         let confidence = confidence_permille(drop, c.puncture_drop);
-        event(&s, EventKind::Puncture, st.peak_x, st.peak_force, confidence)
+        event(
+            &s,
+            EventKind::Puncture,
+            st.peak_x,
+            st.peak_force,
+            confidence,
+        )
     })
 }
 

@@ -466,22 +466,35 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         noise_n: args.noise_n,
         encoder_m: 1e-6,
     };
-    let written = simulate_dataset(
-        &args.out,
-        &tissue.name,
-        &tissue.params,
-        &effects,
-        args.trials,
-        args.seed,
-        &sensor,
-        args.through,
-    )?;
+    let written = Dataset {
+        tissue_name: &tissue.name,
+        tissue: &tissue.params,
+        effects: &effects,
+        trials: args.trials,
+        seed: args.seed,
+        sensor,
+        through: args.through,
+    }
+    .write(&args.out)?;
     eprintln!("wrote {written} trials to {}", args.out.display());
     Ok(())
 }
 
-/// Simulate `trials` trials into `dir`: trial CSVs, firmware replays and
-/// truth.json. Same seed, same bytes.
+/// What to simulate: a tissue with its effects, how many trials from which
+/// seed, through which sensor, and whether the needle goes through.
+#[derive(Clone, Copy, Debug)]
+pub struct Dataset<'a> {
+    pub tissue_name: &'a str,
+    pub tissue: &'a TissueParams,
+    pub effects: &'a [Effect],
+    pub trials: usize,
+    pub seed: u64,
+    pub sensor: Sensor,
+    /// The far side of the sample lies inside the motion (`--through`).
+    pub through: bool,
+}
+
+/// Simulate `trials` trials into `dir` (not through the sample).
 pub fn simulate_dataset(
     dir: &Path,
     tissue_name: &str,
@@ -490,48 +503,74 @@ pub fn simulate_dataset(
     trials: usize,
     seed: u64,
     sensor: &Sensor,
-    through: bool,
 ) -> Result<usize> {
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    let config = needle_holder::config::DeviceConfig::default();
-    let mut truths = Vec::new();
-    for k in 0..trials {
-        let mut rng =
-            ChaCha8Rng::seed_from_u64(seed.wrapping_mul(1_000_003).wrapping_add(k as u64));
-        let mut protocol = random_protocol(&mut rng);
-        if through {
-            protocol.far_surface_x_m = far_surface(tissue, &protocol, &mut rng);
-        }
-        let (trial, truth) = simulate_trial(tissue, &protocol, effects, sensor, &mut rng);
-        let name = format!("trial_{k:03}");
-        crate::trial::write(&dir.join(format!("{name}.csv")), &trial)?;
-        let replay = to_replay(
-            &trial,
-            sensor.rate_hz.round() as u16,
-            &config.load_cell,
-            &config.encoder,
-        );
-        std::fs::write(dir.join(format!("{name}.replay")), replay)?;
-        truths.push((name, truth));
-    }
-    let file = TruthFile {
-        tissue: tissue_name,
-        params: tissue,
+    Dataset {
+        tissue_name,
+        tissue,
         effects,
+        trials,
         seed,
         sensor: *sensor,
-        trials: truths
-            .iter()
-            .map(|(name, truth)| TruthTrial {
-                file: format!("{name}.csv"),
-                replay: format!("{name}.replay"),
-                truth,
-            })
-            .collect(),
-    };
-    let json = serde_json::to_string_pretty(&file)?;
-    std::fs::write(dir.join("truth.json"), json + "\n")?;
-    Ok(trials)
+        through: false,
+    }
+    .write(dir)
+}
+
+impl Dataset<'_> {
+    /// Write trial CSVs, firmware replays and truth.json into `dir`. Same
+    /// seed, same bytes.
+    pub fn write(&self, dir: &Path) -> Result<usize> {
+        let Dataset {
+            tissue_name,
+            tissue,
+            effects,
+            trials,
+            seed,
+            ref sensor,
+            through,
+        } = *self;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let config = needle_holder::config::DeviceConfig::default();
+        let mut truths = Vec::new();
+        for k in 0..trials {
+            let mut rng =
+                ChaCha8Rng::seed_from_u64(seed.wrapping_mul(1_000_003).wrapping_add(k as u64));
+            let mut protocol = random_protocol(&mut rng);
+            if through {
+                protocol.far_surface_x_m = far_surface(tissue, &protocol, &mut rng);
+            }
+            let (trial, truth) = simulate_trial(tissue, &protocol, effects, sensor, &mut rng);
+            let name = format!("trial_{k:03}");
+            crate::trial::write(&dir.join(format!("{name}.csv")), &trial)?;
+            let replay = to_replay(
+                &trial,
+                sensor.rate_hz.round() as u16,
+                &config.load_cell,
+                &config.encoder,
+            );
+            std::fs::write(dir.join(format!("{name}.replay")), replay)?;
+            truths.push((name, truth));
+        }
+        let file = TruthFile {
+            tissue: tissue_name,
+            params: tissue,
+            effects,
+            seed,
+            sensor: *sensor,
+            trials: truths
+                .iter()
+                .map(|(name, truth)| TruthTrial {
+                    file: format!("{name}.csv"),
+                    replay: format!("{name}.replay"),
+                    truth,
+                })
+                .collect(),
+        };
+        let json = serde_json::to_string_pretty(&file)?;
+        std::fs::write(dir.join("truth.json"), json + "\n")?;
+        Ok(trials)
+    }
 }
 
 /// A far side for the sample, between 8 mm past the puncture depth and
