@@ -5,6 +5,7 @@ pub mod bench;
 pub mod decode;
 pub mod demo;
 pub mod detect;
+pub mod diagnose;
 pub mod evaluate;
 pub mod firmware;
 pub mod fit;

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{bench, decode, demo, detect, evaluate, fit, sim};
+use host_tools::{bench, decode, demo, detect, diagnose, evaluate, fit, sim};
 
 #[derive(Parser)]
 #[command(
@@ -33,6 +33,8 @@ enum Command {
     Detect(detect::DetectArgs),
     /// Score the detectors over simulated trials: rates × noise × structures.
     Evaluate(evaluate::EvaluateArgs),
+    /// Where the model misses, which unmodelled effect causes it, judged on withheld trials.
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 fn main() -> ExitCode {
@@ -45,6 +47,7 @@ fn main() -> ExitCode {
         Command::Fit(args) => fit::run(args),
         Command::Detect(args) => detect::run(args),
         Command::Evaluate(args) => evaluate::run(args),
+        Command::Diagnose(args) => diagnose::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

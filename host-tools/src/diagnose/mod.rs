@@ -1,0 +1,453 @@
+//! `needle diagnose`: where the nominal model misses, which unmodelled
+//! effect causes it, and how much the gap shrinks with that effect added,
+//! judged on withheld trials.
+//!
+//! 1. Nominal model: `needle fit`'s estimates over the data (or `--params`),
+//!    along each trial's own geometry (contact, puncture, relaxed surface).
+//! 2. Where: the residual split by phase and depth, with its share of the
+//!    squared residual, and system-identification checks (whiteness,
+//!    correlation with velocity, acceleration, depth, time).
+//! 3. Which: every candidate of [`candidates::CANDIDATES`], fitted on the
+//!    training trials of each fold and scored on the withheld ones.
+//! 4. Verdict: the best candidate if it shrinks the held-out RMS by at
+//!    least [`MIN_SHRINK`] with a paired t over withheld trials of at least
+//!    [`MIN_T`]; then greedily a second one on top of it, by the same test.
+
+pub mod candidates;
+pub mod crossval;
+pub mod prepare;
+mod report;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use needle_holder::model::params::TissueParams;
+use serde_json::{json, Value};
+
+use self::candidates::{Candidate, CANDIDATES};
+use self::crossval::{folds, paired_t, Gram};
+use self::prepare::{prepare, Prepared, PHASES};
+
+/// Least held-out shrink that can name an effect.
+pub const MIN_SHRINK: f64 = 0.03;
+/// Least paired t (withheld trials) that can name an effect.
+pub const MIN_T: f64 = 3.0;
+
+#[derive(Debug, clap::Args)]
+pub struct DiagnoseArgs {
+    /// Dataset directory (all *.csv trials in it).
+    pub dir: PathBuf,
+    /// Take the nominal model from this tissue library file instead of
+    /// fitting it (its first entry, or --tissue).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Entry of --params to use.
+    #[arg(long)]
+    pub tissue: Option<String>,
+    /// Write the diagnosis as JSON here (default: standard output).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write a one-page report (.html, with the figure beside it as .svg).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write every sample's nominal model and residual as CSV here
+    /// (`file,t_s,x_m,f_n,model_n,residual_n,phase`).
+    #[arg(long)]
+    pub residuals: Option<PathBuf>,
+}
+
+/// Every sample's nominal model and residual, as CSV.
+fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
+    let mut out = String::from("file,t_s,x_m,f_n,model_n,residual_n,phase\n");
+    for p in data {
+        for i in 0..p.trial.len() {
+            out += &format!(
+                "{},{},{},{},{},{},{}\n",
+                p.file,
+                p.trial.t_s[i],
+                p.trial.x_m[i],
+                p.trial.f_n[i],
+                p.nominal_n[i],
+                p.residual_n[i],
+                PHASES[p.phase[i]]
+            );
+        }
+    }
+    std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Columns of a set of candidates (each at its grid value) for one trial.
+fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
+    set.iter().flat_map(|(c, g)| (c.columns)(p, *g)).collect()
+}
+
+/// Gram sums per trial and phase for a set of candidates.
+fn grams(data: &[Prepared], set: &[(&Candidate, f64)]) -> Vec<[Gram; 4]> {
+    data.iter()
+        .map(|p| {
+            let cols = columns(p, set);
+            let mut g: [Gram; 4] = std::array::from_fn(|_| Gram::new(cols.len()));
+            let mut phi = vec![0.0; cols.len()];
+            for i in 0..p.trial.len() {
+                for (k, c) in cols.iter().enumerate() {
+                    phi[k] = c[i];
+                }
+                g[p.phase[i]].add(&phi, p.residual_n[i]);
+            }
+            g
+        })
+        .collect()
+}
+
+fn total(gs: &[Gram; 4]) -> Gram {
+    let mut t = gs[0].clone();
+    for g in &gs[1..] {
+        t.merge(g);
+    }
+    t
+}
+
+/// Held-out result of one model (a set of candidate terms).
+#[derive(Clone, Debug)]
+pub struct Scored {
+    /// Per-trial held-out squared error and sample count.
+    pub per_trial: Vec<(f64, usize)>,
+    /// Per-phase held-out squared error and sample count.
+    pub by_phase: [(f64, usize); 4],
+    /// Grid value chosen on all data, and the linear parameters there.
+    pub grid_value: f64,
+    pub theta: Vec<f64>,
+}
+
+impl Scored {
+    pub fn rms(&self) -> f64 {
+        let (sse, n) = self
+            .per_trial
+            .iter()
+            .fold((0.0, 0), |(s, c), (e, k)| (s + e, c + k));
+        (sse / n.max(1) as f64).sqrt()
+    }
+
+    fn phase_rms(&self, k: usize) -> f64 {
+        (self.by_phase[k].0 / self.by_phase[k].1.max(1) as f64).sqrt()
+    }
+}
+
+/// k-fold by trial: fit `fixed` plus the candidate at each grid value on
+/// the training trials, keep the grid value with the least training error,
+/// score the withheld trials.
+fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate>) -> Scored {
+    let grid: &[f64] = cand.map_or(&[0.0], |c| c.grid);
+    let per_grid: Vec<Vec<[Gram; 4]>> = grid
+        .iter()
+        .map(|&g| {
+            let mut set = fixed.to_vec();
+            set.extend(cand.map(|c| (c, g)));
+            grams(data, &set)
+        })
+        .collect();
+    let k = folds(data.len());
+    let mut per_trial = vec![(0.0, 0); data.len()];
+    let mut by_phase = [(0.0, 0); 4];
+    for fold in 0..k {
+        let fit = |gs: &Vec<[Gram; 4]>| {
+            let mut train = Gram::new(gs[0][0].n);
+            for (j, g) in gs.iter().enumerate().filter(|(j, _)| j % k != fold) {
+                let _ = j;
+                train.merge(&total(g));
+            }
+            let theta = train.solve();
+            (train.sse(&theta), theta)
+        };
+        let (best, theta) = per_grid
+            .iter()
+            .enumerate()
+            .map(|(gi, gs)| (gi, fit(gs).1, fit(gs).0))
+            .min_by(|a, b| a.2.total_cmp(&b.2))
+            .map(|(gi, th, _)| (gi, th))
+            .unwrap_or((0, Vec::new()));
+        for (j, g) in per_grid[best]
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| j % k == fold)
+        {
+            for (ph, gp) in g.iter().enumerate() {
+                let e = gp.sse(&theta);
+                per_trial[j].0 += e;
+                per_trial[j].1 += gp.count;
+                by_phase[ph].0 += e;
+                by_phase[ph].1 += gp.count;
+            }
+        }
+    }
+    let (gi, theta) = per_grid
+        .iter()
+        .enumerate()
+        .map(|(gi, gs)| {
+            let mut all = Gram::new(gs[0][0].n);
+            gs.iter().for_each(|g| all.merge(&total(g)));
+            let th = all.solve();
+            (gi, all.sse(&th), th)
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(gi, _, th)| (gi, th))
+        .unwrap_or((0, Vec::new()));
+    Scored {
+        per_trial,
+        by_phase,
+        grid_value: grid[gi],
+        theta,
+    }
+}
+
+/// Shrink of held-out RMS and the paired t of per-trial improvements.
+fn improvement(base: &Scored, with: &Scored) -> (f64, f64) {
+    let shrink = 1.0 - with.rms() / base.rms().max(1e-12);
+    let d: Vec<f64> = base
+        .per_trial
+        .iter()
+        .zip(&with.per_trial)
+        .map(|(b, w)| (b.0 - w.0) / b.1.max(1) as f64)
+        .collect();
+    (shrink, paired_t(&d))
+}
+
+/// Load and prepare every trial.
+pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, Vec<Prepared>)> {
+    let params = match params {
+        Some(p) => *p,
+        None => {
+            let fit = crate::fit::fit_dataset(dir)?;
+            let text = crate::fit::to_toml(&fit);
+            let tissues = crate::tissue::parse(&text, Path::new("<needle fit>"))?;
+            tissues.first().context("needle fit gave no tissue")?.params
+        }
+    };
+    let mut data = Vec::new();
+    for file in crate::trial::dataset_files(dir)? {
+        let name = file
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        let trial = crate::trial::read(&file)?;
+        match prepare(name, trial, &params) {
+            Ok(p) => data.push(p),
+            Err(e) => eprintln!("needle diagnose: {e:#} (left out)"),
+        }
+    }
+    if data.len() < 2 {
+        bail!(
+            "{}: diagnosis needs at least 2 usable trials (k-fold by trial), found {}",
+            dir.display(),
+            data.len()
+        );
+    }
+    Ok((params, data))
+}
+
+/// The whole diagnosis as JSON (the keys of the issue), plus the scored
+/// models for the report.
+pub fn diagnose(data: &[Prepared]) -> (Value, Scored, Option<(usize, Scored)>) {
+    let baseline = score(data, &[], None);
+    let mut ranked: Vec<(usize, Scored, f64, f64)> = CANDIDATES
+        .iter()
+        .enumerate()
+        .map(|(ci, c)| {
+            let s = score(data, &[], Some(c));
+            let (shrink, t) = improvement(&baseline, &s);
+            (ci, s, shrink, t)
+        })
+        .collect();
+    ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
+    let significant = |shrink: f64, t: f64| shrink >= MIN_SHRINK && t >= MIN_T;
+    let first = ranked.first().filter(|r| significant(r.2, r.3));
+    let mut second_name = "none";
+    let mut after = first.map(|f| f.1.clone());
+    if let Some((ci, s, ..)) = first {
+        let fixed = [(&CANDIDATES[*ci], s.grid_value)];
+        let best_second = CANDIDATES
+            .iter()
+            .enumerate()
+            .filter(|(cj, _)| cj != ci)
+            .map(|(cj, c)| {
+                let with = score(data, &fixed, Some(c));
+                let (shrink, t) = improvement(s, &with);
+                (cj, with, shrink, t)
+            })
+            .max_by(|a, b| a.2.total_cmp(&b.2));
+        if let Some((cj, with, shrink, t)) = best_second.filter(|b| significant(b.2, b.3)) {
+            second_name = CANDIDATES[cj].effect;
+            let _ = (shrink, t);
+            after = Some(with);
+        }
+    }
+    let noise = noise_floor(data);
+    let verdict_shrink = after
+        .as_ref()
+        .map_or(0.0, |a| 1.0 - a.rms() / baseline.rms());
+    let out = json!({
+        "trials": data.len(),
+        "noise_floor_n": noise,
+        "baseline": {
+            "heldout_rms_n": baseline.rms(),
+            "by_phase": by_phase(&baseline),
+        },
+        "where": where_(data),
+        "residual_tests": residual_tests(data),
+        "candidates": ranked.iter().map(|(ci, s, shrink, t)| {
+            let c = &CANDIDATES[*ci];
+            let mut params = serde_json::Map::new();
+            if c.grid.len() > 1 {
+                params.insert(c.grid_name.into(), json!(s.grid_value));
+            }
+            for (name, v) in c.linear.iter().zip(&s.theta) {
+                params.insert((*name).into(), json!(v));
+            }
+            json!({
+                "effect": c.effect,
+                "heldout_rms_n": s.rms(),
+                "shrink": shrink,
+                "paired_t": t,
+                "significant": significant(*shrink, *t),
+                "by_phase": by_phase(s),
+                "params": params,
+            })
+        }).collect::<Vec<_>>(),
+        "verdict": {
+            "effect": first.map_or("none", |f| CANDIDATES[f.0].effect),
+            "shrink": verdict_shrink,
+            "second": second_name,
+            "heldout_rms_after_n": after.as_ref().map_or(baseline.rms(), Scored::rms),
+        },
+    });
+    let best = first.map(|f| (f.0, f.1.clone()));
+    (out, baseline, best)
+}
+
+fn by_phase(s: &Scored) -> Value {
+    let total: f64 = s.by_phase.iter().map(|p| p.0).sum();
+    let mut m = serde_json::Map::new();
+    for (k, name) in PHASES.iter().enumerate() {
+        if s.by_phase[k].1 > 0 {
+            m.insert(
+                (*name).into(),
+                json!({ "rms_n": s.phase_rms(k), "share": s.by_phase[k].0 / total.max(1e-300) }),
+            );
+        }
+    }
+    Value::Object(m)
+}
+
+/// Noise floor: robust sample-to-sample noise of the force, averaged.
+fn noise_floor(data: &[Prepared]) -> f64 {
+    data.iter().map(|p| p.noise_n).sum::<f64>() / data.len() as f64
+}
+
+/// Depth bins of the residual: phase, position range, share of the squared
+/// residual; best (largest share) first.
+fn where_(data: &[Prepared]) -> Value {
+    const BIN_M: f64 = 0.005;
+    let mut bins: std::collections::BTreeMap<(usize, i64), f64> = Default::default();
+    let mut total = 0.0;
+    for p in data {
+        for i in 0..p.trial.len() {
+            let e = p.residual_n[i] * p.residual_n[i];
+            *bins
+                .entry((p.phase[i], (p.trial.x_m[i] / BIN_M).floor() as i64))
+                .or_default() += e;
+            total += e;
+        }
+    }
+    let mut list: Vec<_> = bins.into_iter().collect();
+    list.sort_by(|a, b| b.1.total_cmp(&a.1));
+    list.iter()
+        .take(10)
+        .map(|((ph, bin), e)| {
+            json!({
+                "phase": PHASES[*ph],
+                "share": e / total.max(1e-300),
+                "x_from_m": *bin as f64 * BIN_M,
+                "x_to_m": (*bin + 1) as f64 * BIN_M,
+            })
+        })
+        .collect()
+}
+
+/// Whiteness (lag-1 autocorrelation of the residual) and its correlation
+/// with velocity, acceleration, depth past the surface and time, in tissue.
+fn residual_tests(data: &[Prepared]) -> Value {
+    let mut r = Vec::new();
+    let mut sig: [Vec<f64>; 4] = Default::default();
+    let mut lag = (0.0, 0.0);
+    for p in data {
+        for i in 0..p.trial.len() {
+            if p.phase[i] == 0 {
+                continue;
+            }
+            r.push(p.residual_n[i]);
+            sig[0].push(p.v_mps[i]);
+            sig[1].push(p.a_mps2[i]);
+            sig[2].push(p.trial.x_m[i] - p.geometry.contact_x_m);
+            sig[3].push(p.trial.t_s[i]);
+            if i > 0 && p.phase[i - 1] != 0 {
+                lag.0 += p.residual_n[i] * p.residual_n[i - 1];
+                lag.1 += p.residual_n[i] * p.residual_n[i];
+            }
+        }
+    }
+    let corr = |a: &[f64], b: &[f64]| {
+        let n = a.len().max(1) as f64;
+        let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+        let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+        for (x, y) in a.iter().zip(b) {
+            sab += (x - ma) * (y - mb);
+            saa += (x - ma).powi(2);
+            sbb += (y - mb).powi(2);
+        }
+        sab / (saa * sbb).sqrt().max(1e-300)
+    };
+    let n = r.len() as f64;
+    json!({
+        "lag1_autocorrelation": lag.0 / lag.1.max(1e-300),
+        "white_bound": 2.0 / n.max(1.0).sqrt(),
+        "corr_velocity": corr(&r, &sig[0]),
+        "corr_acceleration": corr(&r, &sig[1]),
+        "corr_depth": corr(&r, &sig[2]),
+        "corr_time": corr(&r, &sig[3]),
+    })
+}
+
+pub fn run(args: &DiagnoseArgs) -> Result<()> {
+    let params = match &args.params {
+        Some(file) => Some(crate::tissue::resolve(args.tissue.as_deref(), Some(file))?.params),
+        None => None,
+    };
+    let (_, data) = load(&args.dir, params.as_ref())?;
+    let (out, baseline, best) = diagnose(&data);
+    let v = &out["verdict"];
+    eprintln!(
+        "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {} (+ {}), shrink {:.0} %",
+        data.len(),
+        out["noise_floor_n"].as_f64().unwrap_or(0.0),
+        baseline.rms(),
+        v["heldout_rms_after_n"].as_f64().unwrap_or(0.0),
+        v["effect"].as_str().unwrap_or("none"),
+        v["second"].as_str().unwrap_or("none"),
+        100.0 * v["shrink"].as_f64().unwrap_or(0.0),
+    );
+    if let Some(path) = &args.residuals {
+        write_residuals(path, &data)?;
+    }
+    if let Some(path) = &args.report {
+        report::write(path, &data, &out, best.as_ref().map(|b| b.0))?;
+    }
+    let text = serde_json::to_string_pretty(&out)? + "\n";
+    match &args.json {
+        Some(path) => {
+            std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
+        }
+        None => {
+            print!("{text}");
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,71 @@
+//! The one-page report: an HTML page with the verdict, the ranked
+//! candidates and the residual figure (SVG beside it, drawn with plotters).
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use serde_json::Value;
+
+use super::prepare::Prepared;
+
+pub fn write(path: &Path, data: &[Prepared], out: &Value, _best: Option<usize>) -> Result<()> {
+    let svg = path.with_extension("svg");
+    let first = &data[0];
+    let series = vec![
+        crate::plot::Series {
+            label: "measured",
+            color: plotters::style::RGBColor(40, 40, 40),
+            points: first
+                .trial
+                .x_m
+                .iter()
+                .zip(&first.trial.f_n)
+                .map(|(x, f)| (*x, *f))
+                .collect(),
+        },
+        crate::plot::Series {
+            label: "nominal",
+            color: plotters::style::RGBColor(200, 30, 30),
+            points: first
+                .trial
+                .x_m
+                .iter()
+                .zip(&first.nominal_n)
+                .map(|(x, f)| (*x, *f))
+                .collect(),
+        },
+    ];
+    crate::plot::force_vs_position(&svg, &first.file, &series, &[])?;
+    let mut rows = String::new();
+    for c in out["candidates"].as_array().into_iter().flatten() {
+        rows += &format!(
+            "<tr><td>{}</td><td>{:.4}</td><td>{:.1} %</td><td>{:.1}</td><td>{}</td></tr>\n",
+            c["effect"].as_str().unwrap_or("?"),
+            c["heldout_rms_n"].as_f64().unwrap_or(0.0),
+            100.0 * c["shrink"].as_f64().unwrap_or(0.0),
+            c["paired_t"].as_f64().unwrap_or(0.0),
+            if c["significant"].as_bool().unwrap_or(false) {
+                "yes"
+            } else {
+                "no"
+            },
+        );
+    }
+    let v = &out["verdict"];
+    let html = format!(
+        "<!doctype html><meta charset=utf-8><title>needle diagnose</title>\
+         <h1>Sim-to-real gap</h1><p>{} trials, noise floor {:.4} N, held-out RMS {:.4} N → {:.4} N.\
+         <p><b>Verdict:</b> {} (second: {}), shrink {:.1} %.\
+         <h2>Candidates, held out</h2><table border=1><tr><th>effect<th>held-out RMS (N)<th>shrink<th>paired t<th>significant</tr>\n{rows}</table>\
+         <h2>First trial: measured and nominal model</h2><img src=\"{}\">",
+        out["trials"],
+        out["noise_floor_n"].as_f64().unwrap_or(0.0),
+        out["baseline"]["heldout_rms_n"].as_f64().unwrap_or(0.0),
+        v["heldout_rms_after_n"].as_f64().unwrap_or(0.0),
+        v["effect"].as_str().unwrap_or("none"),
+        v["second"].as_str().unwrap_or("none"),
+        100.0 * v["shrink"].as_f64().unwrap_or(0.0),
+        svg.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+    );
+    std::fs::write(path, html).with_context(|| format!("{}: cannot write", path.display()))
+}
