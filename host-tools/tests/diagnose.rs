@@ -31,7 +31,11 @@ fn no_effect_is_named_when_there_is_none() {
 
 #[test]
 fn drift_walls_and_depth_dependent_cutting_are_named_with_a_real_shrink() {
-    for effect in ["sensor_drift", "internal_structures", "depth_dependent_cutting"] {
+    for effect in [
+        "sensor_drift",
+        "internal_structures",
+        "depth_dependent_cutting",
+    ] {
         let (named, shrink) = verdict(effect);
         assert_eq!(named, effect);
         assert!(shrink > 0.2, "{effect}: shrink {shrink}");
