@@ -121,29 +121,29 @@ impl AssistConfig {
             Some(EventKind::Exit) => m.contains(AssistModes::STOP_ON_EXIT),
             _ => false,
         };
-        match event {
-            Some(kind) if stop_on => {
-                let back = if kind == EventKind::Puncture && m.contains(AssistModes::BACK_OFF) {
-                    phase.puncture.sub(phase.relaxed_surface)
-                } else {
-                    Nanometres::ZERO
-                };
-                return Some(halt(HaltReason::from(kind), s.x.sub(back)));
-            }
-            _ => {}
+        if let Some(kind) = event.filter(|_| stop_on) {
+            let back = if kind == EventKind::Puncture && m.contains(AssistModes::BACK_OFF) {
+                phase.puncture.sub(phase.relaxed_surface)
+            } else {
+                Nanometres::ZERO
+            };
+            return Some(halt(HaltReason::from(kind), s.x.sub(back)));
         }
-        let depth = phase.deformation(s.x);
         if m.contains(AssistModes::TARGET_DEPTH)
             && s.phase != Phase::Out
-            && depth >= self.target_depth
+            && phase.deformation(s.x) >= self.target_depth
         {
             return Some(halt(
                 HaltReason::TargetDepth,
                 phase.surface.add(self.target_depth),
             ));
         }
-        let too_fast = s.v > self.speed_limit(s.force);
-        if m.contains(AssistModes::SPEED_LIMIT) && s.phase == Phase::Loading && too_fast {
+        // The limit (a 64-bit division) only when the mode is on: this runs
+        // every sample.
+        if m.contains(AssistModes::SPEED_LIMIT)
+            && s.phase == Phase::Loading
+            && s.v > self.speed_limit(s.force)
+        {
             return Some(halt(HaltReason::SpeedLimit, s.x));
         }
         None

@@ -43,8 +43,16 @@ pub struct StepOutput {
     pub event: Option<Event>,
     /// Faults this sample raised (not latched here; the device latches).
     pub faults: Faults,
-    /// The robot-assist stop this sample calls for, if any.
+    /// The robot-assist stop this sample calls for, if any (never on a
+    /// sample that raised a fault: that one halts for the fault).
     pub halt: Option<Halt>,
+}
+
+impl PipelineState {
+    /// Every fault raised so far.
+    pub fn faults_seen(&self) -> Faults {
+        self.faults_seen
+    }
 }
 
 impl DeviceConfig {
@@ -119,9 +127,14 @@ impl DeviceConfig {
             residual: force.sub(model),
             phase,
         };
-        let halt = self
-            .assist
-            .check(&state.phase, &sample, event.map(|e| e.kind));
+        // A faulty sample halts for its fault (the device does that), not
+        // for the assist.
+        let halt = if faults.is_empty() {
+            self.assist
+                .check(&state.phase, &sample, event.map(|e| e.kind))
+        } else {
+            None
+        };
         StepOutput {
             sample,
             event,

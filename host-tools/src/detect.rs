@@ -7,7 +7,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use needle_holder::assist::AssistModes;
 use needle_holder::config::DeviceConfig;
-use needle_holder::faults::Faults;
 use needle_holder::hal::LoadCellAdc;
 use needle_holder::pipeline::{PipelineState, RawSample};
 use needle_holder::replay::ReplayAdc;
@@ -98,7 +97,6 @@ pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
     let config = config.with_sample_rate(rate);
     let mut state = PipelineState::default();
     let mut found = TrialDetection::default();
-    let mut faults = Faults::NONE;
     for i in 0..trial.len() {
         let record = raw_record(
             trial.x_m[i],
@@ -138,9 +136,8 @@ pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
                 hold_x_m: hold_x.as_m(),
             });
         }
-        faults = faults.union(out.faults);
     }
-    found.faults = faults.names().collect();
+    found.faults = state.faults_seen().names().collect();
     found
 }
 

@@ -16,7 +16,7 @@ fn verdict(effect_list: &str) -> (String, f64) {
     let list = effects::parse_list(effect_list).unwrap();
     simulate_dataset(dir.path(), "liver1", &LIVER1, &list, 10, 7, &sensor).unwrap();
     let (_, data) = load(dir.path(), None).unwrap();
-    let (out, _, _) = diagnose(&data);
+    let out = diagnose(&data);
     let v = &out["verdict"];
     (
         v["effect"].as_str().unwrap().to_owned(),

@@ -91,14 +91,25 @@ fn assert_twin(board: Board, replay: &[u8], name: &str) -> (Outcome, twin::TwinR
     (qemu, host)
 }
 
-fn last_status(frames: &[u8]) -> Status {
-    let (items, stats) = decode_all(frames).unwrap();
+/// Every frame of a capture, which must decode without a skipped byte.
+fn frames_of(bytes: &[u8]) -> Vec<Frame> {
+    let (items, stats) = decode_all(bytes).unwrap();
     assert_eq!(stats.skipped_bytes, 0);
     items
-        .iter()
+        .into_iter()
+        .filter_map(|i| match i {
+            host_tools::frames::Item::Frame(f) => Some(f),
+            _ => None,
+        })
+        .collect()
+}
+
+fn last_status(frames: &[u8]) -> Status {
+    frames_of(frames)
+        .into_iter()
         .rev()
-        .find_map(|i| match i {
-            host_tools::frames::Item::Frame(Frame::Status(s)) => Some(*s),
+        .find_map(|f| match f {
+            Frame::Status(s) => Some(s),
             _ => None,
         })
         .expect("a status frame")
@@ -159,17 +170,6 @@ fn replay_of(records: impl IntoIterator<Item = Record>) -> Vec<u8> {
         bytes.extend_from_slice(&r.to_bytes());
     }
     bytes
-}
-
-fn frames_of(bytes: &[u8]) -> Vec<Frame> {
-    let (items, _) = decode_all(bytes).unwrap();
-    items
-        .into_iter()
-        .filter_map(|i| match i {
-            host_tools::frames::Item::Frame(f) => Some(f),
-            _ => None,
-        })
-        .collect()
 }
 
 /// The fault is latched and reported, the halt line is up with a `Halt`

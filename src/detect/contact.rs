@@ -29,7 +29,7 @@ pub struct ContactState {
 /// One sample while out of the tissue.
 pub fn update(c: &DetectConfig, st: &mut ContactState, s: DetectInput) -> (Option<Event>, Faults) {
     let above = s.force.abs() > c.contact_force;
-    let touching = above && s.force.0 > 0 && s.v.0 > 0;
+    let touching = s.force > c.contact_force && s.v.0 > 0;
     st.touching_samples = if touching {
         st.touching_samples.saturating_add(1)
     } else {

@@ -27,6 +27,7 @@ use serde_json::{json, Value};
 use self::candidates::{Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram};
 use self::prepare::{prepare, Prepared, PHASES};
+use crate::fit::fit_trial;
 
 /// Least held-out shrink that can name an effect.
 pub const MIN_SHRINK: f64 = 0.03;
@@ -152,8 +153,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     for fold in 0..k {
         let fit = |gs: &Vec<[Gram; 4]>| {
             let mut train = Gram::new(gs[0][0].n);
-            for (j, g) in gs.iter().enumerate().filter(|(j, _)| j % k != fold) {
-                let _ = j;
+            for (_, g) in gs.iter().enumerate().filter(|(j, _)| j % k != fold) {
                 train.merge(&total(g));
             }
             let theta = train.solve();
@@ -162,9 +162,9 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         let (best, theta) = per_grid
             .iter()
             .enumerate()
-            .map(|(gi, gs)| (gi, fit(gs).1, fit(gs).0))
-            .min_by(|a, b| a.2.total_cmp(&b.2))
-            .map(|(gi, th, _)| (gi, th))
+            .map(|(gi, gs)| (gi, fit(gs)))
+            .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0))
+            .map(|(gi, (_, th))| (gi, th))
             .unwrap_or((0, Vec::new()));
         for (j, g) in per_grid[best]
             .iter()
@@ -212,41 +212,60 @@ fn improvement(base: &Scored, with: &Scored) -> (f64, f64) {
     (shrink, paired_t(&d))
 }
 
-/// Load and prepare every trial.
+/// Load every trial, find its geometry with `needle fit`'s code (once),
+/// take the nominal model from those fits unless `params` is given, and
+/// prepare each trial against it.
 pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, Vec<Prepared>)> {
+    let mut trials = Vec::new();
+    let mut skipped = Vec::new();
+    for file in crate::trial::dataset_files(dir)? {
+        let trial = crate::trial::read(&file)?;
+        match fit_trial(&trial) {
+            Ok(fit) => trials.push((file, trial, fit)),
+            Err(e) => {
+                eprintln!(
+                    "needle diagnose: {}: cannot find its geometry: {e:#} (left out)",
+                    file.display()
+                );
+                skipped.push(
+                    json!({ "file": file.display().to_string(), "reason": format!("{e:#}") }),
+                );
+            }
+        }
+    }
+    if trials.len() < 2 {
+        bail!(
+            "{}: diagnosis needs at least 2 usable trials (k-fold by trial), found {}",
+            dir.display(),
+            trials.len()
+        );
+    }
     let params = match params {
         Some(p) => *p,
         None => {
-            let fit = crate::fit::fit_dataset(dir)?;
-            let text = crate::fit::to_toml(&fit);
+            let fits: Vec<_> = trials
+                .iter()
+                .map(|(f, _, fit)| (f.clone(), fit.clone()))
+                .collect();
+            let text = crate::fit::to_toml(&crate::fit::summarise(&fits, skipped));
             let tissues = crate::tissue::parse(&text, Path::new("<needle fit>"))?;
             tissues.first().context("needle fit gave no tissue")?.params
         }
     };
-    let mut data = Vec::new();
-    for file in crate::trial::dataset_files(dir)? {
-        let name = file
-            .file_name()
-            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-        let trial = crate::trial::read(&file)?;
-        match prepare(name, trial, &params) {
-            Ok(p) => data.push(p),
-            Err(e) => eprintln!("needle diagnose: {e:#} (left out)"),
-        }
-    }
-    if data.len() < 2 {
-        bail!(
-            "{}: diagnosis needs at least 2 usable trials (k-fold by trial), found {}",
-            dir.display(),
-            data.len()
-        );
-    }
+    let data = trials
+        .into_iter()
+        .map(|(file, trial, fit)| {
+            let name = file
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+            prepare(name, trial, fit, &params)
+        })
+        .collect();
     Ok((params, data))
 }
 
-/// The whole diagnosis as JSON (the keys of the issue), plus the scored
-/// models for the report.
-pub fn diagnose(data: &[Prepared]) -> (Value, Scored, Option<(usize, Scored)>) {
+/// The whole diagnosis as JSON (the keys of the issue).
+pub fn diagnose(data: &[Prepared]) -> Value {
     let baseline = score(data, &[], None);
     let mut ranked: Vec<(usize, Scored, f64, f64)> = CANDIDATES
         .iter()
@@ -274,9 +293,8 @@ pub fn diagnose(data: &[Prepared]) -> (Value, Scored, Option<(usize, Scored)>) {
                 (cj, with, shrink, t)
             })
             .max_by(|a, b| a.2.total_cmp(&b.2));
-        if let Some((cj, with, shrink, t)) = best_second.filter(|b| significant(b.2, b.3)) {
+        if let Some((cj, with, ..)) = best_second.filter(|b| significant(b.2, b.3)) {
             second_name = CANDIDATES[cj].effect;
-            let _ = (shrink, t);
             after = Some(with);
         }
     }
@@ -284,7 +302,7 @@ pub fn diagnose(data: &[Prepared]) -> (Value, Scored, Option<(usize, Scored)>) {
     let verdict_shrink = after
         .as_ref()
         .map_or(0.0, |a| 1.0 - a.rms() / baseline.rms());
-    let out = json!({
+    json!({
         "trials": data.len(),
         "noise_floor_n": noise,
         "baseline": {
@@ -318,9 +336,7 @@ pub fn diagnose(data: &[Prepared]) -> (Value, Scored, Option<(usize, Scored)>) {
             "second": second_name,
             "heldout_rms_after_n": after.as_ref().map_or(baseline.rms(), Scored::rms),
         },
-    });
-    let best = first.map(|f| (f.0, f.1.clone()));
-    (out, baseline, best)
+    })
 }
 
 fn by_phase(s: &Scored) -> Value {
@@ -422,13 +438,13 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         None => None,
     };
     let (_, data) = load(&args.dir, params.as_ref())?;
-    let (out, baseline, best) = diagnose(&data);
+    let out = diagnose(&data);
     let v = &out["verdict"];
     eprintln!(
         "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {} (+ {}), shrink {:.0} %",
         data.len(),
         out["noise_floor_n"].as_f64().unwrap_or(0.0),
-        baseline.rms(),
+        out["baseline"]["heldout_rms_n"].as_f64().unwrap_or(0.0),
         v["heldout_rms_after_n"].as_f64().unwrap_or(0.0),
         v["effect"].as_str().unwrap_or("none"),
         v["second"].as_str().unwrap_or("none"),
@@ -438,7 +454,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         write_residuals(path, &data)?;
     }
     if let Some(path) = &args.report {
-        report::write(path, &data, &out, best.as_ref().map(|b| b.0))?;
+        report::write(path, &data, &out)?;
     }
     let text = serde_json::to_string_pretty(&out)? + "\n";
     match &args.json {

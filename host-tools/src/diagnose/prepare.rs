@@ -2,13 +2,12 @@
 //! residual, the phase of every sample (DESIGN.md §4 names), and the
 //! kinematic signals the candidate effects are built from.
 
-use anyhow::{Context, Result};
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::TissueParams;
 
 use crate::fit::predict::predict_parts;
 use crate::fit::trial::velocity;
-use crate::fit::{fit_trial, TrialFit};
+use crate::fit::TrialFit;
 use crate::trial::Trial;
 
 /// Phases as the diagnosis splits them.
@@ -37,10 +36,9 @@ pub struct Prepared {
     pub noise_n: f64,
 }
 
-/// Prepare a trial against `params` (its geometry from `needle fit`'s code).
-pub fn prepare(file: String, trial: Trial, params: &TissueParams) -> Result<Prepared> {
-    let geometry =
-        fit_trial(&trial).with_context(|| format!("{file}: cannot find its geometry"))?;
+/// Prepare a trial against `params`, with its geometry as `needle fit`'s
+/// code found it.
+pub fn prepare(file: String, trial: Trial, geometry: TrialFit, params: &TissueParams) -> Prepared {
     let parts = predict_parts(params, &geometry, &trial);
     let n = trial.len();
     let nominal_n: Vec<f64> = (0..n)
@@ -64,7 +62,7 @@ pub fn prepare(file: String, trial: Trial, params: &TissueParams) -> Result<Prep
         .collect();
     let a_mps2 = acceleration(&trial);
     let structures = structures(&trial, params, &residual_n);
-    Ok(Prepared {
+    Prepared {
         file,
         noise_n: geometry.noise_n,
         geometry,
@@ -78,7 +76,7 @@ pub fn prepare(file: String, trial: Trial, params: &TissueParams) -> Result<Prep
         cutting: parts.cutting_n.iter().map(|&c| c != 0.0).collect(),
         structures,
         trial,
-    })
+    }
 }
 
 /// Second difference of position, m/s².

@@ -8,7 +8,7 @@ use serde_json::Value;
 
 use super::prepare::Prepared;
 
-pub fn write(path: &Path, data: &[Prepared], out: &Value, _best: Option<usize>) -> Result<()> {
+pub fn write(path: &Path, data: &[Prepared], out: &Value) -> Result<()> {
     let svg = path.with_extension("svg");
     let first = &data[0];
     let series = vec![

@@ -105,6 +105,12 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
             files.len()
         );
     }
+    Ok(summarise(&fits, skipped))
+}
+
+/// Mean ± sd of per-trial fits, with the per-trial geometry and the trials
+/// left out: `needle fit`'s JSON.
+pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
     let all: Vec<&TrialFit> = fits.iter().map(|(_, f)| f).collect();
     let col = |get: fn(&TrialFit) -> f64| all.iter().map(|t| get(t)).collect::<Vec<f64>>();
     let stats = |fit: fn(&TrialFit) -> trial::StiffnessFit| {
@@ -114,7 +120,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
     };
     let (poly_rms, poly_r2) = stats(|t| t.polynomial);
     let (rat_rms, rat_r2) = stats(|t| t.rational);
-    Ok(json!({
+    json!({
         "trials": all.len(),
         "a1_n_per_m": estimate(&col(|t| t.polynomial.p1)),
         "a2_n_per_m2": estimate(&col(|t| t.polynomial.p2)),
@@ -145,7 +151,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
             "relaxed_surface_x_m": t.relaxed_x_m,
         })).collect::<Vec<_>>(),
         "skipped": skipped,
-    }))
+    })
 }
 
 fn name_of(path: &Path) -> String {

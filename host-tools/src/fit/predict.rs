@@ -4,7 +4,7 @@
 
 use needle_holder::model::params::TissueParams;
 
-use super::trial::TrialFit;
+use super::trial::{velocity_over, TrialFit};
 use crate::trial::Trial;
 
 /// The model's force at every sample, by term.
@@ -31,7 +31,10 @@ pub fn predict(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Vec
 
 /// [`predict`], term by term.
 pub fn predict_parts(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Parts {
-    let v = sharp_velocity(trial);
+    // Sliding, stopped and cutting decided on a ±2 ms velocity: the fit's
+    // ±10 ms one keeps cutting "on" for 10 ms after a stop, which alone is
+    // a residual of the whole cutting force for 5 samples at every stop.
+    let v = velocity_over(trial, 0.002);
     let speed = one_sided_speed(trial);
     let mut deepest = geometry.puncture_x_m;
     let mut last_sliding = 0.0;
@@ -68,25 +71,6 @@ pub fn predict_parts(params: &TissueParams, geometry: &TrialFit, trial: &Trial) 
         deepest = deepest.max(x);
     }
     p
-}
-
-/// Velocity for the model's switching terms: central differences over
-/// ±2 ms (at least one sample). The fit's ±10 ms velocity is smoother, but
-/// it keeps cutting "on" for 10 ms after a stop, which alone is a residual
-/// of the whole cutting force for 5 samples at every stop.
-pub fn sharp_velocity(trial: &Trial) -> Vec<f64> {
-    let n = trial.len();
-    let k = ((0.002 * trial.rate_hz()).round() as usize).max(1);
-    (0..n)
-        .map(|i| {
-            let (a, b) = (i.saturating_sub(k), (i + k).min(n.saturating_sub(1)));
-            if b > a {
-                (trial.x_m[b] - trial.x_m[a]) / (trial.t_s[b] - trial.t_s[a])
-            } else {
-                0.0
-            }
-        })
-        .collect()
 }
 
 /// Speed over 10 ms on whichever side of the sample moved more: full speed

@@ -60,8 +60,14 @@ const SLIDING_MPS: f64 = 0.0005;
 
 /// Velocity by central differences over ±10 ms.
 pub fn velocity(trial: &Trial) -> Vec<f64> {
+    velocity_over(trial, 0.01)
+}
+
+/// Velocity by central differences over ±`half_window_s` (at least one
+/// sample either side).
+pub fn velocity_over(trial: &Trial, half_window_s: f64) -> Vec<f64> {
     let n = trial.len();
-    let k = ((0.01 * trial.rate_hz()).round() as usize).max(1);
+    let k = ((half_window_s * trial.rate_hz()).round() as usize).max(1);
     (0..n)
         .map(|i| {
             let (a, b) = (i.saturating_sub(k), (i + k).min(n - 1));
