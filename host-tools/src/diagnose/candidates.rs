@@ -9,7 +9,7 @@
 
 use std::f64::consts::TAU;
 
-use super::prepare::Prepared;
+use super::prepare::{Prepared, LOADING};
 
 /// One candidate effect.
 pub struct Candidate {
@@ -64,7 +64,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         effect: "holder_inertia",
         grid_name: "none",
         grid: &[0.0],
-        linear: &["mass_lag_kg", "mass_kg", "mass_lead_kg"],
+        linear: &["mass_kg", "mass_smooth_kg"],
         columns: inertia,
     },
     Candidate {
@@ -83,17 +83,13 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
 ];
 
-fn in_tissue(p: &Prepared, i: usize) -> bool {
-    p.phase[i] != 0
-}
-
 /// Maxwell branch state: dm/dt = v − m/τ in tissue (θ = its stiffness).
 fn maxwell(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let dt = 1.0 / p.trial.rate_hz();
     let mut m = 0.0;
     let col = (0..p.trial.len())
         .map(|i| {
-            m = if in_tissue(p, i) {
+            m = if p.in_tissue(i) {
                 m + (p.v_mps[i] - m / tau_s) * dt
             } else {
                 0.0
@@ -171,20 +167,36 @@ fn depth_cutting(p: &Prepared, _: f64) -> Vec<Vec<f64>> {
     vec![a, b]
 }
 
-/// Acceleration, one sample either side as well (the encoder's second
-/// difference sits between samples).
+/// Acceleration two ways: the step of the needle velocity into each
+/// sample (a start or stop is one sample of the whole speed change, as
+/// the velocity the force law uses has it), and over ±10 ms (a smooth
+/// stroke, without the encoder's quantisation, which a second difference
+/// of positions turns into tens of mN at 0.15 kg).
 fn inertia(p: &Prepared, _: f64) -> Vec<Vec<f64>> {
     let n = p.trial.len();
-    let at = |i: isize| {
-        if i < 0 || i as usize >= n {
-            0.0
-        } else {
-            p.a_mps2[i as usize]
-        }
-    };
-    (-1..=1)
-        .map(|lag| (0..n as isize).map(|i| at(i + lag)).collect())
-        .collect()
+    let rate = p.trial.rate_hz();
+    let k = ((0.01 * rate).round() as usize).max(1);
+    let v = &p.v_mps;
+    let step = (0..n)
+        .map(|i| {
+            if i == 0 {
+                0.0
+            } else {
+                (v[i] - v[i - 1]) * rate
+            }
+        })
+        .collect();
+    let smooth = (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(k), (i + k).min(n - 1));
+            if b > a {
+                (v[b] - v[a]) * rate / (b - a) as f64
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    vec![step, smooth]
 }
 
 /// An offset growing in time since the recording began.
@@ -199,14 +211,14 @@ fn tissue_motion(p: &Prepared, f_hz: f64) -> Vec<Vec<f64>> {
     let n = p.trial.len();
     let mut cols = vec![vec![0.0; n]; 4];
     for i in 0..n {
-        if !in_tissue(p, i) {
+        if !p.in_tissue(i) {
             continue;
         }
         let w = TAU * f_hz * (p.trial.t_s[i] - p.trial.t_s[0]);
         let (s, c) = w.sin_cos();
         cols[0][i] = s;
         cols[1][i] = c;
-        if p.phase[i] == 1 && i > 0 && i + 1 < n {
+        if p.phase[i] == LOADING && i > 0 && i + 1 < n {
             let dx = p.trial.x_m[i + 1] - p.trial.x_m[i - 1];
             let slope = if dx.abs() > 1e-7 {
                 (p.nominal_n[i + 1] - p.nominal_n[i - 1]) / dx

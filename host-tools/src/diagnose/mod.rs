@@ -26,7 +26,7 @@ use serde_json::{json, Value};
 
 use self::candidates::{Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram};
-use self::prepare::{prepare, Prepared, PHASES};
+use self::prepare::{prepare, Prepared, LOADING, PHASES};
 use crate::fit::fit_trial;
 
 /// Least held-out shrink that can name an effect.
@@ -77,17 +77,48 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
     std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
 }
 
-/// Columns of a set of candidates (each at its grid value) for one trial.
+/// Corrections to the nominal stiffness, friction and cutting
+/// coefficients, refitted with every model on its training trials: the
+/// baseline is the nominal re-fitted on the same trials, and a candidate
+/// gets no credit for what a better a_1, a_2, c_p, b_p, c_n, b_n or
+/// cutting force would have done.
+pub const NOMINAL_CORRECTIONS: [&str; 7] = [
+    "a1_n_per_m",
+    "a2_n_per_m2",
+    "cp_n_per_m",
+    "bp_ns_per_m2",
+    "cn_n_per_m",
+    "bn_ns_per_m2",
+    "cutting_force_n",
+];
+
+/// Columns of the nominal corrections and of a set of candidates (each at
+/// its grid value) for one trial.
 fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
-    set.iter().flat_map(|(c, g)| (c.columns)(p, *g)).collect()
+    let depth = |i: usize| {
+        if p.phase[i] == LOADING {
+            (p.trial.x_m[i] - p.geometry.contact_x_m).max(0.0)
+        } else {
+            0.0
+        }
+    };
+    let n = p.trial.len();
+    let mut cols: Vec<Vec<f64>> = vec![
+        (0..n).map(depth).collect(),
+        (0..n).map(|i| depth(i).powi(2)).collect(),
+    ];
+    cols.extend((0..4).map(|k| p.friction_basis.iter().map(|b| b[k]).collect()));
+    cols.push(p.cutting.iter().map(|&c| f64::from(u8::from(c))).collect());
+    cols.extend(set.iter().flat_map(|(c, g)| (c.columns)(p, *g)));
+    cols
 }
 
 /// Gram sums per trial and phase for a set of candidates.
-fn grams(data: &[Prepared], set: &[(&Candidate, f64)]) -> Vec<[Gram; 4]> {
+fn grams(data: &[Prepared], set: &[(&Candidate, f64)]) -> Vec<[Gram; PHASES.len()]> {
     data.iter()
         .map(|p| {
             let cols = columns(p, set);
-            let mut g: [Gram; 4] = std::array::from_fn(|_| Gram::new(cols.len()));
+            let mut g: [Gram; PHASES.len()] = std::array::from_fn(|_| Gram::new(cols.len()));
             let mut phi = vec![0.0; cols.len()];
             for i in 0..p.trial.len() {
                 for (k, c) in cols.iter().enumerate() {
@@ -100,7 +131,7 @@ fn grams(data: &[Prepared], set: &[(&Candidate, f64)]) -> Vec<[Gram; 4]> {
         .collect()
 }
 
-fn total(gs: &[Gram; 4]) -> Gram {
+fn total(gs: &[Gram; PHASES.len()]) -> Gram {
     let mut t = gs[0].clone();
     for g in &gs[1..] {
         t.merge(g);
@@ -114,7 +145,7 @@ pub struct Scored {
     /// Per-trial held-out squared error and sample count.
     pub per_trial: Vec<(f64, usize)>,
     /// Per-phase held-out squared error and sample count.
-    pub by_phase: [(f64, usize); 4],
+    pub by_phase: [(f64, usize); PHASES.len()],
     /// Grid value chosen on all data, and the linear parameters there.
     pub grid_value: f64,
     pub theta: Vec<f64>,
@@ -139,7 +170,7 @@ impl Scored {
 /// score the withheld trials.
 fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate>) -> Scored {
     let grid: &[f64] = cand.map_or(&[0.0], |c| c.grid);
-    let per_grid: Vec<Vec<[Gram; 4]>> = grid
+    let per_grid: Vec<Vec<[Gram; PHASES.len()]>> = grid
         .iter()
         .map(|&g| {
             let mut set = fixed.to_vec();
@@ -149,9 +180,9 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         .collect();
     let k = folds(data.len());
     let mut per_trial = vec![(0.0, 0); data.len()];
-    let mut by_phase = [(0.0, 0); 4];
+    let mut by_phase = [(0.0, 0); PHASES.len()];
     for fold in 0..k {
-        let fit = |gs: &Vec<[Gram; 4]>| {
+        let fit = |gs: &Vec<[Gram; PHASES.len()]>| {
             let mut train = Gram::new(gs[0][0].n);
             for (_, g) in gs.iter().enumerate().filter(|(j, _)| j % k != fold) {
                 train.merge(&total(g));
@@ -200,14 +231,17 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     }
 }
 
-/// Shrink of held-out RMS and the paired t of per-trial improvements.
+/// Shrink of held-out RMS and the paired t of per-trial improvements,
+/// taken as log ratios of held-out mean squares: trials differ in length
+/// and in how much of them the effect touches, and a log ratio weighs a
+/// consistent relative gain on every trial above a large gain on one.
 fn improvement(base: &Scored, with: &Scored) -> (f64, f64) {
     let shrink = 1.0 - with.rms() / base.rms().max(1e-12);
     let d: Vec<f64> = base
         .per_trial
         .iter()
         .zip(&with.per_trial)
-        .map(|(b, w)| (b.0 - w.0) / b.1.max(1) as f64)
+        .map(|(b, w)| (b.0.max(1e-300) / w.0.max(1e-300)).ln())
         .collect();
     (shrink, paired_t(&d))
 }
@@ -240,7 +274,7 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
             trials.len()
         );
     }
-    let params = match params {
+    let mut params = match params {
         Some(p) => *p,
         None => {
             let fits: Vec<_> = trials
@@ -252,6 +286,11 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
             tissues.first().context("needle fit gave no tissue")?.params
         }
     };
+    let pairs: Vec<_> = trials
+        .iter()
+        .map(|(_, t, g)| (t.clone(), g.clone()))
+        .collect();
+    params.relaxation = prepare::fit_relaxation(&pairs, &params);
     let data = trials
         .into_iter()
         .map(|(file, trial, fit)| {
@@ -307,6 +346,9 @@ pub fn diagnose(data: &[Prepared]) -> Value {
         "noise_floor_n": noise,
         "baseline": {
             "heldout_rms_n": baseline.rms(),
+            "corrections": NOMINAL_CORRECTIONS.iter().zip(&baseline.theta)
+                .map(|(k, v)| ((*k).to_owned(), json!(v)))
+                .collect::<serde_json::Map<_, _>>(),
             "by_phase": by_phase(&baseline),
         },
         "where": where_(data),
@@ -317,7 +359,7 @@ pub fn diagnose(data: &[Prepared]) -> Value {
             if c.grid.len() > 1 {
                 params.insert(c.grid_name.into(), json!(s.grid_value));
             }
-            for (name, v) in c.linear.iter().zip(&s.theta) {
+            for (name, v) in c.linear.iter().zip(&s.theta[NOMINAL_CORRECTIONS.len()..]) {
                 params.insert((*name).into(), json!(v));
             }
             json!({
@@ -396,7 +438,7 @@ fn residual_tests(data: &[Prepared]) -> Value {
     let mut lag = (0.0, 0.0);
     for p in data {
         for i in 0..p.trial.len() {
-            if p.phase[i] == 0 {
+            if !p.in_tissue(i) {
                 continue;
             }
             r.push(p.residual_n[i]);
@@ -404,7 +446,7 @@ fn residual_tests(data: &[Prepared]) -> Value {
             sig[1].push(p.a_mps2[i]);
             sig[2].push(p.trial.x_m[i] - p.geometry.contact_x_m);
             sig[3].push(p.trial.t_s[i]);
-            if i > 0 && p.phase[i - 1] != 0 {
+            if i > 0 && p.in_tissue(i - 1) {
                 lag.0 += p.residual_n[i] * p.residual_n[i - 1];
                 lag.1 += p.residual_n[i] * p.residual_n[i];
             }

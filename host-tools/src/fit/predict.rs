@@ -4,7 +4,7 @@
 
 use needle_holder::model::params::TissueParams;
 
-use super::trial::{velocity_over, TrialFit};
+use super::trial::{velocity_between, TrialFit};
 use crate::trial::Trial;
 
 /// The model's force at every sample, by term.
@@ -18,6 +18,14 @@ pub struct Parts {
     pub cutting_n: Vec<f64>,
     /// Needle length in tissue after puncture (0 before), m.
     pub length_m: Vec<f64>,
+    /// The last sample on the loading curve.
+    pub puncture_index: usize,
+    /// The needle's velocity the force law was evaluated at, m/s.
+    pub v_mps: Vec<f64>,
+    /// How the friction term changes with (c_p, b_p, c_n, b_n): the
+    /// sliding sample's (l, v·l) on its side, held through a rest unless
+    /// the static band clamps it. The friction is linear in these four.
+    pub friction_basis: Vec<[f64; 4]>,
 }
 
 /// Expected force at every sample of `trial` under `params`, with the
@@ -31,23 +39,30 @@ pub fn predict(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Vec
 
 /// [`predict`], term by term.
 pub fn predict_parts(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Parts {
-    // Sliding, stopped and cutting decided on a ±2 ms velocity: the fit's
-    // ±10 ms one keeps cutting "on" for 10 ms after a stop, which alone is
-    // a residual of the whole cutting force for 5 samples at every stop.
-    let v = velocity_over(trial, 0.002);
-    let speed = one_sided_speed(trial);
+    let v = needle_velocity(trial);
+    let puncture = last_loaded_sample(geometry, trial);
     let mut deepest = geometry.puncture_x_m;
     let mut last_sliding = 0.0;
+    let mut last_basis = [0.0; 4];
+    // Cutting goes on from the puncture, and again only once the tip is
+    // past its deepest point by more than the encoder's jitter: a stroke
+    // that turns round exactly at the deepest point (the paper's
+    // oscillations) cuts nothing, though its encoder reading ties it.
+    let front_m = 3.0 * encoder_step_m(trial);
+    let mut cutting = true;
     let n = trial.len();
     let mut p = Parts {
         stiffness_n: vec![0.0; n],
         friction_n: vec![0.0; n],
         cutting_n: vec![0.0; n],
         length_m: vec![0.0; n],
+        puncture_index: puncture,
+        v_mps: Vec::new(),
+        friction_basis: vec![[0.0; 4]; n],
     };
     for i in 0..n {
         let x = trial.x_m[i];
-        if i <= geometry.puncture_index {
+        if i <= puncture {
             p.stiffness_n[i] = params.stiffness_n(x - geometry.contact_x_m);
             continue;
         }
@@ -55,40 +70,154 @@ pub fn predict_parts(params: &TissueParams, geometry: &TrialFit, trial: &Trial) 
         if l <= 0.0 {
             continue;
         }
-        // Sliding or not from the sharp velocity; how fast from the fuller
-        // one-sided window, so the last sliding sample before a stop (half
-        // a step by central differences) holds the full friction.
-        let v_friction = if v[i].abs() >= params.half_band_mps {
-            v[i].signum() * speed[i]
+        let (friction, last) = params.friction_n(v[i], l, last_sliding);
+        p.friction_basis[i] = if v[i] >= params.half_band_mps {
+            [l, v[i] * l, 0.0, 0.0]
+        } else if v[i] <= -params.half_band_mps {
+            [0.0, 0.0, l, v[i] * l]
+        } else if friction == last_sliding {
+            last_basis
         } else {
-            v[i]
+            [0.0; 4]
         };
-        let (friction, last) = params.friction_n(v_friction, l, last_sliding);
+        last_basis = p.friction_basis[i];
         last_sliding = last;
         p.friction_n[i] = friction;
-        p.cutting_n[i] = params.cutting_n(v[i], x >= deepest);
+        cutting =
+            v[i] >= params.half_band_mps && x >= deepest && (cutting || x > deepest + front_m);
+        p.cutting_n[i] = params.cutting_n(v[i], cutting);
         p.length_m[i] = l;
         deepest = deepest.max(x);
     }
+    p.v_mps = v;
     p
 }
 
-/// Speed over 10 ms on whichever side of the sample moved more: full speed
-/// up to the last sample before a stop and from the first after a start.
-fn one_sided_speed(trial: &Trial) -> Vec<f64> {
-    let n = trial.len();
-    let k = ((0.01 * trial.rate_hz()).round() as usize).max(1);
+/// The last sample still on the loading curve. The fit's puncture index
+/// is the peak of a noisy, nearly flat top, often a few samples before the
+/// capsule gives way; modelling those samples as inserted would put the
+/// whole drop (over 1 N) into the residual.
+fn last_loaded_sample(geometry: &TrialFit, trial: &Trial) -> usize {
+    let mid = 0.5 * (geometry.puncture_force_n + geometry.puncture_drop_to_n);
+    let mut i = geometry.puncture_index;
+    while i + 1 < trial.len() && trial.f_n[i + 1] > mid {
+        i += 1;
+    }
+    i
+}
+
+/// The needle's velocity at each sample, as the force law needs it: which
+/// way it moves (or 0 at rest) from the motion just before and just after
+/// the sample, how fast from up to 10 ms of motion either side.
+///
+/// A stop, start or turn falls between two samples. The sample that
+/// arrives at a stop and the one that sets off are at rest; the sample
+/// before a stop and the one after a start move at full speed. A central
+/// window calls them half-moving, which puts the whole cutting force
+/// (≈ 1 N) into the residual at every stop and start.
+fn needle_velocity(trial: &Trial) -> Vec<f64> {
+    let back = velocity_between(trial, 0.002, 0.0);
+    let ahead = velocity_between(trial, 0.0, 0.002);
     let dt = 1.0 / trial.rate_hz();
-    (0..n)
-        .map(|i| {
-            let back = i
-                .checked_sub(k)
-                .map_or(0.0, |a| (trial.x_m[i] - trial.x_m[a]).abs());
-            let fwd = trial
-                .x_m
-                .get(i + k)
-                .map_or(0.0, |b| (b - trial.x_m[i]).abs());
-            back.max(fwd) / (k as f64 * dt)
+    let k = ((0.01 / dt).round() as usize).max(1);
+    (0..trial.len())
+        .map(|i| match direction(trial, &back, &ahead, i) {
+            0.0 => 0.0,
+            d => d * speed(&trial.x_m, &back, &ahead, i, d, k) / dt,
         })
         .collect()
+}
+
+/// Which way the needle moves at sample `i`: ±1, or 0 at rest.
+fn direction(trial: &Trial, back: &[f64], ahead: &[f64], i: usize) -> f64 {
+    let (b, a) = (back[i], ahead[i]);
+    if b * a > 0.0 {
+        return b.signum();
+    }
+    if b == 0.0 || a == 0.0 {
+        return 0.0;
+    }
+    // A turn between two samples: the side whose step continues its
+    // neighbour is whole motion, the other mixes both directions.
+    let x = &trial.x_m;
+    let step = |j: usize| {
+        if j == 0 || j >= x.len() {
+            0.0
+        } else {
+            x[j] - x[j - 1]
+        }
+    };
+    let mixed_back = (step(i) - step(i.saturating_sub(1))).abs();
+    let mixed_ahead = (step(i + 1) - step(i + 2)).abs();
+    if mixed_ahead < mixed_back {
+        a.signum()
+    } else {
+        b.signum()
+    }
+}
+
+/// How the motion `direction` ends within `k` samples on one side.
+enum Edge {
+    /// It goes on for all k samples.
+    None,
+    Rest,
+    Turn,
+}
+
+/// Speed at sample `i` moving in `direction`, in metres per sample: centred on the sample over
+/// as much motion as is the same both sides (unbiased on a smooth
+/// stroke, also near its turning points), but one-sided where the other
+/// side comes to rest (the full speed up to the last sample of a stop).
+fn speed(x: &[f64], back: &[f64], ahead: &[f64], i: usize, direction: f64, k: usize) -> f64 {
+    let n = x.len();
+    // Samples the motion goes on for, and how it ends, scanning one way.
+    let run = |forward: bool| {
+        for m in 1..=k {
+            let j = if forward { i + m } else { i.wrapping_sub(m) };
+            if j >= n {
+                return (m - 1, Edge::Rest);
+            }
+            // Motion between sample j and sample i's side of it.
+            let v = if forward { back[j] } else { ahead[j] };
+            if v == 0.0 {
+                return (m - 1, Edge::Rest);
+            }
+            if v.signum() != direction {
+                return (m - 1, Edge::Turn);
+            }
+        }
+        (k, Edge::None)
+    };
+    let (m_back, edge_back) = run(false);
+    let (m_ahead, edge_ahead) = run(true);
+    let (from, to) = match (edge_back, edge_ahead) {
+        (Edge::Rest, _) if m_ahead > 0 => (i, i + m_ahead),
+        (_, Edge::Rest) if m_back > 0 => (i - m_back, i),
+        _ => {
+            let m = m_back.min(m_ahead);
+            if m > 0 {
+                (i - m, i + m)
+            } else if m_back > 0 {
+                (i - 1, i)
+            } else {
+                (i, (i + 1).min(n - 1))
+            }
+        }
+    };
+    if to > from {
+        (x[to] - x[from]).abs() / (to - from) as f64
+    } else {
+        0.0
+    }
+}
+
+/// The encoder's resolution as the data show it: the least non-zero step.
+fn encoder_step_m(trial: &Trial) -> f64 {
+    trial
+        .x_m
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|&d| d > 0.0)
+        .fold(f64::INFINITY, f64::min)
+        .min(1e-4)
 }

@@ -66,11 +66,24 @@ pub fn velocity(trial: &Trial) -> Vec<f64> {
 /// Velocity by central differences over ±`half_window_s` (at least one
 /// sample either side).
 pub fn velocity_over(trial: &Trial, half_window_s: f64) -> Vec<f64> {
+    velocity_between(trial, half_window_s, half_window_s)
+}
+
+/// Velocity over the window from `back_s` before each sample to `ahead_s`
+/// after it (each side at least one sample unless zero).
+pub fn velocity_between(trial: &Trial, back_s: f64, ahead_s: f64) -> Vec<f64> {
     let n = trial.len();
-    let k = ((half_window_s * trial.rate_hz()).round() as usize).max(1);
+    let samples = |s: f64| {
+        if s > 0.0 {
+            ((s * trial.rate_hz()).round() as usize).max(1)
+        } else {
+            0
+        }
+    };
+    let (back, ahead) = (samples(back_s), samples(ahead_s));
     (0..n)
         .map(|i| {
-            let (a, b) = (i.saturating_sub(k), (i + k).min(n - 1));
+            let (a, b) = (i.saturating_sub(back), (i + ahead).min(n - 1));
             if b > a {
                 (trial.x_m[b] - trial.x_m[a]) / (trial.t_s[b] - trial.t_s[a])
             } else {
