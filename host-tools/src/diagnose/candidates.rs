@@ -21,6 +21,16 @@ pub struct Candidate {
     pub linear: &'static [&'static str],
     /// Columns (one vector per linear parameter) for a trial at a grid value.
     pub columns: fn(&Prepared, f64) -> Vec<Vec<f64>>,
+    /// The named parameters a grid value stands for.
+    pub grid_params: fn(&'static str, f64) -> Vec<(&'static str, f64)>,
+}
+
+fn grid_as_named(name: &'static str, g: f64) -> Vec<(&'static str, f64)> {
+    if name == "none" {
+        Vec::new()
+    } else {
+        vec![(name, g)]
+    }
 }
 
 /// All candidates, DESIGN.md order.
@@ -31,6 +41,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.25, 0.5, 1.0, 2.0, 4.0],
         linear: &["k_n_per_m"],
         columns: maxwell,
+        grid_params: grid_as_named,
     },
     Candidate {
         effect: "rate_dependent_friction",
@@ -38,6 +49,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[-0.75, -0.5, -0.25, 0.5],
         linear: &["b_extra_ns_per_m2", "b_correction_ns_per_m2"],
         columns: rate_friction,
+        grid_params: grid_as_named,
     },
     Candidate {
         effect: "presliding_hysteresis",
@@ -45,6 +57,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.0001, 0.0003, 0.001, 0.003],
         linear: &["lag_gain"],
         columns: friction_lag,
+        grid_params: grid_as_named,
     },
     Candidate {
         effect: "internal_structures",
@@ -52,6 +65,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[100.0, 200.0, 400.0, 800.0],
         linear: &["wall_gain"],
         columns: walls,
+        grid_params: grid_as_named,
     },
     Candidate {
         effect: "depth_dependent_cutting",
@@ -59,6 +73,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.0],
         linear: &["cutting_per_m_n_per_m", "cutting_correction_n"],
         columns: depth_cutting,
+        grid_params: grid_as_named,
     },
     Candidate {
         effect: "holder_inertia",
@@ -66,6 +81,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.0],
         linear: &["mass_kg", "mass_smooth_kg"],
         columns: inertia,
+        grid_params: grid_as_named,
     },
     Candidate {
         effect: "sensor_drift",
@@ -73,13 +89,23 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.0],
         linear: &["rate_n_per_s"],
         columns: drift,
+        grid_params: grid_as_named,
     },
     Candidate {
         effect: "tissue_motion",
-        grid_name: "freq_hz",
-        grid: &[0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5],
-        linear: &["sin_n", "cos_n", "sin_stiffness_m", "cos_stiffness_m"],
+        grid_name: "motion",
+        grid: &[
+            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0,
+        ],
+        linear: &[
+            "gain",
+            "a1_n_per_m",
+            "a2_n_per_m2",
+            "nominal_loading_gain",
+            "loading_offset_n",
+        ],
         columns: tissue_motion,
+        grid_params: motion_params,
     },
 ];
 
@@ -204,29 +230,89 @@ fn drift(p: &Prepared, _: f64) -> Vec<Vec<f64>> {
     vec![p.trial.t_s.iter().map(|t| t - p.trial.t_s[0]).collect()]
 }
 
-/// Periodic motion of the tissue at f: a sinusoid while in tissue, and
-/// the same moving the capsule along its stiffness while loading.
-#[allow(clippy::needless_range_loop)] // four columns filled per sample
-fn tissue_motion(p: &Prepared, f_hz: f64) -> Vec<Vec<f64>> {
+/// Tissue motion grid: frequency (breathing, 0.15–0.4 Hz) × amplitude.
+const MOTION_FREQ_HZ: [f64; 5] = [0.15, 0.2, 0.25, 0.3, 0.4];
+const MOTION_AMPLITUDE_M: [f64; 3] = [0.0005, 0.0015, 0.003];
+/// Phases tried per trial (breathing does not start with the trial).
+const MOTION_PHASES: usize = 12;
+
+fn motion_at(g: f64) -> (f64, f64) {
+    let k = (g as usize).min(MOTION_FREQ_HZ.len() * MOTION_AMPLITUDE_M.len() - 1);
+    (
+        MOTION_FREQ_HZ[k % MOTION_FREQ_HZ.len()],
+        MOTION_AMPLITUDE_M[k / MOTION_FREQ_HZ.len()],
+    )
+}
+
+fn motion_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
+    let (f, a) = motion_at(g);
+    vec![("freq_hz", f), ("amplitude_m", a)]
+}
+
+/// The tissue moving along the axis by A·sin(2π f t + φ): after the
+/// puncture, the nominal model evaluated at the needle's position in the
+/// moving tissue (friction length, sliding and cutting all follow the
+/// relative motion), minus the nominal; while loading, a stiffness
+/// polynomial in the relative depth beside the nominal's own curve, which
+/// was fitted against the needle's position and is bent by the motion.
+/// φ is found on each trial, withheld or not, like the contact point: it
+/// is where the breathing was when the trial began, not a property of
+/// the tissue.
+fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
+    let (f_hz, amplitude_m) = motion_at(g);
+    let t0 = p.trial.t_s[0];
     let n = p.trial.len();
-    let mut cols = vec![vec![0.0; n]; 4];
-    for i in 0..n {
-        if !p.in_tissue(i) {
-            continue;
+    let mut best: Option<(f64, Vec<Vec<f64>>)> = None;
+    for k in 0..MOTION_PHASES {
+        let phi = TAU * k as f64 / MOTION_PHASES as f64;
+        let shift = |t: f64| amplitude_m * (TAU * f_hz * (t - t0) + phi).sin();
+        let cols = moved_nominal(p, &shift);
+        let sse: f64 = (0..n)
+            .filter(|&i| p.phase[i] != LOADING)
+            .map(|i| (p.residual_n[i] - cols[0][i]).powi(2))
+            .sum();
+        if best.as_ref().map_or(true, |b| sse < b.0) {
+            best = Some((sse, cols));
         }
-        let w = TAU * f_hz * (p.trial.t_s[i] - p.trial.t_s[0]);
-        let (s, c) = w.sin_cos();
-        cols[0][i] = s;
-        cols[1][i] = c;
-        if p.phase[i] == LOADING && i > 0 && i + 1 < n {
-            let dx = p.trial.x_m[i + 1] - p.trial.x_m[i - 1];
-            let slope = if dx.abs() > 1e-7 {
-                (p.nominal_n[i + 1] - p.nominal_n[i - 1]) / dx
-            } else {
-                0.0
-            };
-            cols[2][i] = s * slope;
-            cols[3][i] = c * slope;
+    }
+    best.map_or_else(|| vec![vec![0.0; n]; 5], |b| b.1)
+}
+
+/// Columns of [`tissue_motion`] for one displacement `shift(t)`.
+fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> f64) -> Vec<Vec<f64>> {
+    let trial = &p.trial;
+    let n = trial.len();
+    let mut relative = trial.clone();
+    for (x, &t) in relative.x_m.iter_mut().zip(&trial.t_s) {
+        *x -= shift(t);
+    }
+    // Contact: where the force first rose above the tissue's contact
+    // threshold for good, less the depth that threshold takes, in the
+    // tissue's frame. The fit's own contact assumes a monotonic loading
+    // curve, which the motion bends.
+    let threshold = p.params.contact_force_n.max(5.0 * p.noise_n);
+    let crossing = (0..=p.geometry.puncture_index.min(n - 1))
+        .rev()
+        .find(|&i| trial.f_n[i] < threshold)
+        .unwrap_or(0);
+    let d_threshold = threshold / p.params.a1_n_per_m.max(1.0);
+    let mut geometry = p.geometry.clone();
+    geometry.contact_x_m = relative.x_m[crossing] - d_threshold;
+    geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
+    geometry.relaxed_x_m =
+        geometry.contact_x_m + p.params.relaxation * (geometry.puncture_x_m - geometry.contact_x_m);
+    let moved = crate::fit::predict::predict(&p.params, &geometry, &relative);
+    // The polynomial's own offset stands for an error in that contact.
+    let mut cols = vec![vec![0.0; n]; 5];
+    for i in 0..n {
+        if p.phase[i] == LOADING {
+            let d = (relative.x_m[i] - geometry.contact_x_m).max(0.0);
+            cols[1][i] = d;
+            cols[2][i] = d * d;
+            cols[3][i] = -p.nominal_n[i];
+            cols[4][i] = f64::from(u8::from(d > 0.0));
+        } else {
+            cols[0][i] = moved[i] - p.nominal_n[i];
         }
     }
     cols

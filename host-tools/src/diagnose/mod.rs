@@ -357,7 +357,9 @@ pub fn diagnose(data: &[Prepared]) -> Value {
             let c = &CANDIDATES[*ci];
             let mut params = serde_json::Map::new();
             if c.grid.len() > 1 {
-                params.insert(c.grid_name.into(), json!(s.grid_value));
+                for (name, v) in (c.grid_params)(c.grid_name, s.grid_value) {
+                    params.insert(name.into(), json!(v));
+                }
             }
             for (name, v) in c.linear.iter().zip(&s.theta[NOMINAL_CORRECTIONS.len()..]) {
                 params.insert((*name).into(), json!(v));

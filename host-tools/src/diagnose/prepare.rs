@@ -39,6 +39,8 @@ const DWELL_S: f64 = 0.1;
 #[derive(Clone, Debug)]
 pub struct Prepared {
     pub file: String,
+    /// The nominal model's parameters (with the pooled relaxation).
+    pub params: TissueParams,
     pub trial: Trial,
     pub geometry: TrialFit,
     pub nominal_n: Vec<f64>,
@@ -89,6 +91,7 @@ pub fn prepare(
     Prepared {
         file,
         noise_n: geometry.noise_n,
+        params: *params,
         geometry,
         nominal_n,
         residual_n,

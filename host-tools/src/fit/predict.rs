@@ -63,7 +63,14 @@ pub fn predict_parts(params: &TissueParams, geometry: &TrialFit, trial: &Trial) 
     for i in 0..n {
         let x = trial.x_m[i];
         if i <= puncture {
-            p.stiffness_n[i] = params.stiffness_n(x - geometry.contact_x_m);
+            // A rational law fitted to a bent loading curve can reach its
+            // pole; the capsule holds no more than its puncture force.
+            let f = params.stiffness_n(x - geometry.contact_x_m);
+            p.stiffness_n[i] = if f.is_finite() {
+                f
+            } else {
+                params.puncture_force_n
+            };
             continue;
         }
         let l = x - geometry.relaxed_x_m;
