@@ -67,6 +67,7 @@ pub fn cell(
         seed,
         sensor,
         through: true,
+        form: crate::sim::Form::Standard,
     }
     .write(dir.path())?;
     let out = crate::detect::detect_dataset(dir.path(), &DeviceConfig::default())?;

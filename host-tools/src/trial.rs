@@ -84,6 +84,33 @@ pub fn read(path: &Path) -> Result<Trial> {
     Ok(trial)
 }
 
+/// An extra column of a trial CSV by name (e.g. `model_n` of `needle
+/// decode --csv`), with the same checks as [`read`].
+pub fn read_column(path: &Path, name: &str) -> Result<Vec<f64>> {
+    let shown = path.display();
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .with_context(|| format!("{shown}: cannot open"))?;
+    let at = reader
+        .headers()
+        .with_context(|| format!("{shown}:1: cannot read the header"))?
+        .iter()
+        .position(|h| h == name)
+        .with_context(|| format!("{shown}:1: no `{name}` column"))?;
+    let mut values = Vec::new();
+    for record in reader.records() {
+        let record = record.with_context(|| format!("{shown}: malformed CSV"))?;
+        let line = record.position().map_or(0, |p| p.line());
+        let text = record.get(at).unwrap_or("");
+        match text.parse::<f64>() {
+            Ok(v) if v.is_finite() => values.push(v),
+            _ => bail!("{shown}:{line}: `{name}` is not a finite number: {text:?}"),
+        }
+    }
+    Ok(values)
+}
+
 /// Write a trial CSV (`t_s,x_m,f_n`; µs, nm and µN resolution).
 pub fn write(path: &Path, trial: &Trial) -> Result<()> {
     use std::io::Write;

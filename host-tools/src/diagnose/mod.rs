@@ -15,6 +15,7 @@
 
 pub mod candidates;
 pub mod crossval;
+mod figure;
 pub mod prepare;
 mod report;
 
@@ -51,6 +52,12 @@ pub struct DiagnoseArgs {
     /// Write a one-page report (.html, with the figure beside it as .svg).
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Take the nominal model from each trial's `model_n` column, the
+    /// device's own model as `needle decode --csv` records it, so the
+    /// residual is the firmware's residual stream. Geometry, phases and
+    /// candidates are found on the host as usual.
+    #[arg(long)]
+    pub device_model: bool,
     /// Write every sample's nominal model and residual as CSV here
     /// (`file,t_s,x_m,f_n,model_n,residual_n,phase`).
     #[arg(long)]
@@ -366,6 +373,7 @@ pub fn diagnose(data: &[Prepared]) -> Value {
             }
             json!({
                 "effect": c.effect,
+                "grid_value": s.grid_value,
                 "heldout_rms_n": s.rms(),
                 "shrink": shrink,
                 "paired_t": t,
@@ -381,6 +389,53 @@ pub fn diagnose(data: &[Prepared]) -> Value {
             "heldout_rms_after_n": after.as_ref().map_or(baseline.rms(), Scored::rms),
         },
     })
+}
+
+/// The first trial withheld: the nominal plus the verdict's effect(s),
+/// fitted (with the nominal corrections) on all the other trials.
+fn withheld_overlay(data: &[Prepared], out: &Value) -> (Vec<f64>, String) {
+    let v = &out["verdict"];
+    let named: Vec<&str> = [&v["effect"], &v["second"]]
+        .iter()
+        .filter_map(|e| e.as_str())
+        .filter(|e| *e != "none")
+        .collect();
+    let set: Vec<(&Candidate, f64)> = named
+        .iter()
+        .filter_map(|name| {
+            let c = CANDIDATES.iter().find(|c| c.effect == *name)?;
+            let grid = out["candidates"]
+                .as_array()?
+                .iter()
+                .find(|e| e["effect"] == *name)
+                .and_then(|e| e["grid_value"].as_f64())
+                .unwrap_or(c.grid[0]);
+            Some((c, grid))
+        })
+        .collect();
+    let gs = grams(data, &set);
+    let mut train = Gram::new(gs[0][0].n);
+    for g in &gs[1..] {
+        train.merge(&total(g));
+    }
+    let theta = train.solve();
+    let cols = columns(&data[0], &set);
+    let augmented = (0..data[0].trial.len())
+        .map(|i| {
+            data[0].nominal_n[i]
+                + cols
+                    .iter()
+                    .zip(&theta)
+                    .map(|(c, th)| c[i] * th)
+                    .sum::<f64>()
+        })
+        .collect();
+    let label = if named.is_empty() {
+        "nominal refitted".to_owned()
+    } else {
+        format!("+ {}", named.join(" + "))
+    };
+    (augmented, label)
 }
 
 fn by_phase(s: &Scored) -> Value {
@@ -481,7 +536,15 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         Some(file) => Some(crate::tissue::resolve(args.tissue.as_deref(), Some(file))?.params),
         None => None,
     };
-    let (_, data) = load(&args.dir, params.as_ref())?;
+    let (_, mut data) = load(&args.dir, params.as_ref())?;
+    if args.device_model {
+        for p in &mut data {
+            let path = args.dir.join(&p.file);
+            let model_n = crate::trial::read_column(&path, "model_n")?;
+            p.use_nominal(model_n)
+                .with_context(|| format!("{}: `model_n`", path.display()))?;
+        }
+    }
     let out = diagnose(&data);
     let v = &out["verdict"];
     eprintln!(
@@ -498,7 +561,10 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         write_residuals(path, &data)?;
     }
     if let Some(path) = &args.report {
-        report::write(path, &data, &out)?;
+        let (augmented, label) = withheld_overlay(&data, &out);
+        let svg = path.with_extension("svg");
+        figure::draw(&svg, &data[0], &augmented, &label)?;
+        report::write(path, &svg, &out)?;
     }
     let text = serde_json::to_string_pretty(&out)? + "\n";
     match &args.json {

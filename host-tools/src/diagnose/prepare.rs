@@ -63,6 +63,23 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// Replace the nominal model by another one sample for sample (the
+    /// device's, from its residual stream).
+    pub fn use_nominal(&mut self, model_n: Vec<f64>) -> anyhow::Result<()> {
+        if model_n.len() != self.trial.len() {
+            anyhow::bail!(
+                "{} model values for {} samples",
+                model_n.len(),
+                self.trial.len()
+            );
+        }
+        self.residual_n = (0..model_n.len())
+            .map(|i| self.trial.f_n[i] - model_n[i])
+            .collect();
+        self.nominal_n = model_n;
+        Ok(())
+    }
+
     /// The needle touches tissue at sample `i` (loading or after puncture,
     /// before it left).
     pub fn in_tissue(&self, i: usize) -> bool {

@@ -6,36 +6,8 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde_json::Value;
 
-use super::prepare::Prepared;
-
-pub fn write(path: &Path, data: &[Prepared], out: &Value) -> Result<()> {
-    let svg = path.with_extension("svg");
-    let first = &data[0];
-    let series = vec![
-        crate::plot::Series {
-            label: "measured",
-            color: plotters::style::RGBColor(40, 40, 40),
-            points: first
-                .trial
-                .x_m
-                .iter()
-                .zip(&first.trial.f_n)
-                .map(|(x, f)| (*x, *f))
-                .collect(),
-        },
-        crate::plot::Series {
-            label: "nominal",
-            color: plotters::style::RGBColor(200, 30, 30),
-            points: first
-                .trial
-                .x_m
-                .iter()
-                .zip(&first.nominal_n)
-                .map(|(x, f)| (*x, *f))
-                .collect(),
-        },
-    ];
-    crate::plot::force_vs_position(&svg, &first.file, &series, &[])?;
+/// Write the page to `path`, showing the figure already drawn at `svg`.
+pub fn write(path: &Path, svg: &Path, out: &Value) -> Result<()> {
     let mut rows = String::new();
     for c in out["candidates"].as_array().into_iter().flatten() {
         rows += &format!(
@@ -57,7 +29,7 @@ pub fn write(path: &Path, data: &[Prepared], out: &Value) -> Result<()> {
          <h1>Sim-to-real gap</h1><p>{} trials, noise floor {:.4} N, held-out RMS {:.4} N → {:.4} N.\
          <p><b>Verdict:</b> {} (second: {}), shrink {:.1} %.\
          <h2>Candidates, held out</h2><table border=1><tr><th>effect<th>held-out RMS (N)<th>shrink<th>paired t<th>significant</tr>\n{rows}</table>\
-         <h2>First trial: measured and nominal model</h2><img src=\"{}\">",
+         <h2>A withheld trial: the model with and without the named effect, and the residual by phase</h2><img src=\"{}\">",
         out["trials"],
         out["noise_floor_n"].as_f64().unwrap_or(0.0),
         out["baseline"]["heldout_rms_n"].as_f64().unwrap_or(0.0),

@@ -24,6 +24,17 @@ use self::motion::Segment;
 use crate::trial::Trial;
 pub use needle_holder::model::params::TissueParams;
 
+/// Which physical form the effects take: the one documented in
+/// [`effects`], or another form of the same physics, so that the
+/// diagnosis is tested on data from a simulator it was not written against.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Form {
+    #[default]
+    Standard,
+    Alternate,
+}
+
 /// Sensor realism.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Sensor {
@@ -118,7 +129,8 @@ enum Contact {
 /// Least distance between one wall's rupture and the next wall (m).
 const WALL_GAP_M: f64 = 0.001;
 
-/// Simulate one trial of `protocol` in `tissue` with `effects`.
+/// Simulate one trial of `protocol` in `tissue` with `effects` in their
+/// standard form.
 pub fn simulate_trial(
     tissue: &TissueParams,
     protocol: &Protocol,
@@ -126,6 +138,25 @@ pub fn simulate_trial(
     sensor: &Sensor,
     rng: &mut impl Rng,
 ) -> (Trial, TrialTruth) {
+    simulate_trial_in(tissue, protocol, effects, Form::Standard, sensor, rng)
+}
+
+/// Simulate one trial with the effects in `form`.
+pub fn simulate_trial_in(
+    tissue: &TissueParams,
+    protocol: &Protocol,
+    effects: &[Effect],
+    form: Form,
+    sensor: &Sensor,
+    rng: &mut impl Rng,
+) -> (Trial, TrialTruth) {
+    let alternate = form == Form::Alternate;
+    // Breathing does not start with the trial (alternate form).
+    let breath_phase = if alternate {
+        rng.gen_range(0.0..std::f64::consts::TAU)
+    } else {
+        0.0
+    };
     let m = motion::sample(&protocol.segments, 0.0, sensor.rate_hz);
     let dt = 1.0 / sensor.rate_hz;
     let s1 = protocol.surface_x_m;
@@ -178,6 +209,7 @@ pub fn simulate_trial(
     let mut trial = Trial::default();
     let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
     let (mut last_sliding, mut friction, mut maxwell) = (0.0, 0.0, 0.0);
+    let (mut maxwell_slow, mut a_filtered) = (0.0, 0.0);
     let mut prev_p = 0.0;
     for i in 0..m.t_s.len() {
         let (t, x, v, a) = (m.t_s[i], m.x_m[i], m.v_mps[i], m.a_mps2[i]);
@@ -189,9 +221,17 @@ pub fn simulate_trial(
                 freq_hz,
             } = *effect
             {
-                let w = std::f64::consts::TAU * freq_hz;
-                p -= amplitude_m * (w * t).sin();
-                vr -= amplitude_m * w * (w * t).cos();
+                if alternate {
+                    // Breathing is not a sine: a sharper inhale, 0.8 f.
+                    let w = 0.8 * std::f64::consts::TAU * freq_hz;
+                    let th = w * t + breath_phase;
+                    p -= amplitude_m * (th.sin() + 0.3 * (2.0 * th).sin());
+                    vr -= amplitude_m * w * (th.cos() + 0.6 * (2.0 * th).cos());
+                } else {
+                    let w = std::f64::consts::TAU * freq_hz;
+                    p -= amplitude_m * (w * t).sin();
+                    vr -= amplitude_m * w * (w * t).cos();
+                }
             }
         }
         let mut f = 0.0;
@@ -236,20 +276,32 @@ pub fn simulate_trial(
             if l <= 0.0 {
                 phase = Contact::Out;
             } else {
-                let target = friction_target(tissue, effects, vr, l, &mut last_sliding);
+                let target = friction_target(tissue, effects, form, vr, l, &mut last_sliding);
+                let dx = (p - prev_p).abs();
                 friction = match effects.iter().find_map(|e| match *e {
                     Effect::PreslidingHysteresis { x_c_m } if x_c_m > 0.0 => Some(x_c_m),
                     _ => None,
                 }) {
-                    Some(x_c) => {
-                        friction + (target - friction) * ((p - prev_p).abs() / x_c).min(1.0)
+                    // Elasto-plastic: a bristle of fixed stiffness until
+                    // it slips, a linear ramp instead of an exponential.
+                    Some(x_c) if alternate => {
+                        let most = target.abs().max(0.05) * dx / x_c;
+                        friction + (target - friction).clamp(-most, most)
                     }
+                    Some(x_c) => friction + (target - friction) * (dx / x_c).min(1.0),
                     None => target,
                 };
                 let mut cutting = tissue.cutting_n(vr, p >= deepest && p < far);
                 for effect in effects {
                     if let Effect::DepthDependentCutting { g_per_m } = *effect {
-                        cutting *= 1.0 + g_per_m * (p - s1);
+                        let depth = p - s1;
+                        cutting *= if alternate {
+                            // Saturating over 20 mm, same initial slope.
+                            const L_M: f64 = 0.02;
+                            1.0 + g_per_m * L_M * (1.0 - (-depth / L_M).exp())
+                        } else {
+                            1.0 + g_per_m * depth
+                        };
                     }
                 }
                 deepest = deepest.max(p);
@@ -262,7 +314,12 @@ pub fn simulate_trial(
                     if ruptured[k] || p <= depth {
                         continue;
                     }
-                    let wall = k_v.unwrap_or(0.0) * (p - depth);
+                    let stretch = p - depth;
+                    let mut wall = k_v.unwrap_or(0.0) * stretch;
+                    if alternate {
+                        // Stiffening (a collagen wall), doubling at 1 mm.
+                        wall *= 1.0 + stretch / 0.001;
+                    }
                     if wall >= rupture {
                         ruptured[k] = true;
                         truth.events.push(TruthEvent {
@@ -282,15 +339,34 @@ pub fn simulate_trial(
         for effect in effects {
             match *effect {
                 Effect::Viscoelasticity { k_n_per_m, tau_s } => {
-                    maxwell = if phase == Contact::Out {
-                        0.0
+                    // Alternate: a Prony series of two branches.
+                    let (k1, tau1, k2, tau2) = if alternate {
+                        (0.5 * k_n_per_m, tau_s / 3.0, k_n_per_m, 3.0 * tau_s)
                     } else {
-                        maxwell + (k_n_per_m * vr - maxwell / tau_s) * dt
+                        (k_n_per_m, tau_s, 0.0, 1.0)
                     };
-                    f += maxwell;
+                    if phase == Contact::Out {
+                        (maxwell, maxwell_slow) = (0.0, 0.0);
+                    } else {
+                        maxwell += (k1 * vr - maxwell / tau1) * dt;
+                        maxwell_slow += (k2 * vr - maxwell_slow / tau2) * dt;
+                    }
+                    f += maxwell + maxwell_slow;
                 }
-                Effect::HolderInertia { mass_kg } => f += mass_kg * a,
-                Effect::SensorDrift { rate_n_per_s } => f += rate_n_per_s * t,
+                Effect::HolderInertia { mass_kg } => {
+                    // Alternate: the drive reaches its speed over ~10 ms.
+                    a_filtered += (a - a_filtered) * if alternate { dt / 0.01 } else { 1.0 };
+                    f += mass_kg * a_filtered;
+                }
+                Effect::SensorDrift { rate_n_per_s } => {
+                    // Alternate: a bridge settling thermally over 30 s.
+                    const TAU_S: f64 = 30.0;
+                    f += if alternate {
+                        rate_n_per_s * TAU_S * (1.0 - (-t / TAU_S).exp())
+                    } else {
+                        rate_n_per_s * t
+                    };
+                }
                 _ => {}
             }
         }
@@ -305,6 +381,7 @@ pub fn simulate_trial(
 fn friction_target(
     tissue: &TissueParams,
     effects: &[Effect],
+    form: Form,
     v: f64,
     l: f64,
     last: &mut f64,
@@ -316,7 +393,14 @@ fn friction_target(
             v_ref_mps,
         } = *effect
         {
-            let scale = (v.abs().max(tissue.half_band_mps) / v_ref_mps).powf(exponent - 1.0);
+            let speed = v.abs().max(tissue.half_band_mps);
+            let scale = if form == Form::Alternate {
+                // Logarithmic strengthening, as strong as the power law.
+                let s = (1.0 - exponent) / 0.5;
+                (1.0 - s) + s * v_ref_mps * (1.0 + speed / v_ref_mps).ln() / speed
+            } else {
+                (speed / v_ref_mps).powf(exponent - 1.0)
+            };
             p.bp_ns_per_m2 *= scale;
             p.bn_ns_per_m2 *= scale;
         }
@@ -427,6 +511,10 @@ pub struct SimulateArgs {
     /// Force noise standard deviation, N.
     #[arg(long, default_value_t = 0.002)]
     pub noise_n: f64,
+    /// Form of the effects: `standard` (documented in sim/effects.rs) or
+    /// `alternate` (another form of the same physics, same place).
+    #[arg(long, value_enum, default_value_t = Form::Standard)]
+    pub effect_form: Form,
     /// The needle goes through the sample: its far side lies 8 mm past the
     /// puncture depth or deeper, 4 mm short of the deepest point at most.
     #[arg(long)]
@@ -438,6 +526,7 @@ struct TruthFile<'a> {
     tissue: &'a str,
     params: &'a TissueParams,
     effects: &'a [Effect],
+    effect_form: Form,
     seed: u64,
     sensor: Sensor,
     trials: Vec<TruthTrial<'a>>,
@@ -474,6 +563,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         seed: args.seed,
         sensor,
         through: args.through,
+        form: args.effect_form,
     }
     .write(&args.out)?;
     eprintln!("wrote {written} trials to {}", args.out.display());
@@ -492,6 +582,7 @@ pub struct Dataset<'a> {
     pub sensor: Sensor,
     /// The far side of the sample lies inside the motion (`--through`).
     pub through: bool,
+    pub form: Form,
 }
 
 /// Simulate `trials` trials into `dir` (not through the sample).
@@ -512,6 +603,7 @@ pub fn simulate_dataset(
         seed,
         sensor: *sensor,
         through: false,
+        form: Form::Standard,
     }
     .write(dir)
 }
@@ -528,6 +620,7 @@ impl Dataset<'_> {
             seed,
             ref sensor,
             through,
+            form,
         } = *self;
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
@@ -540,7 +633,8 @@ impl Dataset<'_> {
             if through {
                 protocol.far_surface_x_m = far_surface(tissue, &protocol, &mut rng);
             }
-            let (trial, truth) = simulate_trial(tissue, &protocol, effects, sensor, &mut rng);
+            let (trial, truth) =
+                simulate_trial_in(tissue, &protocol, effects, form, sensor, &mut rng);
             let name = format!("trial_{k:03}");
             crate::trial::write(&dir.join(format!("{name}.csv")), &trial)?;
             let replay = to_replay(
@@ -556,6 +650,7 @@ impl Dataset<'_> {
             tissue: tissue_name,
             params: tissue,
             effects,
+            effect_form: form,
             seed,
             sensor: *sensor,
             trials: truths

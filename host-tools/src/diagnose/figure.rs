@@ -1,0 +1,143 @@
+//! The report's figure: one withheld trial over time — measured force,
+//! the nominal model and the model with the named effect(s) fitted on the
+//! other trials — and below it the residual of each, phases shaded.
+
+use std::path::Path;
+
+use anyhow::{anyhow, Result};
+use plotters::prelude::*;
+
+use super::prepare::{Prepared, PHASES};
+
+/// Phase band colours, in [`PHASES`] order.
+const BANDS: [RGBColor; 7] = [
+    RGBColor(245, 245, 245),
+    RGBColor(255, 236, 200),
+    RGBColor(220, 236, 255),
+    RGBColor(230, 230, 230),
+    RGBColor(225, 245, 220),
+    RGBColor(245, 225, 245),
+    RGBColor(245, 245, 245),
+];
+
+/// Draw `p` with its nominal model and `augmented` (same samples) to `path`.
+pub fn draw(path: &Path, p: &Prepared, augmented: &[f64], label: &str) -> Result<()> {
+    let err = |e: DrawingAreaErrorKind<_>| anyhow!("{}: cannot draw: {e:?}", path.display());
+    let root = SVGBackend::new(path, (1000, 720)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let (top, bottom) = root.split_vertically(400);
+    let t = &p.trial.t_s;
+    let (t0, t1) = (t[0], *t.last().unwrap_or(&t[0]));
+    let step = (t.len() / 3000).max(1);
+    let line = |ys: &[f64]| -> Vec<(f64, f64)> {
+        t.iter()
+            .zip(ys)
+            .step_by(step)
+            .map(|(a, b)| (*a, *b))
+            .collect()
+    };
+    let range = |ys: &[&[f64]]| {
+        let (lo, hi) = ys
+            .iter()
+            .flat_map(|y| y.iter())
+            .filter(|v| v.is_finite())
+            .fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
+        let pad = 0.05 * (hi - lo).max(0.01);
+        (lo - pad)..(hi + pad)
+    };
+    let mut chart = ChartBuilder::on(&top)
+        .caption(
+            format!("{} (withheld): measured, nominal, {label}", p.file),
+            ("sans-serif", 18),
+        )
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(56)
+        .build_cartesian_2d(t0..t1, range(&[&p.trial.f_n, &p.nominal_n, augmented]))
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .y_desc("force, N")
+        .draw()
+        .map_err(err)?;
+    let series: [(&str, &[f64], RGBColor); 3] = [
+        ("measured", &p.trial.f_n, RGBColor(40, 40, 40)),
+        ("nominal", &p.nominal_n, RGBColor(200, 30, 30)),
+        (label, augmented, RGBColor(20, 110, 200)),
+    ];
+    for (name, ys, color) in series {
+        chart
+            .draw_series(LineSeries::new(line(ys), color))
+            .map_err(err)?
+            .label(name)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], color));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+
+    let nominal_residual = &p.residual_n;
+    let augmented_residual: Vec<f64> = (0..t.len())
+        .map(|i| p.trial.f_n[i] - augmented[i])
+        .collect();
+    let y = range(&[nominal_residual, &augmented_residual]);
+    let mut chart = ChartBuilder::on(&bottom)
+        .caption(
+            "residual (measured − model), phases shaded",
+            ("sans-serif", 16),
+        )
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(56)
+        .build_cartesian_2d(t0..t1, y.clone())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("time, s")
+        .y_desc("residual, N")
+        .draw()
+        .map_err(err)?;
+    // Shade each run of one phase, labelled once.
+    let mut start = 0;
+    let mut labelled = [false; PHASES.len()];
+    for i in 1..=t.len() {
+        if i < t.len() && p.phase[i] == p.phase[start] {
+            continue;
+        }
+        let ph = p.phase[start];
+        let band = Rectangle::new([(t[start], y.start), (t[i - 1], y.end)], BANDS[ph].filled());
+        let drawn = chart.draw_series([band]).map_err(err)?;
+        if !labelled[ph] {
+            labelled[ph] = true;
+            let color = BANDS[ph];
+            drawn.label(PHASES[ph]).legend(move |(x, y)| {
+                Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled())
+            });
+        }
+        start = i;
+    }
+    chart
+        .draw_series(LineSeries::new(
+            line(nominal_residual),
+            RGBColor(200, 30, 30),
+        ))
+        .map_err(err)?;
+    chart
+        .draw_series(LineSeries::new(
+            line(&augmented_residual),
+            RGBColor(20, 110, 200),
+        ))
+        .map_err(err)?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
