@@ -271,7 +271,7 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
             .filter(|&i| p.phase[i] != LOADING)
             .map(|i| (p.residual_n[i] - cols[0][i]).powi(2))
             .sum();
-        if best.as_ref().map_or(true, |b| sse < b.0) {
+        if best.as_ref().is_none_or(|b| sse < b.0) {
             best = Some((sse, cols));
         }
     }

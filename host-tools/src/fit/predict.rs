@@ -60,6 +60,7 @@ pub fn predict_parts(params: &TissueParams, geometry: &TrialFit, trial: &Trial) 
         v_mps: Vec::new(),
         friction_basis: vec![[0.0; 4]; n],
     };
+    #[allow(clippy::needless_range_loop)] // six parallel per-sample arrays
     for i in 0..n {
         let x = trial.x_m[i];
         if i <= puncture {
