@@ -9,7 +9,7 @@
 
 use std::f64::consts::TAU;
 
-use super::prepare::{Prepared, LOADING};
+use super::prepare::{relaxed_surface, Prepared, LOADING};
 
 /// One candidate effect.
 pub struct Candidate {
@@ -299,8 +299,7 @@ fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> f64) -> Vec<Vec<f64>> {
     let mut geometry = p.geometry.clone();
     geometry.contact_x_m = relative.x_m[crossing] - d_threshold;
     geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
-    geometry.relaxed_x_m =
-        geometry.contact_x_m + p.params.relaxation * (geometry.puncture_x_m - geometry.contact_x_m);
+    geometry.relaxed_x_m = relaxed_surface(&geometry, p.params.relaxation);
     let moved = crate::fit::predict::predict(&p.params, &geometry, &relative);
     // The polynomial's own offset stands for an error in that contact.
     let mut cols = vec![vec![0.0; n]; 5];

@@ -120,11 +120,18 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
     cols
 }
 
-/// Gram sums per trial and phase for a set of candidates.
-fn grams(data: &[Prepared], set: &[(&Candidate, f64)]) -> Vec<[Gram; PHASES.len()]> {
+/// Gram sums per trial and phase of `fixed` columns (one set per trial,
+/// computed once by the caller) followed by `extra(trial)`.
+fn grams(
+    data: &[Prepared],
+    fixed: &[Vec<Vec<f64>>],
+    extra: impl Fn(&Prepared) -> Vec<Vec<f64>>,
+) -> Vec<[Gram; PHASES.len()]> {
     data.iter()
-        .map(|p| {
-            let cols = columns(p, set);
+        .zip(fixed)
+        .map(|(p, fixed)| {
+            let extra = extra(p);
+            let cols: Vec<&Vec<f64>> = fixed.iter().chain(&extra).collect();
             let mut g: [Gram; PHASES.len()] = std::array::from_fn(|_| Gram::new(cols.len()));
             let mut phi = vec![0.0; cols.len()];
             for i in 0..p.trial.len() {
@@ -177,12 +184,15 @@ impl Scored {
 /// score the withheld trials.
 fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate>) -> Scored {
     let grid: &[f64] = cand.map_or(&[0.0], |c| c.grid);
+    // The fixed terms' columns once, not once per grid value: a fixed
+    // tissue_motion re-evaluates the model a dozen times per trial.
+    let fixed_cols: Vec<_> = data.iter().map(|p| columns(p, fixed)).collect();
     let per_grid: Vec<Vec<[Gram; PHASES.len()]>> = grid
         .iter()
         .map(|&g| {
-            let mut set = fixed.to_vec();
-            set.extend(cand.map(|c| (c, g)));
-            grams(data, &set)
+            grams(data, &fixed_cols, |p| {
+                cand.map_or_else(Vec::new, |c| (c.columns)(p, g))
+            })
         })
         .collect();
     let k = folds(data.len());
@@ -293,10 +303,7 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
             tissues.first().context("needle fit gave no tissue")?.params
         }
     };
-    let pairs: Vec<_> = trials
-        .iter()
-        .map(|(_, t, g)| (t.clone(), g.clone()))
-        .collect();
+    let pairs: Vec<_> = trials.iter().map(|(_, t, g)| (t, g)).collect();
     params.relaxation = prepare::fit_relaxation(&pairs, &params);
     let data = trials
         .into_iter()
@@ -413,7 +420,8 @@ fn withheld_overlay(data: &[Prepared], out: &Value) -> (Vec<f64>, String) {
             Some((c, grid))
         })
         .collect();
-    let gs = grams(data, &set);
+    let all_cols: Vec<_> = data.iter().map(|p| columns(p, &set)).collect();
+    let gs = grams(data, &all_cols, |_| Vec::new());
     let mut train = Gram::new(gs[0][0].n);
     for g in &gs[1..] {
         train.merge(&total(g));

@@ -132,14 +132,14 @@ pub fn prepare(
 /// is determined better, but then an unmodelled effect bends it trial by
 /// trial to hide itself; one ρ for the tissue, as the paper has it, is
 /// both well determined and hard for an effect to hide in.
-pub fn fit_relaxation(trials: &[(Trial, TrialFit)], params: &TissueParams) -> f64 {
+pub fn fit_relaxation(trials: &[(&Trial, &TrialFit)], params: &TissueParams) -> f64 {
     let sse = |rho: f64| {
         trials
             .iter()
             .map(|(trial, geometry)| {
                 let g = TrialFit {
                     relaxed_x_m: relaxed_surface(geometry, rho),
-                    ..geometry.clone()
+                    ..(*geometry).clone()
                 };
                 let parts = predict_parts(params, &g, trial);
                 (parts.puncture_index + 1..trial.len())
