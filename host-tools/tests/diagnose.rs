@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use host_tools::diagnose::{diagnose, load};
+use host_tools::diagnose::{diagnose, load, Nominal};
 use host_tools::sim::{effects, Dataset, Form, Sensor};
 use needle_holder::model::params::LIVER1;
 use serde_json::Value;
@@ -36,7 +36,7 @@ fn diagnosis(effect_list: &str, form: Form, seed: u64) -> Value {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), effect_list, form, seed);
     let (_, data) = load(dir.path(), None).unwrap();
-    diagnose(&data)
+    diagnose(&data, Nominal::Fitted)
 }
 
 fn num(v: &Value) -> f64 {

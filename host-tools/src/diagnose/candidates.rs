@@ -10,6 +10,7 @@
 use std::f64::consts::TAU;
 
 use super::prepare::{relaxed_surface, Prepared, LOADING};
+use crate::fit::predict::predict_parts_at;
 
 /// One candidate effect.
 pub struct Candidate {
@@ -23,6 +24,9 @@ pub struct Candidate {
     pub columns: fn(&Prepared, f64) -> Vec<Vec<f64>>,
     /// The named parameters a grid value stands for.
     pub grid_params: fn(&'static str, f64) -> Vec<(&'static str, f64)>,
+    /// Its fitted contribution is a force that can be taken out of the
+    /// measured one before the nominal is fitted again.
+    pub backfit: bool,
 }
 
 fn grid_as_named(name: &'static str, g: f64) -> Vec<(&'static str, f64)> {
@@ -42,6 +46,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["k_n_per_m"],
         columns: maxwell,
         grid_params: grid_as_named,
+        backfit: true,
     },
     Candidate {
         effect: "rate_dependent_friction",
@@ -50,6 +55,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["b_extra_ns_per_m2", "b_correction_ns_per_m2"],
         columns: rate_friction,
         grid_params: grid_as_named,
+        backfit: true,
     },
     Candidate {
         effect: "presliding_hysteresis",
@@ -58,6 +64,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["lag_gain"],
         columns: friction_lag,
         grid_params: grid_as_named,
+        backfit: true,
     },
     Candidate {
         effect: "internal_structures",
@@ -66,6 +73,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["wall_gain"],
         columns: walls,
         grid_params: grid_as_named,
+        backfit: true,
     },
     Candidate {
         effect: "depth_dependent_cutting",
@@ -74,6 +82,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["cutting_per_m_n_per_m", "cutting_correction_n"],
         columns: depth_cutting,
         grid_params: grid_as_named,
+        backfit: true,
     },
     Candidate {
         effect: "holder_inertia",
@@ -82,6 +91,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["mass_kg", "mass_smooth_kg"],
         columns: inertia,
         grid_params: grid_as_named,
+        backfit: true,
     },
     Candidate {
         effect: "sensor_drift",
@@ -90,6 +100,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["rate_n_per_s"],
         columns: drift,
         grid_params: grid_as_named,
+        backfit: true,
     },
     Candidate {
         effect: "tissue_motion",
@@ -106,6 +117,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         ],
         columns: tissue_motion,
         grid_params: motion_params,
+        backfit: false,
     },
 ];
 
@@ -265,7 +277,11 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let mut best: Option<(f64, Vec<Vec<f64>>)> = None;
     for k in 0..MOTION_PHASES {
         let phi = TAU * k as f64 / MOTION_PHASES as f64;
-        let shift = |t: f64| amplitude_m * (TAU * f_hz * (t - t0) + phi).sin();
+        let w = TAU * f_hz;
+        let shift = |t: f64| {
+            let (s, c) = (w * (t - t0) + phi).sin_cos();
+            (amplitude_m * s, amplitude_m * w * c)
+        };
         let cols = moved_nominal(p, &shift);
         let sse: f64 = (0..n)
             .filter(|&i| p.phase[i] != LOADING)
@@ -278,13 +294,19 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     best.map_or_else(|| vec![vec![0.0; n]; 5], |b| b.1)
 }
 
-/// Columns of [`tissue_motion`] for one displacement `shift(t)`.
-fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> f64) -> Vec<Vec<f64>> {
+/// Columns of [`tissue_motion`] for one tissue displacement and velocity
+/// `shift(t)`. The needle's velocity relative to the tissue is its own
+/// less the tissue's, not a difference of the shifted positions: that
+/// would re-derive the encoder's steps 180 times per trial.
+fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> (f64, f64)) -> Vec<Vec<f64>> {
     let trial = &p.trial;
     let n = trial.len();
     let mut relative = trial.clone();
-    for (x, &t) in relative.x_m.iter_mut().zip(&trial.t_s) {
-        *x -= shift(t);
+    let mut v_rel = p.v_mps.clone();
+    for ((x, v), &t) in relative.x_m.iter_mut().zip(&mut v_rel).zip(&trial.t_s) {
+        let (dx, dv) = shift(t);
+        *x -= dx;
+        *v -= dv;
     }
     // Contact: where the force first rose above the tissue's contact
     // threshold for good, less the depth that threshold takes, in the
@@ -300,7 +322,10 @@ fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> f64) -> Vec<Vec<f64>> {
     geometry.contact_x_m = relative.x_m[crossing] - d_threshold;
     geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
     geometry.relaxed_x_m = relaxed_surface(&geometry, p.params.relaxation);
-    let moved = crate::fit::predict::predict(&p.params, &geometry, &relative);
+    let parts = predict_parts_at(&p.params, &geometry, &relative, v_rel);
+    let moved: Vec<f64> = (0..n)
+        .map(|i| parts.stiffness_n[i] + parts.friction_n[i] + parts.cutting_n[i])
+        .collect();
     // The polynomial's own offset stands for an error in that contact.
     let mut cols = vec![vec![0.0; n]; 5];
     for i in 0..n {

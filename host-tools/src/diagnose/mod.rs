@@ -163,6 +163,9 @@ pub struct Scored {
     /// Grid value chosen on all data, and the linear parameters there.
     pub grid_value: f64,
     pub theta: Vec<f64>,
+    /// Linear parameters fitted on each fold's training trials (trial j
+    /// is withheld in fold j mod k).
+    pub fold_theta: Vec<Vec<f64>>,
 }
 
 impl Scored {
@@ -198,6 +201,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     let k = folds(data.len());
     let mut per_trial = vec![(0.0, 0); data.len()];
     let mut by_phase = [(0.0, 0); PHASES.len()];
+    let mut fold_theta = Vec::with_capacity(k);
     for fold in 0..k {
         let fit = |gs: &Vec<[Gram; PHASES.len()]>| {
             let mut train = Gram::new(gs[0][0].n);
@@ -227,6 +231,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
                 by_phase[ph].1 += gp.count;
             }
         }
+        fold_theta.push(theta);
     }
     let (gi, theta) = per_grid
         .iter()
@@ -245,6 +250,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         by_phase,
         grid_value: grid[gi],
         theta,
+        fold_theta,
     }
 }
 
@@ -291,17 +297,13 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
             trials.len()
         );
     }
+    let geometry: Vec<_> = trials
+        .iter()
+        .map(|(f, _, fit)| (f.clone(), fit.clone()))
+        .collect();
     let mut params = match params {
         Some(p) => *p,
-        None => {
-            let fits: Vec<_> = trials
-                .iter()
-                .map(|(f, _, fit)| (f.clone(), fit.clone()))
-                .collect();
-            let text = crate::fit::to_toml(&crate::fit::summarise(&fits, skipped));
-            let tissues = crate::tissue::parse(&text, Path::new("<needle fit>"))?;
-            tissues.first().context("needle fit gave no tissue")?.params
-        }
+        None => nominal_params(&geometry, skipped)?,
     };
     let pairs: Vec<_> = trials.iter().map(|(_, t, g)| (t, g)).collect();
     params.relaxation = prepare::fit_relaxation(&pairs, &params);
@@ -317,8 +319,114 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
     Ok((params, data))
 }
 
+/// The nominal model found again with the named effects' fitted
+/// contribution taken out of the measured force: an effect also bends the
+/// geometry `needle fit` finds (the contact point of a loading curve with
+/// a relaxing branch in it, the peak of a drifting puncture) and the
+/// coefficients, which the linear corrections cannot undo. Trial j is
+/// cleaned with the effect as fitted without its fold (`fold_theta` of
+/// fold j mod k), so no trial's geometry is found with parameters its own
+/// samples set. The residual stays measured − model; only the nominal's
+/// fit sees the cleaned force.
+fn backfit(
+    data: &[Prepared],
+    set: &[(&Candidate, f64)],
+    fold_theta: &[Vec<f64>],
+    refit_params: bool,
+) -> Result<Vec<Prepared>> {
+    let skip = NOMINAL_CORRECTIONS.len();
+    let cleaned: Vec<(PathBuf, crate::trial::Trial, crate::fit::TrialFit)> = data
+        .iter()
+        .enumerate()
+        .map(|(j, p)| {
+            let theta = &fold_theta[j % fold_theta.len()];
+            let mut trial = p.trial.clone();
+            for (c, th) in columns(p, set)[skip..].iter().zip(&theta[skip..]) {
+                for (f, e) in trial.f_n.iter_mut().zip(c) {
+                    *f -= e * th;
+                }
+            }
+            let geometry = fit_trial(&trial).unwrap_or_else(|_| p.geometry.clone());
+            (PathBuf::from(&p.file), trial, geometry)
+        })
+        .collect();
+    let mut params = if refit_params {
+        let fits: Vec<_> = cleaned
+            .iter()
+            .map(|(f, _, g)| (f.clone(), g.clone()))
+            .collect();
+        nominal_params(&fits, Vec::new())?
+    } else {
+        data[0].params
+    };
+    let pairs: Vec<_> = cleaned.iter().map(|(_, t, g)| (t, g)).collect();
+    params.relaxation = prepare::fit_relaxation(&pairs, &params);
+    Ok(cleaned
+        .into_iter()
+        .zip(data)
+        .map(|((_, _, geometry), p)| prepare(p.file.clone(), p.trial.clone(), geometry, &params))
+        .collect())
+}
+
+/// Most rounds of [`backfit`]; it stops sooner once a round changes the
+/// held-out RMS by less than [`BACKFIT_TOL`] of it.
+const BACKFIT_ROUNDS: usize = 8;
+const BACKFIT_TOL: f64 = 0.01;
+
+/// `set` scored after backfitting the nominal under it, with the data the
+/// last round left. Candidates whose effect is not a force (tissue motion
+/// moves the tissue under the needle) are scored on the data as it is.
+fn scored_with_backfit(
+    data: &[Prepared],
+    set: &[(&Candidate, f64)],
+    nominal: Nominal,
+) -> (Scored, Vec<Prepared>) {
+    let mut scored = score(data, set, None);
+    let mut current = data.to_vec();
+    if nominal == Nominal::Device || !set.iter().all(|(c, _)| c.backfit) {
+        return (scored, current);
+    }
+    for _ in 0..BACKFIT_ROUNDS {
+        let refit_params = nominal == Nominal::Fitted;
+        let Ok(again) = backfit(&current, set, &scored.fold_theta, refit_params) else {
+            break;
+        };
+        let next = score(&again, set, None);
+        let change = (next.rms() - scored.rms()).abs();
+        let done = change < BACKFIT_TOL * scored.rms();
+        (scored, current) = (next, again);
+        if done {
+            break;
+        }
+    }
+    (scored, current)
+}
+
+/// `needle fit`'s estimates over per-trial fits, as tissue parameters.
+fn nominal_params(
+    fits: &[(PathBuf, crate::fit::TrialFit)],
+    skipped: Vec<Value>,
+) -> Result<TissueParams> {
+    let text = crate::fit::to_toml(&crate::fit::summarise(fits, skipped));
+    let tissues = crate::tissue::parse(&text, Path::new("<needle fit>"))?;
+    Ok(tissues.first().context("needle fit gave no tissue")?.params)
+}
+
+/// Where the nominal model came from, which decides what a backfit may
+/// find again.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Nominal {
+    /// `needle fit`'s estimates over the data: parameters and geometry.
+    Fitted,
+    /// A tissue library entry (`--params`): geometry only.
+    Given,
+    /// The device's own model per sample (`--device-model`): nothing; the
+    /// diagnosis is of the model the firmware ran.
+    Device,
+}
+
 /// The whole diagnosis as JSON (the keys of the issue).
-pub fn diagnose(data: &[Prepared]) -> Value {
+pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
     let baseline = score(data, &[], None);
     let mut ranked: Vec<(usize, Scored, f64, f64)> = CANDIDATES
         .iter()
@@ -333,22 +441,25 @@ pub fn diagnose(data: &[Prepared]) -> Value {
     let significant = |shrink: f64, t: f64| shrink >= MIN_SHRINK && t >= MIN_T;
     let first = ranked.first().filter(|r| significant(r.2, r.3));
     let mut second_name = "none";
-    let mut after = first.map(|f| f.1.clone());
+    let mut after = None;
     if let Some((ci, s, ..)) = first {
         let fixed = [(&CANDIDATES[*ci], s.grid_value)];
+        let (alone, cleaned) = scored_with_backfit(data, &fixed, nominal);
         let best_second = CANDIDATES
             .iter()
             .enumerate()
             .filter(|(cj, _)| cj != ci)
             .map(|(cj, c)| {
-                let with = score(data, &fixed, Some(c));
-                let (shrink, t) = improvement(s, &with);
+                let with = score(&cleaned, &fixed, Some(c));
+                let (shrink, t) = improvement(&alone, &with);
                 (cj, with, shrink, t)
             })
             .max_by(|a, b| a.2.total_cmp(&b.2));
+        after = Some(alone);
         if let Some((cj, with, ..)) = best_second.filter(|b| significant(b.2, b.3)) {
             second_name = CANDIDATES[cj].effect;
-            after = Some(with);
+            let both = [fixed[0], (&CANDIDATES[cj], with.grid_value)];
+            after = Some(scored_with_backfit(&cleaned, &both, nominal).0);
         }
     }
     let noise = noise_floor(data);
@@ -553,7 +664,12 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
                 .with_context(|| format!("{}: `model_n`", path.display()))?;
         }
     }
-    let out = diagnose(&data);
+    let nominal = match (args.device_model, &args.params) {
+        (true, _) => Nominal::Device,
+        (false, Some(_)) => Nominal::Given,
+        (false, None) => Nominal::Fitted,
+    };
+    let out = diagnose(&data, nominal);
     let v = &out["verdict"];
     eprintln!(
         "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {} (+ {}), shrink {:.0} %",

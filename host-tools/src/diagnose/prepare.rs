@@ -5,7 +5,7 @@
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::TissueParams;
 
-use crate::fit::predict::{predict_parts, Parts};
+use crate::fit::predict::{needle_velocity, predict_parts, predict_parts_at, Parts};
 use crate::fit::TrialFit;
 use crate::trial::Trial;
 
@@ -133,15 +133,17 @@ pub fn prepare(
 /// trial to hide itself; one ρ for the tissue, as the paper has it, is
 /// both well determined and hard for an effect to hide in.
 pub fn fit_relaxation(trials: &[(&Trial, &TrialFit)], params: &TissueParams) -> f64 {
+    let v: Vec<Vec<f64>> = trials.iter().map(|(t, _)| needle_velocity(t)).collect();
     let sse = |rho: f64| {
         trials
             .iter()
-            .map(|(trial, geometry)| {
+            .zip(&v)
+            .map(|((trial, geometry), v)| {
                 let g = TrialFit {
                     relaxed_x_m: relaxed_surface(geometry, rho),
                     ..(*geometry).clone()
                 };
-                let parts = predict_parts(params, &g, trial);
+                let parts = predict_parts_at(params, &g, trial, v.clone());
                 (parts.puncture_index + 1..trial.len())
                     .map(|i| (trial.f_n[i] - parts.friction_n[i] - parts.cutting_n[i]).powi(2))
                     .sum::<f64>()

@@ -39,7 +39,18 @@ pub fn predict(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Vec
 
 /// [`predict`], term by term.
 pub fn predict_parts(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Parts {
-    let v = needle_velocity(trial);
+    predict_parts_at(params, geometry, trial, needle_velocity(trial))
+}
+
+/// [`predict_parts`] at a needle velocity already known (from
+/// [`needle_velocity`]): the velocity is most of the cost, and a caller
+/// evaluating one trial under many parameters needs it once.
+pub fn predict_parts_at(
+    params: &TissueParams,
+    geometry: &TrialFit,
+    trial: &Trial,
+    v: Vec<f64>,
+) -> Parts {
     let puncture = last_loaded_sample(geometry, trial);
     let mut deepest = geometry.puncture_x_m;
     let mut last_sliding = 0.0;
@@ -123,7 +134,7 @@ fn last_loaded_sample(geometry: &TrialFit, trial: &Trial) -> usize {
 /// before a stop and the one after a start move at full speed. A central
 /// window calls them half-moving, which puts the whole cutting force
 /// (≈ 1 N) into the residual at every stop and start.
-fn needle_velocity(trial: &Trial) -> Vec<f64> {
+pub fn needle_velocity(trial: &Trial) -> Vec<f64> {
     let back = velocity_between(trial, 0.002, 0.0);
     let ahead = velocity_between(trial, 0.0, 0.002);
     let dt = 1.0 / trial.rate_hz();
