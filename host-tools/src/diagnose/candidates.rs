@@ -10,6 +10,7 @@
 use std::f64::consts::TAU;
 
 use super::prepare::{relaxed_surface, Prepared, LOADING};
+use crate::fit::jumps::velocity_steps;
 use crate::fit::predict::predict_parts_at;
 
 /// One candidate effect.
@@ -86,8 +87,8 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
     Candidate {
         effect: "holder_inertia",
-        grid_name: "none",
-        grid: &[0.0],
+        grid_name: "lag_s",
+        grid: &[0.0, 0.003, 0.01, 0.03],
         linear: &["mass_kg", "mass_smooth_kg"],
         columns: inertia,
         grid_params: grid_as_named,
@@ -205,37 +206,61 @@ fn depth_cutting(p: &Prepared, _: f64) -> Vec<Vec<f64>> {
     vec![a, b]
 }
 
-/// Acceleration two ways: the step of the needle velocity into each
-/// sample (a start or stop is one sample of the whole speed change, as
-/// the velocity the force law uses has it), and over ±10 ms (a smooth
-/// stroke, without the encoder's quantisation, which a second difference
-/// of positions turns into tens of mN at 0.15 kg).
-fn inertia(p: &Prepared, _: f64) -> Vec<Vec<f64>> {
-    let n = p.trial.len();
+/// Acceleration two ways, each as the holder feels it through a mount
+/// or drive that spreads it over τ (first-order; τ = 0 is rigid): the
+/// jumps of the needle's velocity (a start or stop is an impulse m·Δv,
+/// which a sampled load cell shows on the first sample after it), and the
+/// smooth rest, the second difference of position over ±10 ms with the
+/// jumps' kinks taken out (else every jump is also a 20 ms triangle).
+fn inertia(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
+    let (t, x) = (&p.trial.t_s, &p.trial.x_m);
+    let n = x.len();
     let rate = p.trial.rate_hz();
     let k = ((0.01 * rate).round() as usize).max(1);
-    let v = &p.v_mps;
-    let step = (0..n)
-        .map(|i| {
-            if i == 0 {
-                0.0
-            } else {
-                (v[i] - v[i - 1]) * rate
+    let jumps = velocity_steps(t, x, k, LEAST_JUMP_MPS);
+    let mut step = vec![0.0; n];
+    let mut kinked = x.clone();
+    for jump in &jumps {
+        // Spread over the samples it may have landed on, by how likely each
+        // is: a pulse on the wrong sample is two pulses of error.
+        for (j, w) in (jump.index - 1..).zip(jump.landing(t)) {
+            if j < n {
+                step[j] += w * jump.dv_mps * rate;
             }
-        })
-        .collect();
+        }
+        for i in jump.index..n {
+            kinked[i] -= jump.dv_mps * (t[i] - jump.t_s);
+        }
+    }
+    let span_s = k as f64 / rate;
     let smooth = (0..n)
         .map(|i| {
-            let (a, b) = (i.saturating_sub(k), (i + k).min(n - 1));
-            if b > a {
-                (v[b] - v[a]) * rate / (b - a) as f64
-            } else {
+            if i < k || i + k >= n {
                 0.0
+            } else {
+                (kinked[i + k] - 2.0 * kinked[i] + kinked[i - k]) / (span_s * span_s)
             }
         })
         .collect();
-    vec![step, smooth]
+    vec![lag(step, tau_s, rate), lag(smooth, tau_s, rate)]
 }
+
+/// First-order lag of time constant `tau_s` (none at 0).
+fn lag(mut signal: Vec<f64>, tau_s: f64, rate_hz: f64) -> Vec<f64> {
+    if tau_s > 0.0 {
+        let alpha = 1.0 - (-1.0 / (tau_s * rate_hz)).exp();
+        let mut y = 0.0;
+        for s in &mut signal {
+            y += (*s - y) * alpha;
+            *s = y;
+        }
+    }
+    signal
+}
+
+/// Least velocity jump taken as one: the encoder's quantisation over the
+/// windows gives a few tenths of a mm/s.
+const LEAST_JUMP_MPS: f64 = 0.001;
 
 /// An offset growing in time since the recording began.
 fn drift(p: &Prepared, _: f64) -> Vec<Vec<f64>> {

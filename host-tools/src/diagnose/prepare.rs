@@ -231,12 +231,20 @@ fn acceleration(trial: &Trial) -> Vec<f64> {
         .collect()
 }
 
-/// Structure events of the device's own detector, with the wall force
-/// taken as the fall of the residual across the event.
+/// Structure events of the device's own detector: (last sample the wall
+/// held, its position, the wall force). The detector reports the peak of
+/// the noisy top of the wall's rise, which can be samples before the wall
+/// gave way (its rise is about a noise step per sample); the wall gave way
+/// at the largest one-sample fall of the residual from there to where the
+/// detector confirmed it. The wall force is that fall, measured between
+/// the means of five samples either side, the earlier mean moved up the
+/// wall's slope to the last sample.
 fn structures(trial: &Trial, params: &TissueParams, residual: &[f64]) -> Vec<(usize, f64, f64)> {
+    const SIDE: usize = 5;
     let Ok(config) = DeviceConfig::for_tissue(params) else {
         return Vec::new();
     };
+    let n = residual.len();
     let found = crate::detect::detect_trial(trial, &config);
     found
         .events
@@ -245,14 +253,18 @@ fn structures(trial: &Trial, params: &TissueParams, residual: &[f64]) -> Vec<(us
         .filter_map(|e| {
             let at = trial.t_s.iter().position(|&t| t >= e.t_s)?;
             let peak = trial.x_m[..at].iter().rposition(|&x| x <= e.x_m)?;
-            let before = residual[peak.saturating_sub(2)..=peak]
-                .iter()
-                .copied()
-                .fold(f64::MIN, f64::max);
-            let after_end = (at + 6).min(residual.len());
-            let after =
-                residual[at..after_end].iter().sum::<f64>() / (after_end - at).max(1) as f64;
-            Some((peak, e.x_m, (before - after).max(0.0)))
+            let last = (peak.saturating_sub(3).max(SIDE)..at.min(n - 1 - SIDE))
+                .max_by(|&a, &b| {
+                    (residual[a] - residual[a + 1]).total_cmp(&(residual[b] - residual[b + 1]))
+                })?;
+            let mean = |from: usize, to: usize| {
+                residual[from..to].iter().sum::<f64>() / (to - from) as f64
+            };
+            let before = mean(last + 1 - SIDE, last + 1);
+            let slope = (before - mean(last + 1 - 2 * SIDE.min(last / 2), last + 1 - SIDE)) / SIDE as f64;
+            let held = before + slope.max(0.0) * (SIDE - 1) as f64 / 2.0;
+            let wall_n = held - mean(last + 1, last + 1 + SIDE);
+            Some((last, trial.x_m[last], wall_n.max(0.0)))
         })
         .collect()
 }

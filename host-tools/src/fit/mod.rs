@@ -1,6 +1,7 @@
 //! `needle fit`: the model's parameters from recorded trials alone (paper
 //! §3), as JSON and as a tissue-library entry the firmware can load.
 
+pub mod jumps;
 mod lsq;
 pub mod predict;
 pub mod trial;

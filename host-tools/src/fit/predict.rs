@@ -4,7 +4,8 @@
 
 use needle_holder::model::params::TissueParams;
 
-use super::trial::{velocity_between, TrialFit};
+use super::jumps;
+use super::trial::TrialFit;
 use crate::trial::Trial;
 
 /// The model's force at every sample, by term.
@@ -125,109 +126,54 @@ fn last_loaded_sample(geometry: &TrialFit, trial: &Trial) -> usize {
     i
 }
 
-/// The needle's velocity at each sample, as the force law needs it: which
-/// way it moves (or 0 at rest) from the motion just before and just after
-/// the sample, how fast from up to 10 ms of motion either side.
+/// The needle's velocity at each sample, as the force law needs it.
 ///
-/// A stop, start or turn falls between two samples. The sample that
-/// arrives at a stop and the one that sets off are at rest; the sample
-/// before a stop and the one after a start move at full speed. A central
-/// window calls them half-moving, which puts the whole cutting force
-/// (≈ 1 N) into the residual at every stop and start.
+/// A stop, start or turn at speed falls between two samples, and the
+/// force law steps there (the whole cutting force, the friction from one
+/// side to the other): a window across it calls the samples next to it
+/// half-moving, over a newton of residual each. So the jumps are found
+/// first ([`jumps::velocity_steps`], placed to the sample by where the
+/// motions either side meet), and each sample's velocity is a central
+/// difference over up to 10 ms that stays between them, one-sided on the
+/// sample next to a jump.
 pub fn needle_velocity(trial: &Trial) -> Vec<f64> {
-    let back = velocity_between(trial, 0.002, 0.0);
-    let ahead = velocity_between(trial, 0.0, 0.002);
+    let n = trial.len();
+    if n < 2 {
+        return vec![0.0; n];
+    }
+    let (t, x) = (&trial.t_s, &trial.x_m);
     let dt = 1.0 / trial.rate_hz();
     let k = ((0.01 / dt).round() as usize).max(1);
-    (0..trial.len())
-        .map(|i| match direction(trial, &back, &ahead, i) {
-            0.0 => 0.0,
-            d => d * speed(&trial.x_m, &back, &ahead, i, d, k) / dt,
-        })
-        .collect()
-}
-
-/// Which way the needle moves at sample `i`: ±1, or 0 at rest.
-fn direction(trial: &Trial, back: &[f64], ahead: &[f64], i: usize) -> f64 {
-    let (b, a) = (back[i], ahead[i]);
-    if b * a > 0.0 {
-        return b.signum();
-    }
-    if b == 0.0 || a == 0.0 {
-        return 0.0;
-    }
-    // A turn between two samples: the side whose step continues its
-    // neighbour is whole motion, the other mixes both directions.
-    let x = &trial.x_m;
-    let step = |j: usize| {
-        if j == 0 || j >= x.len() {
-            0.0
-        } else {
-            x[j] - x[j - 1]
-        }
-    };
-    let mixed_back = (step(i) - step(i.saturating_sub(1))).abs();
-    let mixed_ahead = (step(i + 1) - step(i + 2)).abs();
-    if mixed_ahead < mixed_back {
-        a.signum()
-    } else {
-        b.signum()
-    }
-}
-
-/// How the motion `direction` ends within `k` samples on one side.
-enum Edge {
-    /// It goes on for all k samples.
-    None,
-    Rest,
-    Turn,
-}
-
-/// Speed at sample `i` moving in `direction`, in metres per sample: centred on the sample over
-/// as much motion as is the same both sides (unbiased on a smooth
-/// stroke, also near its turning points), but one-sided where the other
-/// side comes to rest (the full speed up to the last sample of a stop).
-fn speed(x: &[f64], back: &[f64], ahead: &[f64], i: usize, direction: f64, k: usize) -> f64 {
-    let n = x.len();
-    // Samples the motion goes on for, and how it ends, scanning one way.
-    let run = |forward: bool| {
-        for m in 1..=k {
-            let j = if forward { i + m } else { i.wrapping_sub(m) };
-            if j >= n {
-                return (m - 1, Edge::Rest);
-            }
-            // Motion between sample j and sample i's side of it.
-            let v = if forward { back[j] } else { ahead[j] };
-            if v == 0.0 {
-                return (m - 1, Edge::Rest);
-            }
-            if v.signum() != direction {
-                return (m - 1, Edge::Turn);
-            }
-        }
-        (k, Edge::None)
-    };
-    let (m_back, edge_back) = run(false);
-    let (m_ahead, edge_ahead) = run(true);
-    let (from, to) = match (edge_back, edge_ahead) {
-        (Edge::Rest, _) if m_ahead > 0 => (i, i + m_ahead),
-        (_, Edge::Rest) if m_back > 0 => (i - m_back, i),
-        _ => {
-            let m = m_back.min(m_ahead);
-            if m > 0 {
+    // Ten encoder steps over a 10 ms window: well above what quantisation
+    // makes of a smooth motion.
+    let least_mps = 10.0 * encoder_step_m(trial) / (k as f64 * dt);
+    let mut bounds: Vec<usize> = jumps::velocity_steps(t, x, k, least_mps)
+        .iter()
+        .map(|j| j.index)
+        .collect();
+    bounds.push(n);
+    let mut v = vec![0.0; n];
+    let mut start = 0;
+    for end in bounds {
+        // Samples start..end move without a jump.
+        for (i, vi) in v.iter_mut().enumerate().take(end).skip(start) {
+            let m = (i - start).min(end - 1 - i).min(k);
+            let (a, b) = if m > 0 {
                 (i - m, i + m)
-            } else if m_back > 0 {
-                (i - 1, i)
+            } else if end - 1 > i {
+                (i, (i + k).min(end - 1))
+            } else if i > start {
+                (i.saturating_sub(k).max(start), i)
             } else {
-                (i, (i + 1).min(n - 1))
+                (i, i)
+            };
+            if b > a {
+                *vi = (x[b] - x[a]) / (t[b] - t[a]);
             }
         }
-    };
-    if to > from {
-        (x[to] - x[from]).abs() / (to - from) as f64
-    } else {
-        0.0
+        start = end;
     }
+    v
 }
 
 /// The encoder's resolution as the data show it: the least non-zero step.
