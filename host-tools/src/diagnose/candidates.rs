@@ -11,7 +11,7 @@ use std::f64::consts::TAU;
 
 use super::prepare::{relaxed_surface, Prepared, LOADING};
 use crate::fit::jumps::velocity_steps;
-use crate::fit::predict::predict_parts_at;
+use crate::fit::predict::{predict_parts_at, NeedleVelocity};
 
 /// One candidate effect.
 pub struct Candidate {
@@ -347,6 +347,10 @@ fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> (f64, f64)) -> Vec<Vec<f64
     geometry.contact_x_m = relative.x_m[crossing] - d_threshold;
     geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
     geometry.relaxed_x_m = relaxed_surface(&geometry, p.params.relaxation);
+    let v_rel = NeedleVelocity {
+        v_mps: v_rel,
+        uncertain: Vec::new(),
+    };
     let parts = predict_parts_at(&p.params, &geometry, &relative, v_rel);
     let moved: Vec<f64> = (0..n)
         .map(|i| parts.stiffness_n[i] + parts.friction_n[i] + parts.cutting_n[i])

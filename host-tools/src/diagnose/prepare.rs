@@ -133,7 +133,7 @@ pub fn prepare(
 /// trial to hide itself; one ρ for the tissue, as the paper has it, is
 /// both well determined and hard for an effect to hide in.
 pub fn fit_relaxation(trials: &[(&Trial, &TrialFit)], params: &TissueParams) -> f64 {
-    let v: Vec<Vec<f64>> = trials.iter().map(|(t, _)| needle_velocity(t)).collect();
+    let v: Vec<_> = trials.iter().map(|(t, _)| needle_velocity(t)).collect();
     let sse = |rho: f64| {
         trials
             .iter()

@@ -50,7 +50,7 @@ pub fn predict_parts_at(
     params: &TissueParams,
     geometry: &TrialFit,
     trial: &Trial,
-    v: Vec<f64>,
+    v: NeedleVelocity,
 ) -> Parts {
     let puncture = last_loaded_sample(geometry, trial);
     let mut deepest = geometry.puncture_x_m;
@@ -90,27 +90,60 @@ pub fn predict_parts_at(
         if l <= 0.0 {
             continue;
         }
-        let (friction, last) = params.friction_n(v[i], l, last_sliding);
-        p.friction_basis[i] = if v[i] >= params.half_band_mps {
-            [l, v[i] * l, 0.0, 0.0]
-        } else if v[i] <= -params.half_band_mps {
-            [0.0, 0.0, l, v[i] * l]
-        } else if friction == last_sliding {
+        let here = Sliding::at(params, v.v_mps[i], l, last_sliding, last_basis);
+        let cut = |vi: f64, on: bool| {
+            let on = vi >= params.half_band_mps && x >= deepest && (on || x > deepest + front_m);
+            (on, params.cutting_n(vi, on))
+        };
+        let (on, cutting_n) = cut(v.v_mps[i], cutting);
+        (p.friction_n[i], p.friction_basis[i], p.cutting_n[i]) =
+            (here.friction_n, here.basis, cutting_n);
+        // Next to a jump placed to within a fraction of a sample, the
+        // sample may be on its other side: the force law there is the
+        // expected one over both.
+        if let Some(&(_, v_other, w)) = v.uncertain.iter().find(|u| u.0 == i) {
+            let other = Sliding::at(params, v_other, l, last_sliding, last_basis);
+            let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
+            p.friction_n[i] = mix(here.friction_n, other.friction_n);
+            for (k, b) in p.friction_basis[i].iter_mut().enumerate() {
+                *b = mix(*b, other.basis[k]);
+            }
+            p.cutting_n[i] = mix(cutting_n, cut(v_other, cutting).1);
+        }
+        (last_basis, last_sliding, cutting) = (here.basis, here.last_sliding, on);
+        p.length_m[i] = l;
+        deepest = deepest.max(x);
+    }
+    p.v_mps = v.v_mps;
+    p
+}
+
+/// The friction law at one sample: its force, its derivatives by (c_p,
+/// b_p, c_n, b_n), and the sliding force it holds through a rest.
+struct Sliding {
+    friction_n: f64,
+    basis: [f64; 4],
+    last_sliding: f64,
+}
+
+impl Sliding {
+    fn at(params: &TissueParams, v: f64, l: f64, last_sliding: f64, last_basis: [f64; 4]) -> Self {
+        let (friction_n, last) = params.friction_n(v, l, last_sliding);
+        let basis = if v >= params.half_band_mps {
+            [l, v * l, 0.0, 0.0]
+        } else if v <= -params.half_band_mps {
+            [0.0, 0.0, l, v * l]
+        } else if friction_n == last_sliding {
             last_basis
         } else {
             [0.0; 4]
         };
-        last_basis = p.friction_basis[i];
-        last_sliding = last;
-        p.friction_n[i] = friction;
-        cutting =
-            v[i] >= params.half_band_mps && x >= deepest && (cutting || x > deepest + front_m);
-        p.cutting_n[i] = params.cutting_n(v[i], cutting);
-        p.length_m[i] = l;
-        deepest = deepest.max(x);
+        Self {
+            friction_n,
+            basis,
+            last_sliding: last,
+        }
     }
-    p.v_mps = v;
-    p
 }
 
 /// The last sample still on the loading curve. The fit's puncture index
@@ -136,10 +169,13 @@ fn last_loaded_sample(geometry: &TrialFit, trial: &Trial) -> usize {
 /// motions either side meet), and each sample's velocity is a central
 /// difference over up to 10 ms that stays between them, one-sided on the
 /// sample next to a jump.
-pub fn needle_velocity(trial: &Trial) -> Vec<f64> {
+pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let n = trial.len();
     if n < 2 {
-        return vec![0.0; n];
+        return NeedleVelocity {
+            v_mps: vec![0.0; n],
+            uncertain: Vec::new(),
+        };
     }
     let (t, x) = (&trial.t_s, &trial.x_m);
     let dt = 1.0 / trial.rate_hz();
@@ -147,10 +183,8 @@ pub fn needle_velocity(trial: &Trial) -> Vec<f64> {
     // Ten encoder steps over a 10 ms window: well above what quantisation
     // makes of a smooth motion.
     let least_mps = 10.0 * encoder_step_m(trial) / (k as f64 * dt);
-    let mut bounds: Vec<usize> = jumps::velocity_steps(t, x, k, least_mps)
-        .iter()
-        .map(|j| j.index)
-        .collect();
+    let jumps = jumps::velocity_steps(t, x, k, least_mps);
+    let mut bounds: Vec<usize> = jumps.iter().map(|j| j.index).collect();
     bounds.push(n);
     let mut v = vec![0.0; n];
     let mut start = 0;
@@ -173,7 +207,32 @@ pub fn needle_velocity(trial: &Trial) -> Vec<f64> {
         }
         start = end;
     }
-    v
+    // The samples either side of each jump, with the other side's velocity
+    // and how likely they are on that side.
+    let mut uncertain = Vec::new();
+    for j in &jumps {
+        let [early, _, late] = j.landing(t);
+        let (before, after) = (j.index - 1, j.index);
+        if early > 0.01 {
+            uncertain.push((before, v[after], early));
+        }
+        if late > 0.01 && after + 1 < n {
+            uncertain.push((after, v[before], late));
+        }
+    }
+    NeedleVelocity {
+        v_mps: v,
+        uncertain,
+    }
+}
+
+/// The needle's velocity at each sample, and the samples next to a jump
+/// that may lie on its other side: (sample, velocity on the other side,
+/// probability).
+#[derive(Clone, Debug, Default)]
+pub struct NeedleVelocity {
+    pub v_mps: Vec<f64>,
+    pub uncertain: Vec<(usize, f64, f64)>,
 }
 
 /// The encoder's resolution as the data show it: the least non-zero step.
