@@ -81,7 +81,10 @@ fn each_effect_and_none_is_named_with_a_real_shrink() {
         assert_named(&out, effect, shrink);
         let after = num(&out["verdict"]["heldout_rms_after_n"]);
         let noise = num(&out["noise_floor_n"]);
-        assert!(after <= most * noise, "{effect}: {after} N left, noise {noise} N");
+        assert!(
+            after <= most * noise,
+            "{effect}: {after} N left, noise {noise} N"
+        );
     }
 }
 

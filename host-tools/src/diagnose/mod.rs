@@ -101,7 +101,7 @@ pub const NOMINAL_CORRECTIONS: [&str; 7] = [
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
-pub fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
+fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
     let depth = |i: usize| {
         if p.phase[i] == LOADING {
             (p.trial.x_m[i] - p.geometry.contact_x_m).max(0.0)

@@ -253,15 +253,16 @@ fn structures(trial: &Trial, params: &TissueParams, residual: &[f64]) -> Vec<(us
         .filter_map(|e| {
             let at = trial.t_s.iter().position(|&t| t >= e.t_s)?;
             let peak = trial.x_m[..at].iter().rposition(|&x| x <= e.x_m)?;
-            let last = (peak.saturating_sub(3).max(SIDE)..at.min(n - 1 - SIDE))
-                .max_by(|&a, &b| {
+            let last =
+                (peak.saturating_sub(3).max(SIDE)..at.min(n - 1 - SIDE)).max_by(|&a, &b| {
                     (residual[a] - residual[a + 1]).total_cmp(&(residual[b] - residual[b + 1]))
                 })?;
             let mean = |from: usize, to: usize| {
                 residual[from..to].iter().sum::<f64>() / (to - from) as f64
             };
             let before = mean(last + 1 - SIDE, last + 1);
-            let slope = (before - mean(last + 1 - 2 * SIDE.min(last / 2), last + 1 - SIDE)) / SIDE as f64;
+            let slope =
+                (before - mean(last + 1 - 2 * SIDE.min(last / 2), last + 1 - SIDE)) / SIDE as f64;
             let held = before + slope.max(0.0) * (SIDE - 1) as f64 / 2.0;
             let wall_n = held - mean(last + 1, last + 1 + SIDE);
             Some((last, trial.x_m[last], wall_n.max(0.0)))

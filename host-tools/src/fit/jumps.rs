@@ -142,7 +142,11 @@ fn crossing(t: &[f64], x: &[f64], i: usize, k: usize) -> Option<Jump> {
         .fold(f64::INFINITY, f64::min);
     Some(Jump {
         t_s: t_jump,
-        sd_s: if step_m.is_finite() { step_m / dv.abs() } else { 0.0 },
+        sd_s: if step_m.is_finite() {
+            step_m / dv.abs()
+        } else {
+            0.0
+        },
         index,
         dv_mps: dv,
     })
