@@ -10,7 +10,6 @@
 use std::f64::consts::TAU;
 
 use super::prepare::{relaxed_surface, Prepared, LOADING};
-use crate::fit::jumps::velocity_steps;
 use crate::fit::predict::{predict_parts_at, NeedleVelocity};
 
 /// One candidate effect.
@@ -217,10 +216,9 @@ fn inertia(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let n = x.len();
     let rate = p.trial.rate_hz();
     let k = ((0.01 * rate).round() as usize).max(1);
-    let jumps = velocity_steps(t, x, k, LEAST_JUMP_MPS);
     let mut step = vec![0.0; n];
     let mut kinked = x.clone();
-    for jump in &jumps {
+    for jump in &p.jumps {
         // Spread over the samples it may have landed on, by how likely each
         // is: a pulse on the wrong sample is two pulses of error.
         for (j, w) in (jump.index - 1..).zip(jump.landing(t)) {
@@ -257,10 +255,6 @@ fn lag(mut signal: Vec<f64>, tau_s: f64, rate_hz: f64) -> Vec<f64> {
     }
     signal
 }
-
-/// Least velocity jump taken as one: the encoder's quantisation over the
-/// windows gives a few tenths of a mm/s.
-const LEAST_JUMP_MPS: f64 = 0.001;
 
 /// An offset growing in time since the recording began.
 fn drift(p: &Prepared, _: f64) -> Vec<Vec<f64>> {
@@ -349,12 +343,9 @@ fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> (f64, f64)) -> Vec<Vec<f64
     geometry.relaxed_x_m = relaxed_surface(&geometry, p.params.relaxation);
     let v_rel = NeedleVelocity {
         v_mps: v_rel,
-        uncertain: Vec::new(),
+        ..NeedleVelocity::default()
     };
-    let parts = predict_parts_at(&p.params, &geometry, &relative, v_rel);
-    let moved: Vec<f64> = (0..n)
-        .map(|i| parts.stiffness_n[i] + parts.friction_n[i] + parts.cutting_n[i])
-        .collect();
+    let moved = predict_parts_at(&p.params, &geometry, &relative, v_rel).total_n();
     // The polynomial's own offset stands for an error in that contact.
     let mut cols = vec![vec![0.0; n]; 5];
     for i in 0..n {

@@ -297,13 +297,15 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
             trials.len()
         );
     }
-    let geometry: Vec<_> = trials
-        .iter()
-        .map(|(f, _, fit)| (f.clone(), fit.clone()))
-        .collect();
     let mut params = match params {
         Some(p) => *p,
-        None => nominal_params(&geometry, skipped)?,
+        None => {
+            let fits: Vec<_> = trials
+                .iter()
+                .map(|(f, _, fit)| (f.clone(), fit.clone()))
+                .collect();
+            nominal_params(&fits, skipped)?
+        }
     };
     let pairs: Vec<_> = trials.iter().map(|(_, t, g)| (t, g)).collect();
     params.relaxation = prepare::fit_relaxation(&pairs, &params);
@@ -335,7 +337,7 @@ fn backfit(
     refit_params: bool,
 ) -> Result<Vec<Prepared>> {
     let skip = NOMINAL_CORRECTIONS.len();
-    let cleaned: Vec<(PathBuf, crate::trial::Trial, crate::fit::TrialFit)> = data
+    let cleaned: Vec<(crate::trial::Trial, crate::fit::TrialFit)> = data
         .iter()
         .enumerate()
         .map(|(j, p)| {
@@ -347,24 +349,25 @@ fn backfit(
                 }
             }
             let geometry = fit_trial(&trial).unwrap_or_else(|_| p.geometry.clone());
-            (PathBuf::from(&p.file), trial, geometry)
+            (trial, geometry)
         })
         .collect();
     let mut params = if refit_params {
-        let fits: Vec<_> = cleaned
+        let fits: Vec<_> = data
             .iter()
-            .map(|(f, _, g)| (f.clone(), g.clone()))
+            .zip(&cleaned)
+            .map(|(p, (_, g))| (PathBuf::from(&p.file), g.clone()))
             .collect();
         nominal_params(&fits, Vec::new())?
     } else {
         data[0].params
     };
-    let pairs: Vec<_> = cleaned.iter().map(|(_, t, g)| (t, g)).collect();
+    let pairs: Vec<_> = cleaned.iter().map(|(t, g)| (t, g)).collect();
     params.relaxation = prepare::fit_relaxation(&pairs, &params);
     Ok(cleaned
         .into_iter()
         .zip(data)
-        .map(|((_, _, geometry), p)| prepare(p.file.clone(), p.trial.clone(), geometry, &params))
+        .map(|((_, geometry), p)| prepare(p.file.clone(), p.trial.clone(), geometry, &params))
         .collect())
 }
 
@@ -386,8 +389,8 @@ fn scored_with_backfit(
     if nominal == Nominal::Device || !set.iter().all(|(c, _)| c.backfit) {
         return (scored, current);
     }
+    let refit_params = nominal == Nominal::Fitted;
     for _ in 0..BACKFIT_ROUNDS {
-        let refit_params = nominal == Nominal::Fitted;
         let Ok(again) = backfit(&current, set, &scored.fold_theta, refit_params) else {
             break;
         };
@@ -670,17 +673,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         (false, None) => Nominal::Fitted,
     };
     let out = diagnose(&data, nominal);
-    let v = &out["verdict"];
-    eprintln!(
-        "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {} (+ {}), shrink {:.0} %",
-        data.len(),
-        out["noise_floor_n"].as_f64().unwrap_or(0.0),
-        out["baseline"]["heldout_rms_n"].as_f64().unwrap_or(0.0),
-        v["heldout_rms_after_n"].as_f64().unwrap_or(0.0),
-        v["effect"].as_str().unwrap_or("none"),
-        v["second"].as_str().unwrap_or("none"),
-        100.0 * v["shrink"].as_f64().unwrap_or(0.0),
-    );
+    eprintln!("{}", report::headline(&out));
     if let Some(path) = &args.residuals {
         write_residuals(path, &data)?;
     }

@@ -5,7 +5,8 @@
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::TissueParams;
 
-use crate::fit::predict::{needle_velocity, predict_parts, predict_parts_at, Parts};
+use crate::fit::jumps::Jump;
+use crate::fit::predict::{needle_velocity, predict_parts_at, Parts};
 use crate::fit::TrialFit;
 use crate::trial::Trial;
 
@@ -48,6 +49,8 @@ pub struct Prepared {
     /// Index into [`PHASES`].
     pub phase: Vec<usize>,
     pub v_mps: Vec<f64>,
+    /// The jumps of the needle's velocity that `v_mps` does not cross.
+    pub jumps: Vec<Jump>,
     pub a_mps2: Vec<f64>,
     /// The friction term's derivatives by (c_p, b_p, c_n, b_n).
     pub friction_basis: Vec<[f64; 4]>,
@@ -96,11 +99,11 @@ pub fn prepare(
     params: &TissueParams,
 ) -> Prepared {
     geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
-    let parts = predict_parts(params, &geometry, &trial);
+    let velocity = needle_velocity(&trial);
+    let jumps = velocity.jumps.clone();
+    let parts = predict_parts_at(params, &geometry, &trial, velocity);
     let n = trial.len();
-    let nominal_n: Vec<f64> = (0..n)
-        .map(|i| parts.stiffness_n[i] + parts.friction_n[i] + parts.cutting_n[i])
-        .collect();
+    let nominal_n = parts.total_n();
     let residual_n: Vec<f64> = (0..n).map(|i| trial.f_n[i] - nominal_n[i]).collect();
     let phase = phases(&trial, &geometry, &parts);
     let a_mps2 = acceleration(&trial);
@@ -114,6 +117,7 @@ pub fn prepare(
         residual_n,
         phase,
         v_mps: parts.v_mps,
+        jumps,
         friction_basis: parts.friction_basis,
         a_mps2,
         friction_n: parts.friction_n,
@@ -253,16 +257,16 @@ fn structures(trial: &Trial, params: &TissueParams, residual: &[f64]) -> Vec<(us
         .filter_map(|e| {
             let at = trial.t_s.iter().position(|&t| t >= e.t_s)?;
             let peak = trial.x_m[..at].iter().rposition(|&x| x <= e.x_m)?;
-            let last =
-                (peak.saturating_sub(3).max(SIDE)..at.min(n - 1 - SIDE)).max_by(|&a, &b| {
-                    (residual[a] - residual[a + 1]).total_cmp(&(residual[b] - residual[b + 1]))
-                })?;
+            // Two windows of SIDE samples before it, one after.
+            let last = (peak.saturating_sub(3).max(2 * SIDE)..at.min(n.saturating_sub(SIDE + 1)))
+                .max_by(|&a, &b| {
+                (residual[a] - residual[a + 1]).total_cmp(&(residual[b] - residual[b + 1]))
+            })?;
             let mean = |from: usize, to: usize| {
                 residual[from..to].iter().sum::<f64>() / (to - from) as f64
             };
             let before = mean(last + 1 - SIDE, last + 1);
-            let slope =
-                (before - mean(last + 1 - 2 * SIDE.min(last / 2), last + 1 - SIDE)) / SIDE as f64;
+            let slope = (before - mean(last + 1 - 2 * SIDE, last + 1 - SIDE)) / SIDE as f64;
             let held = before + slope.max(0.0) * (SIDE - 1) as f64 / 2.0;
             let wall_n = held - mean(last + 1, last + 1 + SIDE);
             Some((last, trial.x_m[last], wall_n.max(0.0)))

@@ -6,6 +6,23 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde_json::Value;
 
+/// The diagnosis in one line: what `needle diagnose` prints on stderr and
+/// the report's headline.
+pub fn headline(out: &Value) -> String {
+    let num = |v: &Value| v.as_f64().unwrap_or(0.0);
+    let v = &out["verdict"];
+    format!(
+        "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {} (+ {}), shrink {:.0} %",
+        out["trials"],
+        num(&out["noise_floor_n"]),
+        num(&out["baseline"]["heldout_rms_n"]),
+        num(&v["heldout_rms_after_n"]),
+        v["effect"].as_str().unwrap_or("none"),
+        v["second"].as_str().unwrap_or("none"),
+        100.0 * num(&v["shrink"]),
+    )
+}
+
 /// Write the page to `path`, showing the figure already drawn at `svg`.
 pub fn write(path: &Path, svg: &Path, out: &Value) -> Result<()> {
     let mut rows = String::new();
@@ -23,20 +40,12 @@ pub fn write(path: &Path, svg: &Path, out: &Value) -> Result<()> {
             },
         );
     }
-    let v = &out["verdict"];
     let html = format!(
         "<!doctype html><meta charset=utf-8><title>needle diagnose</title>\
-         <h1>Sim-to-real gap</h1><p>{} trials, noise floor {:.4} N, held-out RMS {:.4} N → {:.4} N.\
-         <p><b>Verdict:</b> {} (second: {}), shrink {:.1} %.\
+         <h1>Sim-to-real gap</h1><p><b>Verdict:</b> {}.\
          <h2>Candidates, held out</h2><table border=1><tr><th>effect<th>held-out RMS (N)<th>shrink<th>paired t<th>significant</tr>\n{rows}</table>\
          <h2>A withheld trial: the model with and without the named effect, and the residual by phase</h2><img src=\"{}\">",
-        out["trials"],
-        out["noise_floor_n"].as_f64().unwrap_or(0.0),
-        out["baseline"]["heldout_rms_n"].as_f64().unwrap_or(0.0),
-        v["heldout_rms_after_n"].as_f64().unwrap_or(0.0),
-        v["effect"].as_str().unwrap_or("none"),
-        v["second"].as_str().unwrap_or("none"),
-        100.0 * v["shrink"].as_f64().unwrap_or(0.0),
+        headline(out),
         svg.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
     );
     std::fs::write(path, html).with_context(|| format!("{}: cannot write", path.display()))

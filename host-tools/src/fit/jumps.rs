@@ -72,14 +72,14 @@ fn normal_cdf(z: f64) -> f64 {
 }
 
 /// The velocity jumps of the trace, over windows of `k` samples, of at
-/// least `least_mps`.
+/// least `least_mps`, read by an encoder of resolution `step_m`.
 ///
 /// A smooth acceleration a gives contrasts a·(k + 1)·dt over k and
 /// a·(2k + 1)·dt over 2k, a jump Δv gives Δv over both; so
 /// ((2k + 1)·c_k − (k + 1)·c_2k)/k is the jump alone. A jump between
 /// samples i − 1 and i lands on i (the first sample after it), found where
 /// the lines fitted to the motion either side cross.
-pub fn velocity_steps(t: &[f64], x: &[f64], k: usize, least_mps: f64) -> Vec<Jump> {
+pub fn velocity_steps(t: &[f64], x: &[f64], k: usize, least_mps: f64, step_m: f64) -> Vec<Jump> {
     let n = x.len();
     let mut steps = Vec::new();
     if k == 0 || n < 4 * k + 4 {
@@ -113,7 +113,7 @@ pub fn velocity_steps(t: &[f64], x: &[f64], k: usize, least_mps: f64) -> Vec<Jum
             }
             j += 1;
         }
-        steps.extend(crossing(t, x, best, k));
+        steps.extend(crossing(t, x, best, k, step_m));
         i = j.max(best + k);
     }
     steps
@@ -123,7 +123,7 @@ pub fn velocity_steps(t: &[f64], x: &[f64], k: usize, least_mps: f64) -> Vec<Jum
 /// sample that time falls on or before) and the jump of their slopes. The
 /// samples next to the gap are left out of both lines: one of them mixes
 /// both motions.
-fn crossing(t: &[f64], x: &[f64], i: usize, k: usize) -> Option<Jump> {
+fn crossing(t: &[f64], x: &[f64], i: usize, k: usize, step_m: f64) -> Option<Jump> {
     let (v_back, x0_back) = line(t, x, i - 1 - k, i - 1);
     let (v_ahead, x0_ahead) = line(t, x, i + 1, i + 1 + k);
     let dv = v_ahead - v_back;
@@ -136,17 +136,9 @@ fn crossing(t: &[f64], x: &[f64], i: usize, k: usize) -> Option<Jump> {
     let index = (i - 1..=i + 1).find(|&j| t[j] >= t_jump - 1e-9 * dt)?;
     // The lines meet to within about an encoder step of position: a jump
     // of Δv is placed to within step/Δv of time.
-    let step_m = (1..x.len())
-        .map(|j| (x[j] - x[j - 1]).abs())
-        .filter(|&d| d > 0.0)
-        .fold(f64::INFINITY, f64::min);
     Some(Jump {
         t_s: t_jump,
-        sd_s: if step_m.is_finite() {
-            step_m / dv.abs()
-        } else {
-            0.0
-        },
+        sd_s: step_m / dv.abs(),
         index,
         dv_mps: dv,
     })
@@ -177,7 +169,7 @@ mod tests {
     fn a_start_lands_on_the_first_sample_after_it() {
         // At rest, then 3 mm/s from t = 0.1003 s (between samples 50 and 51).
         let (t, x) = sampled(200, |t| if t >= 0.1003 { 0.003 } else { 0.0 });
-        let s = velocity_steps(&t, &x, 5, 0.001);
+        let s = velocity_steps(&t, &x, 5, 0.001, 1e-6);
         assert_eq!(s.len(), 1);
         assert_eq!(s[0].index, 51);
         assert!((s[0].t_s - 0.1003).abs() < 2e-4, "{:?}", s[0]);
@@ -189,13 +181,13 @@ mod tests {
         // An oscillation of 2.65 mm at 1.13 Hz: turns slowly, never jumps.
         let w = std::f64::consts::TAU * 1.13;
         let (t, x) = sampled(2000, |t| 0.00265 * w * (w * t).cos());
-        assert_eq!(velocity_steps(&t, &x, 5, 0.001), vec![]);
+        assert_eq!(velocity_steps(&t, &x, 5, 0.001, 1e-6), vec![]);
     }
 
     #[test]
     fn a_stop_at_speed_is_one_jump() {
         let (t, x) = sampled(300, |t| if t < 0.3011 { 0.0188 } else { 0.0 });
-        let s = velocity_steps(&t, &x, 5, 0.001);
+        let s = velocity_steps(&t, &x, 5, 0.001, 1e-6);
         assert_eq!(s.len(), 1);
         assert_eq!(s[0].index, 151);
         assert!((s[0].dv_mps + 0.0188).abs() < 5e-4, "{:?}", s[0]);

@@ -32,10 +32,16 @@ pub struct Parts {
 /// Expected force at every sample of `trial` under `params`, with the
 /// surface positions found by the fit.
 pub fn predict(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Vec<f64> {
-    let p = predict_parts(params, geometry, trial);
-    (0..trial.len())
-        .map(|i| p.stiffness_n[i] + p.friction_n[i] + p.cutting_n[i])
-        .collect()
+    predict_parts(params, geometry, trial).total_n()
+}
+
+impl Parts {
+    /// The model's whole force at every sample.
+    pub fn total_n(&self) -> Vec<f64> {
+        (0..self.stiffness_n.len())
+            .map(|i| self.stiffness_n[i] + self.friction_n[i] + self.cutting_n[i])
+            .collect()
+    }
 }
 
 /// [`predict`], term by term.
@@ -174,7 +180,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     if n < 2 {
         return NeedleVelocity {
             v_mps: vec![0.0; n],
-            uncertain: Vec::new(),
+            ..NeedleVelocity::default()
         };
     }
     let (t, x) = (&trial.t_s, &trial.x_m);
@@ -182,8 +188,9 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let k = ((0.01 / dt).round() as usize).max(1);
     // Ten encoder steps over a 10 ms window: well above what quantisation
     // makes of a smooth motion.
-    let least_mps = 10.0 * encoder_step_m(trial) / (k as f64 * dt);
-    let jumps = jumps::velocity_steps(t, x, k, least_mps);
+    let step_m = encoder_step_m(trial);
+    let least_mps = 10.0 * step_m / (k as f64 * dt);
+    let jumps = jumps::velocity_steps(t, x, k, least_mps, step_m);
     let mut bounds: Vec<usize> = jumps.iter().map(|j| j.index).collect();
     bounds.push(n);
     let mut v = vec![0.0; n];
@@ -223,16 +230,18 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     NeedleVelocity {
         v_mps: v,
         uncertain,
+        jumps,
     }
 }
 
-/// The needle's velocity at each sample, and the samples next to a jump
-/// that may lie on its other side: (sample, velocity on the other side,
-/// probability).
+/// The needle's velocity at each sample, the samples next to a jump that
+/// may lie on its other side: (sample, velocity on the other side,
+/// probability), and the jumps themselves.
 #[derive(Clone, Debug, Default)]
 pub struct NeedleVelocity {
     pub v_mps: Vec<f64>,
     pub uncertain: Vec<(usize, f64, f64)>,
+    pub jumps: Vec<jumps::Jump>,
 }
 
 /// The encoder's resolution as the data show it: the least non-zero step.
