@@ -239,12 +239,21 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         rms_n: rms,
         r2,
     };
-    // The contact point of whichever law fits better.
-    let contact_x_m = if rational.rms_n < polynomial.rms_n {
+    // The contact point of whichever law fits better, but not further
+    // before the last sample that read no force than the loading curve
+    // begins after it: a curve bent by something the laws lack (tissue
+    // moving under the needle) can put either root tens of millimetres
+    // before the data.
+    let fitted_contact_x_m = if rational.rms_n < polynomial.rms_n {
         rational_contact
     } else {
         contact_x_m
     };
+    let unloaded_x_m = (0..j0)
+        .rev()
+        .find(|&j| f[j] <= 0.0)
+        .map_or(x[0], |j| x[j].min(x[j0]));
+    let contact_x_m = fitted_contact_x_m.max(2.0 * unloaded_x_m - x[j0]);
 
     let rate = trial.rate_hz();
     let after = |s: f64| (ip + (s * rate) as usize).min(trial.len() - 1);
