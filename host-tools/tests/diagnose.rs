@@ -72,9 +72,12 @@ fn each_effect_and_none_is_named_with_a_real_shrink() {
         // and its 1.6 N pulse lands on a sample the encoder cannot tell.
         ("holder_inertia", 0.45, 1.6),
         ("sensor_drift", 0.7, 1.5),
-        // The moving tissue's nominal is refitted only in part (README,
-        // "Targets not met"): 98 % of the gap goes, not all of it.
-        ("tissue_motion", 0.9, f64::INFINITY),
+        // The nominal refitted in the tissue's frame leaves 4.9 noise
+        // floors (README, "Targets not met"): where the tissue moves along
+        // with the needle for many samples, whether it cuts turns on a
+        // relative velocity the encoder and the fitted motion cannot
+        // resolve, and a wrong guess is the whole cutting force.
+        ("tissue_motion", 0.85, 6.0),
     ];
     for (effect, shrink, most) in cases {
         let out = diagnosis(effect, Form::Standard, 7);

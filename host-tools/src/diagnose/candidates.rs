@@ -9,8 +9,8 @@
 
 use std::f64::consts::TAU;
 
-use super::prepare::{relaxed_surface, Prepared, LOADING};
-use crate::fit::predict::{predict_parts_at, NeedleVelocity};
+use super::motion::moved_model;
+use super::prepare::{Prepared, LOADING};
 
 /// One candidate effect.
 pub struct Candidate {
@@ -24,9 +24,19 @@ pub struct Candidate {
     pub columns: fn(&Prepared, f64) -> Vec<Vec<f64>>,
     /// The named parameters a grid value stands for.
     pub grid_params: fn(&'static str, f64) -> Vec<(&'static str, f64)>,
-    /// Its fitted contribution is a force that can be taken out of the
-    /// measured one before the nominal is fitted again.
-    pub backfit: bool,
+    /// How its fit is taken out of the data before the nominal is fitted
+    /// again.
+    pub backfit: Backfit,
+}
+
+/// What backfitting under a named effect takes out of the data.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backfit {
+    /// Its fitted force, from the measured force.
+    Force,
+    /// The tissue's displacement, from the needle's position: the nominal
+    /// is then fitted in the tissue's frame ([`super::motion`]).
+    TissueFrame,
 }
 
 fn grid_as_named(name: &'static str, g: f64) -> Vec<(&'static str, f64)> {
@@ -46,7 +56,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["k_n_per_m"],
         columns: maxwell,
         grid_params: grid_as_named,
-        backfit: true,
+        backfit: Backfit::Force,
     },
     Candidate {
         effect: "rate_dependent_friction",
@@ -55,7 +65,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["b_extra_ns_per_m2", "b_correction_ns_per_m2"],
         columns: rate_friction,
         grid_params: grid_as_named,
-        backfit: true,
+        backfit: Backfit::Force,
     },
     Candidate {
         effect: "presliding_hysteresis",
@@ -64,7 +74,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["lag_gain"],
         columns: friction_lag,
         grid_params: grid_as_named,
-        backfit: true,
+        backfit: Backfit::Force,
     },
     Candidate {
         effect: "internal_structures",
@@ -73,7 +83,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["wall_gain"],
         columns: walls,
         grid_params: grid_as_named,
-        backfit: true,
+        backfit: Backfit::Force,
     },
     Candidate {
         effect: "depth_dependent_cutting",
@@ -82,7 +92,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["cutting_per_m_n_per_m", "cutting_correction_n"],
         columns: depth_cutting,
         grid_params: grid_as_named,
-        backfit: true,
+        backfit: Backfit::Force,
     },
     Candidate {
         effect: "holder_inertia",
@@ -91,7 +101,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["mass_kg", "mass_smooth_kg"],
         columns: inertia,
         grid_params: grid_as_named,
-        backfit: true,
+        backfit: Backfit::Force,
     },
     Candidate {
         effect: "sensor_drift",
@@ -100,7 +110,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         linear: &["rate_n_per_s"],
         columns: drift,
         grid_params: grid_as_named,
-        backfit: true,
+        backfit: Backfit::Force,
     },
     Candidate {
         effect: "tissue_motion",
@@ -117,7 +127,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         ],
         columns: tissue_motion,
         grid_params: motion_params,
-        backfit: false,
+        backfit: Backfit::TissueFrame,
     },
 ];
 
@@ -128,7 +138,7 @@ fn maxwell(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let col = (0..p.trial.len())
         .map(|i| {
             m = if p.in_tissue(i) {
-                m + (p.v_mps[i] - m / tau_s) * dt
+                m + (p.velocity.v_mps[i] - m / tau_s) * dt
             } else {
                 0.0
             };
@@ -143,7 +153,7 @@ fn rate_friction(p: &Prepared, q: f64) -> Vec<Vec<f64>> {
     let n = p.trial.len();
     let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
     for i in 0..n {
-        let (v, l) = (p.v_mps[i], p.length_m[i]);
+        let (v, l) = (p.velocity.v_mps[i], p.length_m[i]);
         if l > 0.0 && v.abs() > 0.0005 {
             a[i] = l * v * (v.abs() / 0.003).powf(q);
             b[i] = l * v;
@@ -218,7 +228,7 @@ fn inertia(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let k = ((0.01 * rate).round() as usize).max(1);
     let mut step = vec![0.0; n];
     let mut kinked = x.clone();
-    for jump in &p.jumps {
+    for jump in &p.velocity.jumps {
         // Spread over the samples it may have landed on, by how likely each
         // is: a pulse on the wrong sample is two pulses of error.
         for (j, w) in (jump.index - 1..).zip(jump.landing(t)) {
@@ -314,43 +324,16 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
 }
 
 /// Columns of [`tissue_motion`] for one tissue displacement and velocity
-/// `shift(t)`. The needle's velocity relative to the tissue is its own
-/// less the tissue's, not a difference of the shifted positions: that
-/// would re-derive the encoder's steps 180 times per trial.
+/// `shift(t)`.
 fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> (f64, f64)) -> Vec<Vec<f64>> {
-    let trial = &p.trial;
-    let n = trial.len();
-    let mut relative = trial.clone();
-    let mut v_rel = p.v_mps.clone();
-    for ((x, v), &t) in relative.x_m.iter_mut().zip(&mut v_rel).zip(&trial.t_s) {
-        let (dx, dv) = shift(t);
-        *x -= dx;
-        *v -= dv;
-    }
-    // Contact: where the force first rose above the tissue's contact
-    // threshold for good, less the depth that threshold takes, in the
-    // tissue's frame. The fit's own contact assumes a monotonic loading
-    // curve, which the motion bends.
-    let threshold = p.params.contact_force_n.max(5.0 * p.noise_n);
-    let crossing = (0..=p.geometry.puncture_index.min(n - 1))
-        .rev()
-        .find(|&i| trial.f_n[i] < threshold)
-        .unwrap_or(0);
-    let d_threshold = threshold / p.params.a1_n_per_m.max(1.0);
-    let mut geometry = p.geometry.clone();
-    geometry.contact_x_m = relative.x_m[crossing] - d_threshold;
-    geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
-    geometry.relaxed_x_m = relaxed_surface(&geometry, p.params.relaxation);
-    let v_rel = NeedleVelocity {
-        v_mps: v_rel,
-        ..NeedleVelocity::default()
-    };
-    let moved = predict_parts_at(&p.params, &geometry, &relative, v_rel).total_n();
+    let n = p.trial.len();
+    let (moved, contact_x_m) = moved_model(p, &p.params, shift);
     // The polynomial's own offset stands for an error in that contact.
     let mut cols = vec![vec![0.0; n]; 5];
     for i in 0..n {
         if p.phase[i] == LOADING {
-            let d = (relative.x_m[i] - geometry.contact_x_m).max(0.0);
+            let x = p.trial.x_m[i] - shift(p.trial.t_s[i]).0;
+            let d = (x - contact_x_m).max(0.0);
             cols[1][i] = d;
             cols[2][i] = d * d;
             cols[3][i] = -p.nominal_n[i];

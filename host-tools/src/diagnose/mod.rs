@@ -16,6 +16,7 @@
 pub mod candidates;
 pub mod crossval;
 mod figure;
+mod motion;
 pub mod prepare;
 mod report;
 
@@ -25,10 +26,11 @@ use anyhow::{bail, Context, Result};
 use needle_holder::model::params::TissueParams;
 use serde_json::{json, Value};
 
-use self::candidates::{Candidate, CANDIDATES};
+use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram};
 use self::prepare::{prepare, Prepared, LOADING, PHASES};
 use crate::fit::fit_trial;
+use crate::fit::predict::needle_velocity;
 
 /// Least held-out shrink that can name an effect.
 pub const MIN_SHRINK: f64 = 0.03;
@@ -307,15 +309,21 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
             nominal_params(&fits, skipped)?
         }
     };
-    let pairs: Vec<_> = trials.iter().map(|(_, t, g)| (t, g)).collect();
-    params.relaxation = prepare::fit_relaxation(&pairs, &params);
+    let velocities: Vec<_> = trials.iter().map(|(_, t, _)| needle_velocity(t)).collect();
+    let triples: Vec<_> = trials
+        .iter()
+        .zip(&velocities)
+        .map(|((_, t, g), v)| (t, g, v))
+        .collect();
+    params.relaxation = prepare::fit_relaxation(&triples, &params);
     let data = trials
         .into_iter()
-        .map(|(file, trial, fit)| {
+        .zip(velocities)
+        .map(|((file, trial, fit), v)| {
             let name = file
                 .file_name()
                 .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-            prepare(name, trial, fit, &params)
+            prepare(name, trial, fit, &params, v)
         })
         .collect();
     Ok((params, data))
@@ -362,12 +370,22 @@ fn backfit(
     } else {
         data[0].params
     };
-    let pairs: Vec<_> = cleaned.iter().map(|(t, g)| (t, g)).collect();
-    params.relaxation = prepare::fit_relaxation(&pairs, &params);
+    // Cleaning changed forces, not positions: each trial's velocity is
+    // what it was.
+    let velocities: Vec<_> = data.iter().map(|p| p.velocity.clone()).collect();
+    let triples: Vec<_> = cleaned
+        .iter()
+        .zip(&velocities)
+        .map(|((t, g), v)| (t, g, v))
+        .collect();
+    params.relaxation = prepare::fit_relaxation(&triples, &params);
     Ok(cleaned
         .into_iter()
         .zip(data)
-        .map(|((_, geometry), p)| prepare(p.file.clone(), p.trial.clone(), geometry, &params))
+        .zip(velocities)
+        .map(|(((_, geometry), p), v)| {
+            prepare(p.file.clone(), p.trial.clone(), geometry, &params, v)
+        })
         .collect())
 }
 
@@ -375,26 +393,42 @@ fn backfit(
 /// held-out RMS by less than [`BACKFIT_TOL`] of it.
 const BACKFIT_ROUNDS: usize = 8;
 const BACKFIT_TOL: f64 = 0.01;
+/// Most rounds of [`backfit_tissue_frame`]: each fits the displacement of
+/// every trial again, and after the third the held-out RMS moves by a few
+/// per cent up and down (the cutting's cliffs), not down.
+const TISSUE_FRAME_ROUNDS: usize = 4;
 
 /// `set` scored after backfitting the nominal under it, with the data the
-/// last round left. Candidates whose effect is not a force (tissue motion
-/// moves the tissue under the needle) are scored on the data as it is.
-fn scored_with_backfit(
+/// last round left and the part of `set` still to be added as columns
+/// (tissue motion is in the data's positions once backfitted).
+fn scored_with_backfit<'c>(
     data: &[Prepared],
-    set: &[(&Candidate, f64)],
+    set: &[(&'c Candidate, f64)],
     nominal: Nominal,
-) -> (Scored, Vec<Prepared>) {
-    let mut scored = score(data, set, None);
-    let mut current = data.to_vec();
-    if nominal == Nominal::Device || !set.iter().all(|(c, _)| c.backfit) {
-        return (scored, current);
+) -> (Scored, Vec<Prepared>, Vec<(&'c Candidate, f64)>) {
+    if nominal == Nominal::Device {
+        return (score(data, set, None), data.to_vec(), set.to_vec());
     }
     let refit_params = nominal == Nominal::Fitted;
+    let (moving, forces): (Vec<_>, Vec<_>) = set
+        .iter()
+        .partition(|(c, _)| c.backfit == Backfit::TissueFrame);
+    let moved = (!moving.is_empty())
+        .then(|| backfit_tissue_frame(data, refit_params))
+        .flatten();
+    let (mut scored, mut current, remaining) = match moved {
+        Some((scored, moved)) if forces.is_empty() => return (scored, moved, forces),
+        Some((_, moved)) => (score(&moved, &forces, None), moved, forces),
+        None => (score(data, set, None), data.to_vec(), set.to_vec()),
+    };
+    if remaining.iter().any(|(c, _)| c.backfit != Backfit::Force) {
+        return (scored, current, remaining);
+    }
     for _ in 0..BACKFIT_ROUNDS {
-        let Ok(again) = backfit(&current, set, &scored.fold_theta, refit_params) else {
+        let Ok(again) = backfit(&current, &remaining, &scored.fold_theta, refit_params) else {
             break;
         };
-        let next = score(&again, set, None);
+        let next = score(&again, &remaining, None);
         let change = (next.rms() - scored.rms()).abs();
         let done = change < BACKFIT_TOL * scored.rms();
         (scored, current) = (next, again);
@@ -402,7 +436,58 @@ fn scored_with_backfit(
             break;
         }
     }
-    (scored, current)
+    (scored, current, remaining)
+}
+
+/// The nominal found again in the tissue's frame: the tissue's
+/// displacement fitted per trial under the current nominal (cross-fitted,
+/// [`motion::fit_shifts`]), the positions moved into its frame, `needle
+/// fit`'s code run on them, repeated until the held-out RMS settles.
+/// `None` when a moved trial no longer fits.
+fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored, Vec<Prepared>)> {
+    let k = folds(data.len());
+    let mut params = data[0].params;
+    let mut shifts: Option<Vec<motion::TissueShift>> = None;
+    let mut best: Option<(Scored, Vec<Prepared>)> = None;
+    for _ in 0..TISSUE_FRAME_ROUNDS {
+        let found = motion::fit_shifts(data, &params, k, shifts.as_deref());
+        let moved: Vec<_> = data
+            .iter()
+            .zip(&found)
+            .map(|(p, s)| {
+                let trial = s.apply(&p.trial);
+                let v = s.velocity_in_tissue(&p.velocity, &p.trial.t_s);
+                fit_trial(&trial).ok().map(|g| (trial, g, v))
+            })
+            .collect::<Option<_>>()?;
+        params = if refit_params {
+            let fits: Vec<_> = data
+                .iter()
+                .zip(&moved)
+                .map(|(p, (_, g, _))| (PathBuf::from(&p.file), g.clone()))
+                .collect();
+            nominal_params(&fits, Vec::new()).ok()?
+        } else {
+            data[0].params
+        };
+        let triples: Vec<_> = moved.iter().map(|(t, g, v)| (t, g, v)).collect();
+        params.relaxation = prepare::fit_relaxation(&triples, &params);
+        let prepared: Vec<Prepared> = moved
+            .into_iter()
+            .zip(data)
+            .map(|((t, g, v), p)| prepare(p.file.clone(), t, g, &params, v))
+            .collect();
+        let scored = score(&prepared, &[], None);
+        let done = best
+            .as_ref()
+            .is_some_and(|b| (b.0.rms() - scored.rms()).abs() < BACKFIT_TOL * b.0.rms());
+        best = Some((scored, prepared));
+        shifts = Some(found);
+        if done {
+            break;
+        }
+    }
+    best
 }
 
 /// `needle fit`'s estimates over per-trial fits, as tissue parameters.
@@ -447,7 +532,7 @@ pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
     let mut after = None;
     if let Some((ci, s, ..)) = first {
         let fixed = [(&CANDIDATES[*ci], s.grid_value)];
-        let (alone, cleaned) = scored_with_backfit(data, &fixed, nominal);
+        let (alone, cleaned, fixed) = scored_with_backfit(data, &fixed, nominal);
         let best_second = CANDIDATES
             .iter()
             .enumerate()
@@ -461,7 +546,8 @@ pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
         after = Some(alone);
         if let Some((cj, with, ..)) = best_second.filter(|b| significant(b.2, b.3)) {
             second_name = CANDIDATES[cj].effect;
-            let both = [fixed[0], (&CANDIDATES[cj], with.grid_value)];
+            let mut both = fixed.clone();
+            both.push((&CANDIDATES[cj], with.grid_value));
             after = Some(scored_with_backfit(&cleaned, &both, nominal).0);
         }
     }
@@ -621,7 +707,7 @@ fn residual_tests(data: &[Prepared]) -> Value {
                 continue;
             }
             r.push(p.residual_n[i]);
-            sig[0].push(p.v_mps[i]);
+            sig[0].push(p.velocity.v_mps[i]);
             sig[1].push(p.a_mps2[i]);
             sig[2].push(p.trial.x_m[i] - p.geometry.contact_x_m);
             sig[3].push(p.trial.t_s[i]);

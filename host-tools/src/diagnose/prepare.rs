@@ -5,8 +5,7 @@
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::TissueParams;
 
-use crate::fit::jumps::Jump;
-use crate::fit::predict::{needle_velocity, predict_parts_at, Parts};
+use crate::fit::predict::{predict_parts_at, NeedleVelocity, Parts};
 use crate::fit::TrialFit;
 use crate::trial::Trial;
 
@@ -48,9 +47,9 @@ pub struct Prepared {
     pub residual_n: Vec<f64>,
     /// Index into [`PHASES`].
     pub phase: Vec<usize>,
-    pub v_mps: Vec<f64>,
-    /// The jumps of the needle's velocity that `v_mps` does not cross.
-    pub jumps: Vec<Jump>,
+    /// The needle's velocity (relative to the tissue where the trial is
+    /// in the tissue's frame) and its jumps.
+    pub velocity: NeedleVelocity,
     pub a_mps2: Vec<f64>,
     /// The friction term's derivatives by (c_p, b_p, c_n, b_n).
     pub friction_basis: Vec<[f64; 4]>,
@@ -91,17 +90,18 @@ impl Prepared {
 }
 
 /// Prepare a trial against `params`, with its geometry as `needle fit`'s
-/// code found it and its relaxed surface at `params.relaxation`.
+/// code found it, its relaxed surface at `params.relaxation`, and the
+/// needle's velocity ([`needle_velocity`] of the measured positions, less
+/// the tissue's own where the trial is in the tissue's frame).
 pub fn prepare(
     file: String,
     trial: Trial,
     mut geometry: TrialFit,
     params: &TissueParams,
+    velocity: NeedleVelocity,
 ) -> Prepared {
     geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
-    let velocity = needle_velocity(&trial);
-    let jumps = velocity.jumps.clone();
-    let parts = predict_parts_at(params, &geometry, &trial, velocity);
+    let parts = predict_parts_at(params, &geometry, &trial, velocity.clone());
     let n = trial.len();
     let nominal_n = parts.total_n();
     let residual_n: Vec<f64> = (0..n).map(|i| trial.f_n[i] - nominal_n[i]).collect();
@@ -116,8 +116,7 @@ pub fn prepare(
         nominal_n,
         residual_n,
         phase,
-        v_mps: parts.v_mps,
-        jumps,
+        velocity,
         friction_basis: parts.friction_basis,
         a_mps2,
         friction_n: parts.friction_n,
@@ -136,18 +135,19 @@ pub fn prepare(
 /// is determined better, but then an unmodelled effect bends it trial by
 /// trial to hide itself; one ρ for the tissue, as the paper has it, is
 /// both well determined and hard for an effect to hide in.
-pub fn fit_relaxation(trials: &[(&Trial, &TrialFit)], params: &TissueParams) -> f64 {
-    let v: Vec<_> = trials.iter().map(|(t, _)| needle_velocity(t)).collect();
+pub fn fit_relaxation(
+    trials: &[(&Trial, &TrialFit, &NeedleVelocity)],
+    params: &TissueParams,
+) -> f64 {
     let sse = |rho: f64| {
         trials
             .iter()
-            .zip(&v)
-            .map(|((trial, geometry), v)| {
+            .map(|(trial, geometry, v)| {
                 let g = TrialFit {
                     relaxed_x_m: relaxed_surface(geometry, rho),
                     ..(*geometry).clone()
                 };
-                let parts = predict_parts_at(params, &g, trial, v.clone());
+                let parts = predict_parts_at(params, &g, trial, (*v).clone());
                 (parts.puncture_index + 1..trial.len())
                     .map(|i| (trial.f_n[i] - parts.friction_n[i] - parts.cutting_n[i]).powi(2))
                     .sum::<f64>()

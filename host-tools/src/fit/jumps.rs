@@ -67,7 +67,7 @@ impl Jump {
 
 /// Standard normal CDF, by the logistic approximation (within 0.01; the
 /// uncertainty it weighs is itself a rough figure).
-fn normal_cdf(z: f64) -> f64 {
+pub(crate) fn normal_cdf(z: f64) -> f64 {
     1.0 / (1.0 + (-1.702 * z).exp())
 }
 

@@ -57,6 +57,27 @@ impl<const N: usize> Lsq<N> {
         Some(std::array::from_fn(|i| b[i] / m[i][i]))
     }
 
+    /// Levenberg–Marquardt's step: the first `free` coefficients solved
+    /// with each diagonal term raised by `lambda` times itself (the rest
+    /// held at 0), or `None` when singular even so.
+    pub fn solve_damped(&self, lambda: f64, free: usize) -> Option<[f64; N]> {
+        let mut damped = self.clone();
+        for i in 0..N {
+            if i < free {
+                let d = self.ata[i][i];
+                damped.ata[i][i] = d + lambda * d.max(f64::MIN_POSITIVE);
+            } else {
+                damped.ata[i] = [0.0; N];
+                for row in &mut damped.ata {
+                    row[i] = 0.0;
+                }
+                damped.ata[i][i] = 1.0;
+                damped.aty[i] = 0.0;
+            }
+        }
+        damped.solve()
+    }
+
     /// Sum of squared residuals at `c` (from the accumulated sums).
     pub fn sse(&self, c: &[f64; N]) -> f64 {
         let mut s = self.yy;

@@ -2,7 +2,7 @@
 //! §3), as JSON and as a tissue-library entry the firmware can load.
 
 pub mod jumps;
-mod lsq;
+pub(crate) mod lsq;
 pub mod predict;
 pub mod trial;
 

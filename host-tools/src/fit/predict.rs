@@ -65,8 +65,11 @@ pub fn predict_parts_at(
     // Cutting goes on from the puncture, and again only once the tip is
     // past its deepest point by more than the encoder's jitter: a stroke
     // that turns round exactly at the deepest point (the paper's
-    // oscillations) cuts nothing, though its encoder reading ties it.
-    let front_m = 3.0 * encoder_step_m(trial);
+    // oscillations) cuts nothing, though its encoder reading ties it. By
+    // the same jitter it stays on: in a moving tissue the tip can advance
+    // by less than an encoder step a sample, and its reading, relative to
+    // the tissue, then dithers about the deepest point.
+    let front_m = 3.0 * v.encoder_step_m;
     let mut cutting = true;
     let n = trial.len();
     let mut p = Parts {
@@ -98,8 +101,22 @@ pub fn predict_parts_at(
         }
         let here = Sliding::at(params, v.v_mps[i], l, last_sliding, last_basis);
         let cut = |vi: f64, on: bool| {
-            let on = vi >= params.half_band_mps && x >= deepest && (on || x > deepest + front_m);
-            (on, params.cutting_n(vi, on))
+            let ahead = if on {
+                x >= deepest - front_m
+            } else {
+                x > deepest + front_m
+            };
+            let on = ahead && vi >= params.half_band_mps;
+            let force = if ahead && v.sd_mps > 0.0 {
+                // Known only to sd_mps, the velocity cuts as likely as it
+                // is above the band: a tissue moving along with the
+                // needle holds it near there for many samples.
+                let above = jumps::normal_cdf((vi - params.half_band_mps) / v.sd_mps);
+                params.cutting_force_n * above
+            } else {
+                params.cutting_n(vi, on)
+            };
+            (on, force)
         };
         let (on, cutting_n) = cut(v.v_mps[i], cutting);
         (p.friction_n[i], p.friction_basis[i], p.cutting_n[i]) =
@@ -118,7 +135,14 @@ pub fn predict_parts_at(
         }
         (last_basis, last_sliding, cutting) = (here.basis, here.last_sliding, on);
         p.length_m[i] = l;
-        deepest = deepest.max(x);
+        // The front follows the tip while it cuts and while it is not
+        // advancing (a stop at speed lands between samples, and the rest
+        // reading is the true deepest point), but not while it creeps
+        // forward uncut by less than the jitter a sample: it would never
+        // get past the front (a tissue moving along with the needle).
+        if on || v.v_mps[i] <= 0.0 {
+            deepest = deepest.max(x);
+        }
     }
     p.v_mps = v.v_mps;
     p
@@ -180,6 +204,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     if n < 2 {
         return NeedleVelocity {
             v_mps: vec![0.0; n],
+            encoder_step_m: encoder_step_m(trial),
             ..NeedleVelocity::default()
         };
     }
@@ -231,6 +256,8 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
         v_mps: v,
         uncertain,
         jumps,
+        encoder_step_m: step_m,
+        sd_mps: 0.0,
     }
 }
 
@@ -242,6 +269,13 @@ pub struct NeedleVelocity {
     pub v_mps: Vec<f64>,
     pub uncertain: Vec<(usize, f64, f64)>,
     pub jumps: Vec<jumps::Jump>,
+    /// The encoder's resolution, m: the jitter the cutting front allows.
+    /// Kept from the measured positions, which show it; positions moved
+    /// into a moving tissue's frame do not.
+    pub encoder_step_m: f64,
+    /// How well `v_mps` is known where that matters (relative to a moving
+    /// tissue, whose velocity is itself estimated), m/s; 0 for exact.
+    pub sd_mps: f64,
 }
 
 /// The encoder's resolution as the data show it: the least non-zero step.

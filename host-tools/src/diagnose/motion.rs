@@ -1,0 +1,427 @@
+//! Tissue motion as what it is: the tissue displaced along the needle's
+//! axis under it, so the nominal model holds in the tissue's frame, not
+//! the encoder's. The `tissue_motion` candidate ranks the effect with a
+//! coarse grid of sinusoids (cheap, and enough to tell it from the
+//! others); once it is named, this module finds the displacement itself,
+//! trial by trial, and the backfit fits the nominal again on positions in
+//! the tissue's frame.
+//!
+//! What is shared and what is per trial: the breathing frequency is a
+//! property of the subject and is fitted on the training trials only (the
+//! median of their own estimates); the displacement's phase and shape
+//! (fundamental and second harmonic, four coefficients) are where the
+//! breathing was during that trial, found on each trial withheld or not,
+//! as its contact point is. Breathing is not a sine (a sharper inhale),
+//! hence the second harmonic.
+//!
+//! The fit is Levenberg–Marquardt on the measured force against the
+//! nominal model evaluated in the moving tissue, with finite-difference
+//! derivatives, over the samples after the puncture (the loading curve is
+//! what the backfit refits). Written here rather than taken from a crate:
+//! the Rust LM crates bring nalgebra, a large build for five unknowns.
+
+use std::f64::consts::TAU;
+
+use needle_holder::model::params::TissueParams;
+
+use super::prepare::{relaxed_surface, Prepared, LOADING};
+use crate::fit::lsq::Lsq;
+use crate::fit::predict::{predict_parts_at, NeedleVelocity};
+
+/// Breathing frequencies searched, Hz (6 to 40 breaths a minute).
+const FREQ_FROM_HZ: f64 = 0.1;
+const FREQ_TO_HZ: f64 = 0.7;
+const FREQ_STEP_HZ: f64 = 0.002;
+
+/// How well the tissue's fitted velocity is known, as a fraction of its
+/// fastest.
+const TISSUE_VELOCITY_SD: f64 = 0.02;
+
+/// The needle's velocity is known to the encoder's quantisation over its
+/// 20 ms difference, the tissue's to a few per cent of its fastest.
+fn relative_velocity_sd(encoder_step_m: f64, tissue_fastest_mps: f64) -> f64 {
+    let needle_sd_mps = encoder_step_m / (6f64.sqrt() * 0.02);
+    needle_sd_mps.hypot(TISSUE_VELOCITY_SD * tissue_fastest_mps)
+}
+
+/// The tissue's displacement along the axis during one trial.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TissueShift {
+    pub omega_rad_s: f64,
+    /// Time the harmonics' phases are referred to (the trial's middle, so
+    /// that a change of frequency does not swing the phase), s.
+    pub t_ref_s: f64,
+    /// sin, cos of the fundamental, sin, cos of the second harmonic, m.
+    pub coeffs_m: [f64; 4],
+}
+
+impl TissueShift {
+    /// Displacement (m) and velocity (m/s) at `t_s`.
+    pub fn at(&self, t_s: f64) -> (f64, f64) {
+        let w = self.omega_rad_s;
+        let th = w * (t_s - self.t_ref_s);
+        let (s1, c1) = th.sin_cos();
+        let (s2, c2) = (2.0 * th).sin_cos();
+        let [a, b, c, d] = self.coeffs_m;
+        (
+            a * s1 + b * c1 + c * s2 + d * c2,
+            w * (a * c1 - b * s1) + 2.0 * w * (c * c2 - d * s2),
+        )
+    }
+
+    /// Peak-to-peak half amplitude over one period, m.
+    pub fn amplitude_m(&self) -> f64 {
+        let period = TAU / self.omega_rad_s.max(1e-9);
+        let s: Vec<f64> = (0..64)
+            .map(|k| self.at(self.t_ref_s + period * k as f64 / 64.0).0)
+            .collect();
+        let (lo, hi) = s
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        (hi - lo) / 2.0
+    }
+
+    /// The needle's velocity relative to the tissue: the measured one less
+    /// the tissue's, not a difference of moved positions (which would
+    /// re-derive the encoder's steps, and no longer show them).
+    pub fn velocity_in_tissue(&self, measured: &NeedleVelocity, t_s: &[f64]) -> NeedleVelocity {
+        let mut v = measured.clone();
+        for (vi, &t) in v.v_mps.iter_mut().zip(t_s) {
+            *vi -= self.at(t).1;
+        }
+        for u in &mut v.uncertain {
+            u.1 -= self.at(t_s[u.0]).1;
+        }
+        let fastest_mps = self.amplitude_m() * self.omega_rad_s;
+        v.sd_mps = relative_velocity_sd(measured.encoder_step_m, fastest_mps);
+        v
+    }
+
+    /// The trial's positions in the tissue's frame.
+    pub fn apply(&self, trial: &crate::trial::Trial) -> crate::trial::Trial {
+        let mut moved = trial.clone();
+        for (x, &t) in moved.x_m.iter_mut().zip(&trial.t_s) {
+            *x -= self.at(t).0;
+        }
+        moved
+    }
+}
+
+/// The nominal model's force along `p`'s trial with the tissue displaced
+/// by `shift(t) = (m, m/s)`: friction length, sliding and cutting follow
+/// the needle's motion relative to the tissue. The needle's velocity
+/// relative to the tissue is its own less the tissue's, not a difference
+/// of the shifted positions (that would re-derive the encoder's steps on
+/// every evaluation).
+pub fn moved_model(
+    p: &Prepared,
+    params: &TissueParams,
+    shift: &dyn Fn(f64) -> (f64, f64),
+) -> (Vec<f64>, f64) {
+    let trial = &p.trial;
+    let n = trial.len();
+    let mut relative = trial.clone();
+    let mut v_rel = NeedleVelocity {
+        v_mps: p.velocity.v_mps.clone(),
+        encoder_step_m: p.velocity.encoder_step_m,
+        ..NeedleVelocity::default()
+    };
+    let mut fastest_mps: f64 = 0.0;
+    for ((x, v), &t) in relative
+        .x_m
+        .iter_mut()
+        .zip(&mut v_rel.v_mps)
+        .zip(&trial.t_s)
+    {
+        let (dx, dv) = shift(t);
+        *x -= dx;
+        *v -= dv;
+        fastest_mps = fastest_mps.max(dv.abs());
+    }
+    v_rel.sd_mps = relative_velocity_sd(p.velocity.encoder_step_m, fastest_mps);
+    // Contact: where the force first rose above the tissue's contact
+    // threshold for good, less the depth that threshold takes, in the
+    // tissue's frame. The fit's own contact assumes a monotonic loading
+    // curve, which the motion bends.
+    let threshold = params.contact_force_n.max(5.0 * p.noise_n);
+    let crossing = (0..=p.geometry.puncture_index.min(n - 1))
+        .rev()
+        .find(|&i| trial.f_n[i] < threshold)
+        .unwrap_or(0);
+    let d_threshold = threshold / params.a1_n_per_m.max(1.0);
+    let mut geometry = p.geometry.clone();
+    geometry.contact_x_m = relative.x_m[crossing] - d_threshold;
+    geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
+    geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
+    let model = predict_parts_at(params, &geometry, &relative, v_rel).total_n();
+    (model, geometry.contact_x_m)
+}
+
+/// Samples the motion is fitted on: in tissue after the puncture.
+fn fitted_samples(p: &Prepared) -> Vec<usize> {
+    (0..p.trial.len())
+        .filter(|&i| p.in_tissue(i) && p.phase[i] != LOADING)
+        .collect()
+}
+
+/// Residuals of the measured force against the model moved by `shift`,
+/// over `samples`.
+fn residuals(
+    p: &Prepared,
+    params: &TissueParams,
+    shift: &TissueShift,
+    samples: &[usize],
+) -> Vec<f64> {
+    let (model, _) = moved_model(p, params, &|t| shift.at(t));
+    samples.iter().map(|&i| p.trial.f_n[i] - model[i]).collect()
+}
+
+/// Huber's loss with its corner at `c`: quadratic within, linear beyond.
+/// The model's force has cliffs (the whole cutting force on or off as the
+/// needle passes its deepest point in the tissue), which a displacement a
+/// micrometre off puts on the wrong samples; squared, those few samples
+/// would outweigh the friction's smooth record of the displacement on all
+/// the others.
+fn huber(r: &[f64], c: f64) -> f64 {
+    r.iter()
+        .map(|e| {
+            let a = e.abs();
+            if a <= c {
+                0.5 * a * a
+            } else {
+                c * (a - 0.5 * c)
+            }
+        })
+        .sum()
+}
+
+/// Weight of a residual in Huber's iteratively reweighted least squares.
+fn huber_weight(e: f64, c: f64) -> f64 {
+    if e.abs() <= c {
+        1.0
+    } else {
+        c / e.abs()
+    }
+}
+
+/// Frequencies of the periodogram, Hz.
+fn periodogram_freqs_hz() -> impl Iterator<Item = f64> {
+    let steps = ((FREQ_TO_HZ - FREQ_FROM_HZ) / FREQ_STEP_HZ).round() as usize;
+    (0..=steps).map(|k| FREQ_FROM_HZ + FREQ_STEP_HZ * k as f64)
+}
+
+/// A trial's residual's periodogram over the breathing band, normalised
+/// to its own total (each trial has one vote, however long).
+fn periodogram(p: &Prepared, samples: &[usize]) -> Vec<f64> {
+    let mean = samples.iter().map(|&i| p.residual_n[i]).sum::<f64>() / samples.len().max(1) as f64;
+    let power = |f_hz: f64| {
+        let (mut re, mut im) = (0.0, 0.0);
+        for &i in samples {
+            let (s, c) = (TAU * f_hz * p.trial.t_s[i]).sin_cos();
+            let r = p.residual_n[i] - mean;
+            re += r * c;
+            im -= r * s;
+        }
+        re * re + im * im
+    };
+    let spectrum: Vec<f64> = periodogram_freqs_hz().map(power).collect();
+    let total = spectrum.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+    spectrum.into_iter().map(|s| s / total).collect()
+}
+
+/// The breathing frequency outside trial j's fold: the peak of the other
+/// folds' summed periodograms, between bins by a parabola, rad/s.
+fn periodogram_peak(spectra: &[Vec<f64>], j: usize, folds: usize) -> f64 {
+    let mut sum = vec![0.0; spectra[0].len()];
+    for (i, s) in spectra.iter().enumerate() {
+        if i % folds != j % folds || spectra.len() == 1 {
+            sum.iter_mut().zip(s).for_each(|(a, b)| *a += b);
+        }
+    }
+    let k = (0..sum.len())
+        .max_by(|&a, &b| sum[a].total_cmp(&sum[b]))
+        .unwrap_or(0);
+    let offset = if k > 0 && k + 1 < sum.len() {
+        let (l, c, r) = (sum[k - 1], sum[k], sum[k + 1]);
+        let den = l - 2.0 * c + r;
+        if den < 0.0 {
+            (0.5 * (l - r) / den).clamp(-0.5, 0.5)
+        } else {
+            0.0
+        }
+    } else {
+        0.0
+    };
+    TAU * (FREQ_FROM_HZ + FREQ_STEP_HZ * (k as f64 + offset))
+}
+
+/// A sinusoid's amplitude and phase on a grid at `omega`: where LM starts.
+fn grid_start(p: &Prepared, params: &TissueParams, omega: f64, samples: &[usize]) -> TissueShift {
+    let t_ref_s = (p.trial.t_s[0] + p.trial.t_s[p.trial.len() - 1]) / 2.0;
+    let mut best = (
+        f64::INFINITY,
+        TissueShift {
+            omega_rad_s: omega,
+            t_ref_s,
+            coeffs_m: [0.0; 4],
+        },
+    );
+    for amplitude_m in [0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 2.8, 4.0].map(|a| a * 1e-3) {
+        for k in 0..16 {
+            let (s, c) = (TAU * k as f64 / 16.0).sin_cos();
+            let shift = TissueShift {
+                coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
+                ..best.1
+            };
+            // Squared: far from the displacement every sample is off by more
+            // than the noise, and Huber's loss would be an absolute one,
+            // which favours moving the tissue least.
+            let e: f64 = residuals(p, params, &shift, samples)
+                .iter()
+                .map(|e| e * e)
+                .sum();
+            if e < best.0 {
+                best = (e, shift);
+            }
+        }
+    }
+    best.1
+}
+
+/// Levenberg–Marquardt from `start` over its four coefficients, and its
+/// frequency too when `free_omega`.
+fn refine(
+    p: &Prepared,
+    params: &TissueParams,
+    start: TissueShift,
+    free_omega: bool,
+    samples: &[usize],
+) -> TissueShift {
+    let unknowns = if free_omega { 5 } else { 4 };
+    let with = |s: &TissueShift, k: usize, d: f64| {
+        let mut s = *s;
+        if k < 4 {
+            s.coeffs_m[k] += d;
+        } else {
+            s.omega_rad_s += d;
+        }
+        s
+    };
+    // Steps that move the tissue about a micrometre.
+    let step = |k: usize, s: &TissueShift| {
+        if k < 4 {
+            1e-6
+        } else {
+            let half_span_s = (p.trial.t_s[p.trial.len() - 1] - p.trial.t_s[0]) / 2.0;
+            1e-6 / (s.amplitude_m().max(1e-4) * half_span_s.max(1.0))
+        }
+    };
+    let corner_n = 3.0 * p.noise_n;
+    let mut shift = start;
+    let mut r = residuals(p, params, &shift, samples);
+    let mut lambda = 1e-3;
+    for _ in 0..20 {
+        let jac: Vec<(f64, Vec<f64>)> = (0..unknowns)
+            .map(|k| {
+                let h = step(k, &shift);
+                let rk = residuals(p, params, &with(&shift, k, h), samples);
+                // d(model)/dθ = −d(residual)/dθ.
+                (h, rk.iter().zip(&r).map(|(a, b)| (b - a) / h).collect())
+            })
+            .collect();
+        let mut normal = Lsq::<5>::default();
+        for i in 0..r.len() {
+            let w = huber_weight(r[i], corner_n).sqrt();
+            let mut row = [0.0; 5];
+            for (k, (_, col)) in jac.iter().enumerate() {
+                row[k] = w * col[i];
+            }
+            normal.add(row, w * r[i]);
+        }
+        let mut improved = false;
+        let loss = huber(&r, corner_n);
+        while lambda < 1e6 {
+            let Some(delta) = normal.solve_damped(lambda, unknowns) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut next = shift;
+            for (k, d) in delta.iter().enumerate().take(unknowns) {
+                next = with(&next, k, *d);
+            }
+            let rn = residuals(p, params, &next, samples);
+            let loss_next = huber(&rn, corner_n);
+            if loss_next < loss {
+                improved = 1.0 - loss_next / loss > 1e-5;
+                (shift, r, lambda) = (next, rn, (lambda / 10.0).max(1e-9));
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    shift
+}
+
+/// The median of the values outside trial j's fold.
+fn median_outside(values: &[f64], j: usize, folds: usize) -> f64 {
+    let mut others: Vec<f64> = values
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| i % folds != j % folds)
+        .map(|(_, v)| *v)
+        .collect();
+    others.sort_by(f64::total_cmp);
+    others.get(others.len() / 2).copied().unwrap_or(values[j])
+}
+
+/// The tissue's displacement in every trial, cross-fitted: trial j's
+/// frequency is the median of the other folds' own estimates (trial j in
+/// fold j mod `folds`), its phase and shape its own. Without `start`, each
+/// trial begins from a grid of sinusoids at the other folds' periodogram
+/// frequency (the force is far from linear in the displacement: friction
+/// flips with the tissue's velocity, and a local search from nowhere
+/// stops at the wrong flip); with `start`, from a round before under
+/// another nominal.
+pub fn fit_shifts(
+    data: &[Prepared],
+    params: &TissueParams,
+    folds: usize,
+    start: Option<&[TissueShift]>,
+) -> Vec<TissueShift> {
+    let samples: Vec<Vec<usize>> = data.iter().map(fitted_samples).collect();
+    let spectra: Vec<Vec<f64>> = match start {
+        Some(_) => Vec::new(),
+        None => data
+            .iter()
+            .zip(&samples)
+            .map(|(p, s)| periodogram(p, s))
+            .collect(),
+    };
+    let own: Vec<TissueShift> = data
+        .iter()
+        .enumerate()
+        .map(|(j, p)| {
+            let first = match start {
+                Some(s) => s[j],
+                None => grid_start(p, params, periodogram_peak(&spectra, j, folds), &samples[j]),
+            };
+            refine(p, params, first, true, &samples[j])
+        })
+        .collect();
+    let omegas: Vec<f64> = own.iter().map(|s| s.omega_rad_s).collect();
+    data.iter()
+        .enumerate()
+        .map(|(j, p)| {
+            let at_fold = TissueShift {
+                omega_rad_s: median_outside(&omegas, j, folds),
+                ..own[j]
+            };
+            refine(p, params, at_fold, false, &samples[j])
+        })
+        .collect()
+}
