@@ -121,8 +121,8 @@ fn another_form_of_the_physics_is_still_named() {
     // Two-branch viscoelasticity, elasto-plastic presliding, stiffening
     // walls, saturating depth dependence, a drive with finite
     // acceleration, thermally settling drift (sim::Form::Alternate).
-    // Logarithmic rate dependence and non-sinusoidal breathing with a
-    // random phase are not found yet (README, "Diagnosis").
+    // Non-sinusoidal breathing at a random phase. Logarithmic rate
+    // dependence is not found yet (README, "Diagnosis").
     for effect in [
         "none",
         "viscoelasticity",
@@ -131,6 +131,7 @@ fn another_form_of_the_physics_is_still_named() {
         "depth_dependent_cutting",
         "holder_inertia",
         "sensor_drift",
+        "tissue_motion",
     ] {
         let out = diagnosis(effect, Form::Alternate, 11);
         assert_named(&out, effect, 0.15);
