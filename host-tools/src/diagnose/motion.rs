@@ -425,3 +425,28 @@ pub fn fit_shifts(
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_velocity_is_the_displacements_derivative() {
+        let shift = TissueShift {
+            omega_rad_s: TAU * 0.25,
+            t_ref_s: 3.0,
+            coeffs_m: [0.0012, -0.0004, 0.0003, 0.0001],
+        };
+        for t in [0.0, 1.3, 2.9, 7.7] {
+            let h = 1e-6;
+            let numeric = (shift.at(t + h).0 - shift.at(t - h).0) / (2.0 * h);
+            assert!((numeric - shift.at(t).1).abs() < 1e-9, "at {t}");
+        }
+        // A pure sine of 1.2 mm has that half peak-to-peak amplitude.
+        let sine = TissueShift {
+            coeffs_m: [0.0012, 0.0, 0.0, 0.0],
+            ..shift
+        };
+        assert!((sine.amplitude_m() - 0.0012).abs() < 1e-6);
+    }
+}

@@ -1,6 +1,7 @@
-//! Small linear least squares by normal equations (2–3 unknowns), the only
+//! Small linear least squares by normal equations (2–5 unknowns), the only
 //! regression the fits need. Written here: pulling a linear-algebra crate
-//! in for 3×3 systems would cost more build time than these lines.
+//! in for 3×3 systems (and the 5×5 steps of the tissue-motion fit) would
+//! cost more build time than these lines.
 
 /// Accumulates `y ≈ Σ c_k·φ_k` and solves for `c`.
 #[derive(Clone, Debug)]
@@ -112,5 +113,21 @@ mod tests {
             flat.add([1.0, 1.0], 2.0);
         }
         assert!(flat.solve().is_none());
+    }
+
+    #[test]
+    fn a_damped_step_shrinks_toward_zero_and_holds_the_unfree_at_zero() {
+        let mut lsq = Lsq::<3>::default();
+        for i in 0..20 {
+            let x = i as f64 * 0.1;
+            lsq.add([1.0, x, x * x], 2.0 + 0.5 * x - 0.25 * x * x);
+        }
+        let exact = lsq.solve().unwrap();
+        let barely = lsq.solve_damped(1e-12, 3).unwrap();
+        assert!((0..3).all(|k| (exact[k] - barely[k]).abs() < 1e-6));
+        let heavy = lsq.solve_damped(1e6, 3).unwrap();
+        assert!(heavy.iter().all(|c| c.abs() < 1e-3), "{heavy:?}");
+        let two = lsq.solve_damped(1e-12, 2).unwrap();
+        assert_eq!(two[2], 0.0);
     }
 }
