@@ -327,13 +327,12 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
 /// `shift(t)`.
 fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> (f64, f64)) -> Vec<Vec<f64>> {
     let n = p.trial.len();
-    let (moved, contact_x_m) = moved_model(p, &p.params, shift);
+    let (moved, relative_x_m, contact_x_m) = moved_model(p, &p.params, shift);
     // The polynomial's own offset stands for an error in that contact.
     let mut cols = vec![vec![0.0; n]; 5];
     for i in 0..n {
         if p.phase[i] == LOADING {
-            let x = p.trial.x_m[i] - shift(p.trial.t_s[i]).0;
-            let d = (x - contact_x_m).max(0.0);
+            let d = (relative_x_m[i] - contact_x_m).max(0.0);
             cols[1][i] = d;
             cols[2][i] = d * d;
             cols[3][i] = -p.nominal_n[i];

@@ -30,7 +30,9 @@ use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram};
 use self::prepare::{prepare, Prepared, LOADING, PHASES};
 use crate::fit::fit_trial;
-use crate::fit::predict::needle_velocity;
+use crate::fit::predict::{needle_velocity, NeedleVelocity};
+use crate::fit::TrialFit;
+use crate::trial::Trial;
 
 /// Least held-out shrink that can name an effect.
 pub const MIN_SHRINK: f64 = 0.03;
@@ -345,47 +347,71 @@ fn backfit(
     refit_params: bool,
 ) -> Result<Vec<Prepared>> {
     let skip = NOMINAL_CORRECTIONS.len();
-    let cleaned: Vec<(crate::trial::Trial, crate::fit::TrialFit)> = data
+    let refits: Vec<Refit> = data
         .iter()
         .enumerate()
         .map(|(j, p)| {
             let theta = &fold_theta[j % fold_theta.len()];
-            let mut trial = p.trial.clone();
+            let mut cleaned = p.trial.clone();
             for (c, th) in columns(p, set)[skip..].iter().zip(&theta[skip..]) {
-                for (f, e) in trial.f_n.iter_mut().zip(c) {
+                for (f, e) in cleaned.f_n.iter_mut().zip(c) {
                     *f -= e * th;
                 }
             }
-            let geometry = fit_trial(&trial).unwrap_or_else(|_| p.geometry.clone());
-            (trial, geometry)
+            let geometry = fit_trial(&cleaned).unwrap_or_else(|_| p.geometry.clone());
+            // Cleaning changed forces, not positions: the velocity is
+            // what it was, and the trial kept is the measured one.
+            Refit {
+                seen: cleaned,
+                geometry,
+                velocity: p.velocity.clone(),
+                kept: p.trial.clone(),
+            }
         })
         .collect();
+    nominal_again(data, refits, refit_params)
+}
+
+/// One trial as the nominal is found again on it.
+struct Refit {
+    /// The trial `needle fit`'s code saw: force cleaned, or positions in
+    /// the tissue's frame.
+    seen: Trial,
+    geometry: TrialFit,
+    /// The needle's velocity along `seen`.
+    velocity: NeedleVelocity,
+    /// The trial to prepare against the new nominal: forces as measured,
+    /// so the residual stays measured − model.
+    kept: Trial,
+}
+
+/// The nominal's parameters found again over `refits` (with `needle
+/// fit`'s code, or `data`'s own kept when not `refit_params`), ρ over
+/// them, and each kept trial prepared against it.
+fn nominal_again(
+    data: &[Prepared],
+    refits: Vec<Refit>,
+    refit_params: bool,
+) -> Result<Vec<Prepared>> {
     let mut params = if refit_params {
         let fits: Vec<_> = data
             .iter()
-            .zip(&cleaned)
-            .map(|(p, (_, g))| (PathBuf::from(&p.file), g.clone()))
+            .zip(&refits)
+            .map(|(p, r)| (PathBuf::from(&p.file), r.geometry.clone()))
             .collect();
         nominal_params(&fits, Vec::new())?
     } else {
         data[0].params
     };
-    // Cleaning changed forces, not positions: each trial's velocity is
-    // what it was.
-    let velocities: Vec<_> = data.iter().map(|p| p.velocity.clone()).collect();
-    let triples: Vec<_> = cleaned
+    let triples: Vec<_> = refits
         .iter()
-        .zip(&velocities)
-        .map(|((t, g), v)| (t, g, v))
+        .map(|r| (&r.seen, &r.geometry, &r.velocity))
         .collect();
     params.relaxation = prepare::fit_relaxation(&triples, &params);
-    Ok(cleaned
+    Ok(refits
         .into_iter()
         .zip(data)
-        .zip(velocities)
-        .map(|(((_, geometry), p), v)| {
-            prepare(p.file.clone(), p.trial.clone(), geometry, &params, v)
-        })
+        .map(|(r, p)| prepare(p.file.clone(), r.kept, r.geometry, &params, r.velocity))
         .collect())
 }
 
@@ -416,19 +442,18 @@ fn scored_with_backfit<'c>(
     let moved = (!moving.is_empty())
         .then(|| backfit_tissue_frame(data, refit_params))
         .flatten();
-    let (mut scored, mut current, remaining) = match moved {
+    let (mut scored, mut current) = match moved {
         Some((scored, moved)) if forces.is_empty() => return (scored, moved, forces),
-        Some((_, moved)) => (score(&moved, &forces, None), moved, forces),
-        None => (score(data, set, None), data.to_vec(), set.to_vec()),
+        Some((_, moved)) => (score(&moved, &forces, None), moved),
+        // A moved trial no longer fits: the motion stays as columns.
+        None if !moving.is_empty() => return (score(data, set, None), data.to_vec(), set.to_vec()),
+        None => (score(data, set, None), data.to_vec()),
     };
-    if remaining.iter().any(|(c, _)| c.backfit != Backfit::Force) {
-        return (scored, current, remaining);
-    }
     for _ in 0..BACKFIT_ROUNDS {
-        let Ok(again) = backfit(&current, &remaining, &scored.fold_theta, refit_params) else {
+        let Ok(again) = backfit(&current, &forces, &scored.fold_theta, refit_params) else {
             break;
         };
-        let next = score(&again, &remaining, None);
+        let next = score(&again, &forces, None);
         let change = (next.rms() - scored.rms()).abs();
         let done = change < BACKFIT_TOL * scored.rms();
         (scored, current) = (next, again);
@@ -436,7 +461,7 @@ fn scored_with_backfit<'c>(
             break;
         }
     }
-    (scored, current, remaining)
+    (scored, current, forces)
 }
 
 /// The nominal found again in the tissue's frame: the tissue's
@@ -448,53 +473,40 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
     let k = folds(data.len());
     let mut params = data[0].params;
     let mut shifts: Option<Vec<motion::TissueShift>> = None;
-    let mut best: Option<(Scored, Vec<Prepared>)> = None;
+    let mut last: Option<(Scored, Vec<Prepared>)> = None;
     for _ in 0..TISSUE_FRAME_ROUNDS {
         let found = motion::fit_shifts(data, &params, k, shifts.as_deref());
-        let moved: Vec<_> = data
+        let refits: Vec<Refit> = data
             .iter()
             .zip(&found)
             .map(|(p, s)| {
-                let trial = s.apply(&p.trial);
-                let v = s.velocity_in_tissue(&p.velocity, &p.trial.t_s);
-                fit_trial(&trial).ok().map(|g| (trial, g, v))
+                let moved = s.apply(&p.trial);
+                let geometry = fit_trial(&moved).ok()?;
+                Some(Refit {
+                    kept: moved.clone(),
+                    seen: moved,
+                    geometry,
+                    velocity: s.velocity_in_tissue(&p.velocity, &p.trial.t_s),
+                })
             })
             .collect::<Option<_>>()?;
-        params = if refit_params {
-            let fits: Vec<_> = data
-                .iter()
-                .zip(&moved)
-                .map(|(p, (_, g, _))| (PathBuf::from(&p.file), g.clone()))
-                .collect();
-            nominal_params(&fits, Vec::new()).ok()?
-        } else {
-            data[0].params
-        };
-        let triples: Vec<_> = moved.iter().map(|(t, g, v)| (t, g, v)).collect();
-        params.relaxation = prepare::fit_relaxation(&triples, &params);
-        let prepared: Vec<Prepared> = moved
-            .into_iter()
-            .zip(data)
-            .map(|((t, g, v), p)| prepare(p.file.clone(), t, g, &params, v))
-            .collect();
+        let prepared = nominal_again(data, refits, refit_params).ok()?;
+        params = prepared[0].params;
         let scored = score(&prepared, &[], None);
-        let done = best
+        let done = last
             .as_ref()
-            .is_some_and(|b| (b.0.rms() - scored.rms()).abs() < BACKFIT_TOL * b.0.rms());
-        best = Some((scored, prepared));
+            .is_some_and(|l| (l.0.rms() - scored.rms()).abs() < BACKFIT_TOL * l.0.rms());
+        last = Some((scored, prepared));
         shifts = Some(found);
         if done {
             break;
         }
     }
-    best
+    last
 }
 
 /// `needle fit`'s estimates over per-trial fits, as tissue parameters.
-fn nominal_params(
-    fits: &[(PathBuf, crate::fit::TrialFit)],
-    skipped: Vec<Value>,
-) -> Result<TissueParams> {
+fn nominal_params(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Result<TissueParams> {
     let text = crate::fit::to_toml(&crate::fit::summarise(fits, skipped));
     let tissues = crate::tissue::parse(&text, Path::new("<needle fit>"))?;
     Ok(tissues.first().context("needle fit gave no tissue")?.params)

@@ -72,12 +72,9 @@ impl TissueShift {
     /// Peak-to-peak half amplitude over one period, m.
     pub fn amplitude_m(&self) -> f64 {
         let period = TAU / self.omega_rad_s.max(1e-9);
-        let s: Vec<f64> = (0..64)
+        let (lo, hi) = (0..64)
             .map(|k| self.at(self.t_ref_s + period * k as f64 / 64.0).0)
-            .collect();
-        let (lo, hi) = s
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
                 (l.min(v), h.max(v))
             });
         (hi - lo) / 2.0
@@ -110,7 +107,8 @@ impl TissueShift {
 }
 
 /// The nominal model's force along `p`'s trial with the tissue displaced
-/// by `shift(t) = (m, m/s)`: friction length, sliding and cutting follow
+/// by `shift(t) = (m, m/s)`, the needle's positions in the tissue's frame
+/// and the contact point there: friction length, sliding and cutting follow
 /// the needle's motion relative to the tissue. The needle's velocity
 /// relative to the tissue is its own less the tissue's, not a difference
 /// of the shifted positions (that would re-derive the encoder's steps on
@@ -119,7 +117,7 @@ pub fn moved_model(
     p: &Prepared,
     params: &TissueParams,
     shift: &dyn Fn(f64) -> (f64, f64),
-) -> (Vec<f64>, f64) {
+) -> (Vec<f64>, Vec<f64>, f64) {
     let trial = &p.trial;
     let n = trial.len();
     let mut relative = trial.clone();
@@ -156,7 +154,7 @@ pub fn moved_model(
     geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
     geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
     let model = predict_parts_at(params, &geometry, &relative, v_rel).total_n();
-    (model, geometry.contact_x_m)
+    (model, relative.x_m, geometry.contact_x_m)
 }
 
 /// Samples the motion is fitted on: in tissue after the puncture.
@@ -174,7 +172,7 @@ fn residuals(
     shift: &TissueShift,
     samples: &[usize],
 ) -> Vec<f64> {
-    let (model, _) = moved_model(p, params, &|t| shift.at(t));
+    let (model, ..) = moved_model(p, params, &|t| shift.at(t));
     samples.iter().map(|&i| p.trial.f_n[i] - model[i]).collect()
 }
 
@@ -323,19 +321,19 @@ fn refine(
     let mut r = residuals(p, params, &shift, samples);
     let mut lambda = 1e-3;
     for _ in 0..20 {
-        let jac: Vec<(f64, Vec<f64>)> = (0..unknowns)
+        let jac: Vec<Vec<f64>> = (0..unknowns)
             .map(|k| {
                 let h = step(k, &shift);
                 let rk = residuals(p, params, &with(&shift, k, h), samples);
                 // d(model)/dθ = −d(residual)/dθ.
-                (h, rk.iter().zip(&r).map(|(a, b)| (b - a) / h).collect())
+                rk.iter().zip(&r).map(|(a, b)| (b - a) / h).collect()
             })
             .collect();
         let mut normal = Lsq::<5>::default();
         for i in 0..r.len() {
             let w = huber_weight(r[i], corner_n).sqrt();
             let mut row = [0.0; 5];
-            for (k, (_, col)) in jac.iter().enumerate() {
+            for (k, col) in jac.iter().enumerate() {
                 row[k] = w * col[i];
             }
             normal.add(row, w * r[i]);
