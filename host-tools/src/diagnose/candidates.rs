@@ -231,7 +231,7 @@ fn inertia(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     for jump in &p.velocity.jumps {
         // Spread over the samples it may have landed on, by how likely each
         // is: a pulse on the wrong sample is two pulses of error.
-        for (j, w) in (jump.index - 1..).zip(jump.landing(t)) {
+        for (j, w) in (jump.index - 1..).zip(p.landing(jump)) {
             if j < n {
                 step[j] += w * jump.dv_mps * rate;
             }

@@ -311,7 +311,15 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
             nominal_params(&fits, skipped)?
         }
     };
-    let velocities: Vec<_> = trials.iter().map(|(_, t, _)| needle_velocity(t)).collect();
+    // The diagnosis fits the model to these forces: the force settles
+    // which side of a jump the samples the encoder cannot place lie on.
+    let velocities: Vec<_> = trials
+        .iter()
+        .map(|(_, t, g)| NeedleVelocity {
+            force_sd_n: g.noise_n,
+            ..needle_velocity(t)
+        })
+        .collect();
     let triples: Vec<_> = trials
         .iter()
         .zip(&velocities)

@@ -5,6 +5,7 @@
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::TissueParams;
 
+use crate::fit::jumps::Jump;
 use crate::fit::predict::{predict_parts_at, NeedleVelocity, Parts};
 use crate::fit::TrialFit;
 use crate::trial::Trial;
@@ -50,6 +51,9 @@ pub struct Prepared {
     /// The needle's velocity (relative to the tissue where the trial is
     /// in the tissue's frame) and its jumps.
     pub velocity: NeedleVelocity,
+    /// The samples next to a jump that may lie on its other side, and how
+    /// likely they do ([`Parts::other_side`]).
+    pub other_side: Vec<(usize, f64)>,
     pub a_mps2: Vec<f64>,
     /// The friction term's derivatives by (c_p, b_p, c_n, b_n).
     pub friction_basis: Vec<[f64; 4]>,
@@ -87,6 +91,23 @@ impl Prepared {
     pub fn in_tissue(&self, i: usize) -> bool {
         !matches!(self.phase[i], APPROACH | AFTER)
     }
+
+    /// How likely `jump` shows on the sample before its own, its own, or
+    /// the one after: the encoder's odds ([`Jump::landing`]), unless the
+    /// measured force settled which side those samples lie on.
+    pub fn landing(&self, jump: &Jump) -> [f64; 3] {
+        let [mut early, _, mut late] = jump.landing(&self.trial.t_s);
+        for &(i, w) in &self.other_side {
+            if i + 1 == jump.index {
+                early = w;
+            } else if i == jump.index {
+                late = w;
+            }
+        }
+        let on = (1.0 - early - late).max(0.0);
+        let total = early + on + late;
+        [early / total, on / total, late / total]
+    }
 }
 
 /// Prepare a trial against `params`, with its geometry as `needle fit`'s
@@ -117,6 +138,7 @@ pub fn prepare(
         residual_n,
         phase,
         velocity,
+        other_side: parts.other_side,
         friction_basis: parts.friction_basis,
         a_mps2,
         friction_n: parts.friction_n,

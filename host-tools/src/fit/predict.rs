@@ -23,6 +23,10 @@ pub struct Parts {
     pub puncture_index: usize,
     /// The needle's velocity the force law was evaluated at, m/s.
     pub v_mps: Vec<f64>,
+    /// The samples next to a jump that may lie on its other side, with
+    /// how likely they do: the encoder's odds, weighed by the measured
+    /// force where [`NeedleVelocity::force_sd_n`] says how well it is known.
+    pub other_side: Vec<(usize, f64)>,
     /// How the friction term changes with (c_p, b_p, c_n, b_n): the
     /// sliding sample's (l, v·l) on its side, held through a rest unless
     /// the static band clamps it. The friction is linear in these four.
@@ -79,6 +83,7 @@ pub fn predict_parts_at(
         length_m: vec![0.0; n],
         puncture_index: puncture,
         v_mps: Vec::new(),
+        other_side: Vec::new(),
         friction_basis: vec![[0.0; 4]; n],
     };
     #[allow(clippy::needless_range_loop)] // six parallel per-sample arrays
@@ -124,14 +129,25 @@ pub fn predict_parts_at(
         // Next to a jump placed to within a fraction of a sample, the
         // sample may be on its other side: the force law there is the
         // expected one over both.
-        if let Some(&(_, v_other, w)) = v.uncertain.iter().find(|u| u.0 == i) {
+        if let Some(&(_, v_other, prior)) = v.uncertain.iter().find(|u| u.0 == i) {
             let other = Sliding::at(params, v_other, l, last_sliding, last_basis);
+            let other_cutting_n = cut(v_other, cutting).1;
+            let w = other_side_odds(
+                prior,
+                trial.f_n[i],
+                [
+                    here.friction_n + cutting_n,
+                    other.friction_n + other_cutting_n,
+                ],
+                v.force_sd_n,
+            );
             let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
             p.friction_n[i] = mix(here.friction_n, other.friction_n);
             for (k, b) in p.friction_basis[i].iter_mut().enumerate() {
                 *b = mix(*b, other.basis[k]);
             }
-            p.cutting_n[i] = mix(cutting_n, cut(v_other, cutting).1);
+            p.cutting_n[i] = mix(cutting_n, other_cutting_n);
+            p.other_side.push((i, w));
         }
         (last_basis, last_sliding, cutting) = (here.basis, here.last_sliding, on);
         p.length_m[i] = l;
@@ -146,6 +162,23 @@ pub fn predict_parts_at(
     }
     p.v_mps = v.v_mps;
     p
+}
+
+/// How likely a sample next to a jump lies on its other side, given the
+/// encoder's `prior` odds and the measured force `f_n` against the force
+/// law on this side and the other (`model_n`). The encoder places a stop
+/// at 3 mm/s to a third of a 2 ms sample; the load cell shows the whole
+/// cutting force come or go on the very sample, a step of hundreds of
+/// noise floors. Gaussian noise of `sd_n`; 0 keeps the prior.
+fn other_side_odds(prior: f64, f_n: f64, model_n: [f64; 2], sd_n: f64) -> f64 {
+    if sd_n <= 0.0 {
+        return prior;
+    }
+    // Log-likelihood ratio other : here, clamped so the odds stay finite.
+    let z = |m: f64| (f_n - m) / sd_n;
+    let llr = (0.5 * (z(model_n[0]).powi(2) - z(model_n[1]).powi(2))).clamp(-50.0, 50.0);
+    let odds = prior / (1.0 - prior).max(1e-12) * llr.exp();
+    odds / (1.0 + odds)
 }
 
 /// The friction law at one sample: its force, its derivatives by (c_p,
@@ -258,6 +291,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
         jumps,
         encoder_step_m: step_m,
         sd_mps: 0.0,
+        force_sd_n: 0.0,
     }
 }
 
@@ -276,6 +310,10 @@ pub struct NeedleVelocity {
     /// How well `v_mps` is known where that matters (relative to a moving
     /// tissue, whose velocity is itself estimated), m/s; 0 for exact.
     pub sd_mps: f64,
+    /// The load cell's noise, N, when the measured force is to settle which
+    /// side of a jump an uncertain sample lies on; 0 leaves it to the
+    /// encoder (a model drawn over data, not yet fitted to it).
+    pub force_sd_n: f64,
 }
 
 /// The encoder's resolution as the data show it: the least non-zero step.
