@@ -303,12 +303,20 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let (f_hz, amplitude_m) = motion_at(g);
     let t0 = p.trial.t_s[0];
     let n = p.trial.len();
+    let w = TAU * f_hz;
+    // sin, cos of w·(t − t0) once; each phase rotates them.
+    let at_zero_phase: Vec<(f64, f64)> = p
+        .trial
+        .t_s
+        .iter()
+        .map(|t| (w * (t - t0)).sin_cos())
+        .collect();
     let mut best: Option<(f64, Vec<Vec<f64>>)> = None;
     for k in 0..MOTION_PHASES {
-        let phi = TAU * k as f64 / MOTION_PHASES as f64;
-        let w = TAU * f_hz;
-        let shift = |t: f64| {
-            let (s, c) = (w * (t - t0) + phi).sin_cos();
+        let (sp, cp) = (TAU * k as f64 / MOTION_PHASES as f64).sin_cos();
+        let shift = |i: usize| {
+            let (s0, c0) = at_zero_phase[i];
+            let (s, c) = (s0 * cp + c0 * sp, c0 * cp - s0 * sp);
             (amplitude_m * s, amplitude_m * w * c)
         };
         let cols = moved_nominal(p, &shift);
@@ -324,8 +332,8 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
 }
 
 /// Columns of [`tissue_motion`] for one tissue displacement and velocity
-/// `shift(t)`.
-fn moved_nominal(p: &Prepared, shift: &dyn Fn(f64) -> (f64, f64)) -> Vec<Vec<f64>> {
+/// `shift(i)` at sample i.
+fn moved_nominal(p: &Prepared, shift: &dyn Fn(usize) -> (f64, f64)) -> Vec<Vec<f64>> {
     let n = p.trial.len();
     let (moved, relative_x_m, contact_x_m) = moved_model(p, &p.params, shift);
     // The polynomial's own offset stands for an error in that contact.

@@ -58,10 +58,12 @@ pub struct TissueShift {
 impl TissueShift {
     /// Displacement (m) and velocity (m/s) at `t_s`.
     pub fn at(&self, t_s: f64) -> (f64, f64) {
+        self.at_harmonics(harmonics(self.omega_rad_s * (t_s - self.t_ref_s)))
+    }
+
+    /// [`Self::at`] from the harmonics' sines and cosines there.
+    fn at_harmonics(&self, [s1, c1, s2, c2]: [f64; 4]) -> (f64, f64) {
         let w = self.omega_rad_s;
-        let th = w * (t_s - self.t_ref_s);
-        let (s1, c1) = th.sin_cos();
-        let (s2, c2) = (2.0 * th).sin_cos();
         let [a, b, c, d] = self.coeffs_m;
         (
             a * s1 + b * c1 + c * s2 + d * c2,
@@ -106,8 +108,44 @@ impl TissueShift {
     }
 }
 
+/// sin, cos of phase θ and of 2θ (by the double angle).
+fn harmonics(theta: f64) -> [f64; 4] {
+    let (s1, c1) = theta.sin_cos();
+    [s1, c1, 2.0 * s1 * c1, c1 * c1 - s1 * s1]
+}
+
+/// The harmonics of a frequency at every sample of a trial, for the last
+/// two frequencies asked: `sin_cos` was a third of the fit's time, four of
+/// its five Jacobian columns hold the frequency, and a free frequency's
+/// column and step alternate with the point they start from.
+struct Harmonics {
+    /// (ω, reference time, sin/cos of both harmonics per sample), the
+    /// most recent first.
+    kept: Vec<(f64, f64, Vec<[f64; 4]>)>,
+}
+
+impl Harmonics {
+    fn new() -> Self {
+        Self { kept: Vec::new() }
+    }
+
+    /// The harmonics for `shift` along `t_s`.
+    fn follow(&mut self, shift: &TissueShift, t_s: &[f64]) -> &[[f64; 4]] {
+        let key = (shift.omega_rad_s, shift.t_ref_s);
+        match self.kept.iter().position(|k| (k.0, k.1) == key) {
+            Some(i) => self.kept[..=i].rotate_right(1),
+            None => {
+                let at = t_s.iter().map(|t| harmonics(key.0 * (t - key.1))).collect();
+                self.kept.insert(0, (key.0, key.1, at));
+                self.kept.truncate(2);
+            }
+        }
+        &self.kept[0].2
+    }
+}
+
 /// The nominal model's force along `p`'s trial with the tissue displaced
-/// by `shift(t) = (m, m/s)`, the needle's positions in the tissue's frame
+/// by `shift(i) = (m, m/s)` at sample i, the needle's positions in the tissue's frame
 /// and the contact point there: friction length, sliding and cutting follow
 /// the needle's motion relative to the tissue. The needle's velocity
 /// relative to the tissue is its own less the tissue's, not a difference
@@ -116,7 +154,7 @@ impl TissueShift {
 pub fn moved_model(
     p: &Prepared,
     params: &TissueParams,
-    shift: &dyn Fn(f64) -> (f64, f64),
+    shift: &dyn Fn(usize) -> (f64, f64),
 ) -> (Vec<f64>, Vec<f64>, f64) {
     let trial = &p.trial;
     let n = trial.len();
@@ -127,13 +165,8 @@ pub fn moved_model(
         ..NeedleVelocity::default()
     };
     let mut fastest_mps: f64 = 0.0;
-    for ((x, v), &t) in relative
-        .x_m
-        .iter_mut()
-        .zip(&mut v_rel.v_mps)
-        .zip(&trial.t_s)
-    {
-        let (dx, dv) = shift(t);
+    for (i, (x, v)) in relative.x_m.iter_mut().zip(&mut v_rel.v_mps).enumerate() {
+        let (dx, dv) = shift(i);
         *x -= dx;
         *v -= dv;
         fastest_mps = fastest_mps.max(dv.abs());
@@ -171,8 +204,10 @@ fn residuals(
     params: &TissueParams,
     shift: &TissueShift,
     samples: &[usize],
+    harmonics: &mut Harmonics,
 ) -> Vec<f64> {
-    let (model, ..) = moved_model(p, params, &|t| shift.at(t));
+    let h = harmonics.follow(shift, &p.trial.t_s);
+    let (model, ..) = moved_model(p, params, &|i| shift.at_harmonics(h[i]));
     samples.iter().map(|&i| p.trial.f_n[i] - model[i]).collect()
 }
 
@@ -255,38 +290,55 @@ fn periodogram_peak(spectra: &[Vec<f64>], j: usize, folds: usize) -> f64 {
     TAU * (FREQ_FROM_HZ + FREQ_STEP_HZ * (k as f64 + offset))
 }
 
-/// A sinusoid's amplitude and phase on a grid at `omega`: where LM starts.
-fn grid_start(p: &Prepared, params: &TissueParams, omega: f64, samples: &[usize]) -> TissueShift {
+/// Where LM starts: the best sinusoids of a grid of amplitudes and phases
+/// at `omega`, one per amplitude, the [`STARTS`] best of those.
+fn grid_starts(
+    p: &Prepared,
+    params: &TissueParams,
+    omega: f64,
+    samples: &[usize],
+) -> Vec<TissueShift> {
     let t_ref_s = (p.trial.t_s[0] + p.trial.t_s[p.trial.len() - 1]) / 2.0;
-    let mut best = (
-        f64::INFINITY,
-        TissueShift {
-            omega_rad_s: omega,
-            t_ref_s,
-            coeffs_m: [0.0; 4],
-        },
-    );
-    for amplitude_m in [0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 2.8, 4.0].map(|a| a * 1e-3) {
-        for k in 0..16 {
-            let (s, c) = (TAU * k as f64 / 16.0).sin_cos();
-            let shift = TissueShift {
-                coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
-                ..best.1
-            };
-            // Squared: far from the displacement every sample is off by more
-            // than the noise, and Huber's loss would be an absolute one,
-            // which favours moving the tissue least.
-            let e: f64 = residuals(p, params, &shift, samples)
-                .iter()
-                .map(|e| e * e)
-                .sum();
-            if e < best.0 {
-                best = (e, shift);
-            }
-        }
-    }
-    best.1
+    let mut harmonics = Harmonics::new();
+    let mut per_amplitude: Vec<(f64, TissueShift)> =
+        [0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 2.8, 4.0]
+            .map(|a| a * 1e-3)
+            .into_iter()
+            .filter_map(|amplitude_m| {
+                (0..GRID_PHASES)
+                    .map(|k| {
+                        let (s, c) = (TAU * k as f64 / GRID_PHASES as f64).sin_cos();
+                        let shift = TissueShift {
+                            omega_rad_s: omega,
+                            t_ref_s,
+                            coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
+                        };
+                        // Squared: far from the displacement every sample is off
+                        // by more than the noise, and Huber's loss would be an
+                        // absolute one, which favours moving the tissue least.
+                        let e: f64 = residuals(p, params, &shift, samples, &mut harmonics)
+                            .iter()
+                            .map(|e| e * e)
+                            .sum();
+                        (e, shift)
+                    })
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+            })
+            .collect();
+    per_amplitude.sort_by(|a, b| a.0.total_cmp(&b.0));
+    per_amplitude
+        .into_iter()
+        .take(STARTS)
+        .map(|(_, s)| s)
+        .collect()
 }
+
+/// Phases of the start grid: LM finds the phase between them.
+const GRID_PHASES: usize = 16;
+
+/// Starts of the first LM per trial: the force is far from linear in the
+/// displacement, and one start can stop at the wrong flip of friction.
+const STARTS: usize = 3;
 
 /// Levenberg–Marquardt from `start` over its four coefficients, and its
 /// frequency too when `free_omega`.
@@ -296,7 +348,8 @@ fn refine(
     start: TissueShift,
     free_omega: bool,
     samples: &[usize],
-) -> TissueShift {
+    iterations: usize,
+) -> (TissueShift, f64) {
     let unknowns = if free_omega { 5 } else { 4 };
     let with = |s: &TissueShift, k: usize, d: f64| {
         let mut s = *s;
@@ -318,13 +371,14 @@ fn refine(
     };
     let corner_n = 3.0 * p.noise_n;
     let mut shift = start;
-    let mut r = residuals(p, params, &shift, samples);
+    let mut harmonics = Harmonics::new();
+    let mut r = residuals(p, params, &shift, samples, &mut harmonics);
     let mut lambda = 1e-3;
-    for _ in 0..20 {
+    for _ in 0..iterations {
         let jac: Vec<Vec<f64>> = (0..unknowns)
             .map(|k| {
                 let h = step(k, &shift);
-                let rk = residuals(p, params, &with(&shift, k, h), samples);
+                let rk = residuals(p, params, &with(&shift, k, h), samples, &mut harmonics);
                 // d(model)/dθ = −d(residual)/dθ.
                 rk.iter().zip(&r).map(|(a, b)| (b - a) / h).collect()
             })
@@ -349,7 +403,7 @@ fn refine(
             for (k, d) in delta.iter().enumerate().take(unknowns) {
                 next = with(&next, k, *d);
             }
-            let rn = residuals(p, params, &next, samples);
+            let rn = residuals(p, params, &next, samples, &mut harmonics);
             let loss_next = huber(&rn, corner_n);
             if loss_next < loss {
                 improved = 1.0 - loss_next / loss > 1e-5;
@@ -362,7 +416,42 @@ fn refine(
             break;
         }
     }
-    shift
+    let loss = huber(&r, corner_n);
+    (shift, loss)
+}
+
+/// Most Levenberg–Marquardt iterations of a fit, and of a scouting one
+/// from each of several starts (the best of which is then fitted fully).
+const ITERATIONS: usize = 20;
+const SCOUT_ITERATIONS: usize = 5;
+
+/// The displacement fitted from the best of `first` and `others`, with
+/// its frequency: each is scouted for a few iterations, the best fitted.
+fn best_of(
+    p: &Prepared,
+    params: &TissueParams,
+    first: TissueShift,
+    others: impl Iterator<Item = TissueShift>,
+    samples: &[usize],
+) -> TissueShift {
+    let scout = |s: TissueShift| refine(p, params, s, true, samples, SCOUT_ITERATIONS);
+    let (best, _) = others.fold(scout(first), |best, s| {
+        let next = scout(s);
+        if next.1 < best.1 {
+            next
+        } else {
+            best
+        }
+    });
+    refine(
+        p,
+        params,
+        best,
+        true,
+        samples,
+        ITERATIONS - SCOUT_ITERATIONS,
+    )
+    .0
 }
 
 /// The median of the values outside trial j's fold.
@@ -379,12 +468,13 @@ fn median_outside(values: &[f64], j: usize, folds: usize) -> f64 {
 
 /// The tissue's displacement in every trial, cross-fitted: trial j's
 /// frequency is the median of the other folds' own estimates (trial j in
-/// fold j mod `folds`), its phase and shape its own. Without `start`, each
-/// trial begins from a grid of sinusoids at the other folds' periodogram
-/// frequency (the force is far from linear in the displacement: friction
-/// flips with the tissue's velocity, and a local search from nowhere
-/// stops at the wrong flip); with `start`, from a round before under
-/// another nominal.
+/// fold j mod `folds`), its phase and shape its own. Each trial's own fit
+/// is the best of several starts ([`best_of`]): the best sinusoids of a
+/// grid at the other folds' periodogram frequency (or at `start`'s, a
+/// round before under another nominal) and `start` itself. The force is
+/// far from linear in the displacement: friction flips with the tissue's
+/// velocity, and a local search from one start stops at the wrong flip
+/// (at seed 11, two trials of ten at a fifth of the true amplitude).
 pub fn fit_shifts(
     data: &[Prepared],
     params: &TissueParams,
@@ -404,11 +494,23 @@ pub fn fit_shifts(
         .iter()
         .enumerate()
         .map(|(j, p)| {
+            // Each round starts again from the grid as well as from the
+            // round before: under a better nominal, a trial stuck at the
+            // wrong flip of friction has a better start there.
+            let omega = start.map_or_else(
+                || periodogram_peak(&spectra, j, folds),
+                |s| s[j].omega_rad_s,
+            );
+            let mut grid = grid_starts(p, params, omega, &samples[j]).into_iter();
             let first = match start {
                 Some(s) => s[j],
-                None => grid_start(p, params, periodogram_peak(&spectra, j, folds), &samples[j]),
+                None => grid.next().unwrap_or(TissueShift {
+                    omega_rad_s: omega,
+                    t_ref_s: 0.0,
+                    coeffs_m: [0.0; 4],
+                }),
             };
-            refine(p, params, first, true, &samples[j])
+            best_of(p, params, first, grid, &samples[j])
         })
         .collect();
     let omegas: Vec<f64> = own.iter().map(|s| s.omega_rad_s).collect();
@@ -419,7 +521,7 @@ pub fn fit_shifts(
                 omega_rad_s: median_outside(&omegas, j, folds),
                 ..own[j]
             };
-            refine(p, params, at_fold, false, &samples[j])
+            refine(p, params, at_fold, false, &samples[j], ITERATIONS).0
         })
         .collect()
 }
