@@ -542,6 +542,22 @@ mod tests {
             let numeric = (shift.at(t + h).0 - shift.at(t - h).0) / (2.0 * h);
             assert!((numeric - shift.at(t).1).abs() < 1e-9, "at {t}");
         }
+        // The kept harmonics give the same displacement as computed afresh,
+        // for either of the last two frequencies asked.
+        let t_s: Vec<f64> = (0..50).map(|i| i as f64 * 0.2).collect();
+        let other = TissueShift {
+            omega_rad_s: 1.1,
+            ..shift
+        };
+        let mut kept = Harmonics::new();
+        for s in [shift, other, shift, other] {
+            let h = kept.follow(&s, &t_s).to_vec();
+            for (i, &t) in t_s.iter().enumerate() {
+                let (a, b) = (s.at_harmonics(h[i]), s.at(t));
+                assert!((a.0 - b.0).abs() < 1e-15 && (a.1 - b.1).abs() < 1e-15);
+            }
+        }
+        assert_eq!(kept.kept.len(), 2);
         // A pure sine of 1.2 mm has that half peak-to-peak amplitude.
         let sine = TissueShift {
             coeffs_m: [0.0012, 0.0, 0.0, 0.0],

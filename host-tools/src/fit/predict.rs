@@ -326,3 +326,27 @@ fn encoder_step_m(trial: &Trial) -> f64 {
         .fold(f64::INFINITY, f64::min)
         .min(1e-4)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_force_settles_the_side_the_encoder_cannot() {
+        // Moving: 1.05 N (friction + cutting); stopped: 0.11 N. Even odds
+        // from the encoder, 5 mN noise.
+        let sides = [1.05, 0.11];
+        let reads_moving = other_side_odds(0.5, 1.047, sides, 0.005);
+        let reads_stopped = other_side_odds(0.5, 0.113, sides, 0.005);
+        assert!(reads_moving < 1e-6, "{reads_moving}");
+        assert!(reads_stopped > 1.0 - 1e-6, "{reads_stopped}");
+        // Halfway between the two, the encoder's odds stand.
+        assert!((other_side_odds(0.3, 0.58, sides, 0.005) - 0.3).abs() < 1e-9);
+        // Without a noise figure the force is not read at all.
+        assert_eq!(other_side_odds(0.3, 0.113, sides, 0.0), 0.3);
+        // A force far from both (an effect the nominal lacks) still picks
+        // the nearer side, and the odds stay a probability.
+        let far = other_side_odds(0.5, -0.13, sides, 0.005);
+        assert!(far > 0.99 && far <= 1.0, "{far}");
+    }
+}
