@@ -70,11 +70,12 @@ fn is_broken_pipe(err: &anyhow::Error) -> bool {
 }
 
 /// Keep freed memory in the heap instead of handing it back to the
-/// kernel (by a trim, or by unmapping a large block). The diagnosis evaluates the model along a trial thousands
-/// of times, each evaluation allocating and freeing traces of ~100 kB;
-/// glibc trims the heap after each free and the next evaluation faults
-/// the pages back in, which was 45 % of a tissue-motion diagnosis (9.7 s
-/// → 5.3 s on one core).
+/// kernel (by a trim, or by unmapping a large block). The diagnosis
+/// evaluates the model along a trial tens of thousands of times, each
+/// evaluation allocating and freeing traces of ~100 kB; glibc trimmed the
+/// heap after each free and the next evaluation faulted the pages back in
+/// (a tissue-motion diagnosis: 9.7 s → 7.9 s on one core). A refused
+/// setting (mallopt returns 0) only costs that time, so it is not checked.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn keep_freed_heap() {
     // SAFETY: mallopt only sets an allocator tunable; called before any

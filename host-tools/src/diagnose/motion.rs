@@ -538,6 +538,11 @@ mod tests {
             coeffs_m: [0.0012, -0.0004, 0.0003, 0.0001],
         };
         for t in [0.0, 1.3, 2.9, 7.7] {
+            // The harmonics are those of the phase, the second by itself.
+            let th = shift.omega_rad_s * (t - shift.t_ref_s);
+            let (s2, c2) = (2.0 * th).sin_cos();
+            let h2 = harmonics(th);
+            assert!((h2[2] - s2).abs() < 1e-12 && (h2[3] - c2).abs() < 1e-12);
             let h = 1e-6;
             let numeric = (shift.at(t + h).0 - shift.at(t - h).0) / (2.0 * h);
             assert!((numeric - shift.at(t).1).abs() < 1e-9, "at {t}");
