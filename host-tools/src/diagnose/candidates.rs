@@ -9,7 +9,7 @@
 
 use std::f64::consts::TAU;
 
-use super::motion::moved_model;
+use super::motion::{harmonics_along, moved_model, TissueShift};
 use super::prepare::{Prepared, LOADING};
 
 /// One candidate effect.
@@ -303,23 +303,19 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let (f_hz, amplitude_m) = motion_at(g);
     let t0 = p.trial.t_s[0];
     let n = p.trial.len();
-    let w = TAU * f_hz;
-    // sin, cos of w·(t − t0) once; each phase rotates them.
-    let at_zero_phase: Vec<(f64, f64)> = p
-        .trial
-        .t_s
-        .iter()
-        .map(|t| (w * (t - t0)).sin_cos())
-        .collect();
+    let omega_rad_s = TAU * f_hz;
+    // The harmonics once; each phase is a pair of coefficients on them.
+    let harmonics = harmonics_along(omega_rad_s, t0, &p.trial.t_s);
     let mut best: Option<(f64, Vec<Vec<f64>>)> = None;
     for k in 0..MOTION_PHASES {
-        let (sp, cp) = (TAU * k as f64 / MOTION_PHASES as f64).sin_cos();
-        let shift = |i: usize| {
-            let (s0, c0) = at_zero_phase[i];
-            let (s, c) = (s0 * cp + c0 * sp, c0 * cp - s0 * sp);
-            (amplitude_m * s, amplitude_m * w * c)
+        let (s, c) = (TAU * k as f64 / MOTION_PHASES as f64).sin_cos();
+        // A·sin(ωt + φ) = A·cos φ·sin ωt + A·sin φ·cos ωt.
+        let sine = TissueShift {
+            omega_rad_s,
+            t_ref_s: t0,
+            coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
         };
-        let cols = moved_nominal(p, &shift);
+        let cols = moved_nominal(p, &|i| sine.at_harmonics(harmonics[i]));
         let sse: f64 = (0..n)
             .filter(|&i| p.phase[i] != LOADING)
             .map(|i| (p.residual_n[i] - cols[0][i]).powi(2))

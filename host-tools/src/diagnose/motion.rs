@@ -61,8 +61,9 @@ impl TissueShift {
         self.at_harmonics(harmonics(self.omega_rad_s * (t_s - self.t_ref_s)))
     }
 
-    /// [`Self::at`] from the harmonics' sines and cosines there.
-    fn at_harmonics(&self, [s1, c1, s2, c2]: [f64; 4]) -> (f64, f64) {
+    /// [`Self::at`] from the harmonics' sines and cosines there
+    /// ([`harmonics_along`]).
+    pub fn at_harmonics(&self, [s1, c1, s2, c2]: [f64; 4]) -> (f64, f64) {
         let w = self.omega_rad_s;
         let [a, b, c, d] = self.coeffs_m;
         (
@@ -114,6 +115,14 @@ fn harmonics(theta: f64) -> [f64; 4] {
     [s1, c1, 2.0 * s1 * c1, c1 * c1 - s1 * s1]
 }
 
+/// sin, cos of both harmonics of `omega_rad_s` at every time of `t_s`,
+/// phases referred to `t_ref_s`.
+pub fn harmonics_along(omega_rad_s: f64, t_ref_s: f64, t_s: &[f64]) -> Vec<[f64; 4]> {
+    t_s.iter()
+        .map(|t| harmonics(omega_rad_s * (t - t_ref_s)))
+        .collect()
+}
+
 /// The harmonics of a frequency at every sample of a trial, for the last
 /// two frequencies asked: `sin_cos` was a third of the fit's time, four of
 /// its five Jacobian columns hold the frequency, and a free frequency's
@@ -135,7 +144,7 @@ impl Harmonics {
         match self.kept.iter().position(|k| (k.0, k.1) == key) {
             Some(i) => self.kept[..=i].rotate_right(1),
             None => {
-                let at = t_s.iter().map(|t| harmonics(key.0 * (t - key.1))).collect();
+                let at = harmonics_along(key.0, key.1, t_s);
                 self.kept.insert(0, (key.0, key.1, at));
                 self.kept.truncate(2);
             }
