@@ -207,10 +207,8 @@ fn depth_cutting(p: &Prepared, _: f64) -> Vec<Vec<f64>> {
     let n = p.trial.len();
     let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
     for i in 0..n {
-        if p.cutting[i] {
-            a[i] = p.trial.x_m[i] - p.geometry.contact_x_m;
-            b[i] = 1.0;
-        }
+        a[i] = p.cutting[i] * (p.trial.x_m[i] - p.geometry.contact_x_m);
+        b[i] = p.cutting[i];
     }
     vec![a, b]
 }

@@ -119,7 +119,7 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
         (0..n).map(|i| depth(i).powi(2)).collect(),
     ];
     cols.extend((0..4).map(|k| p.friction_basis.iter().map(|b| b[k]).collect()));
-    cols.push(p.cutting.iter().map(|&c| f64::from(u8::from(c))).collect());
+    cols.push(p.cutting.clone());
     cols.extend(set.iter().flat_map(|(c, g)| (c.columns)(p, *g)));
     cols
 }

@@ -60,8 +60,10 @@ pub struct Prepared {
     /// Nominal friction term and needle length in tissue after puncture.
     pub friction_n: Vec<f64>,
     pub length_m: Vec<f64>,
-    /// The nominal cutting term is on.
-    pub cutting: Vec<bool>,
+    /// How much of the cutting force the nominal has on (0 to 1; between
+    /// where it mixes both sides of a jump, or cannot yet tell in a moving
+    /// tissue).
+    pub cutting: Vec<f64>,
     /// Interior structures the device's detector found: (sample index,
     /// peak position, wall force = fall of the force there).
     pub structures: Vec<(usize, f64, f64)>,
@@ -143,7 +145,11 @@ pub fn prepare(
         a_mps2,
         friction_n: parts.friction_n,
         length_m: parts.length_m,
-        cutting: parts.cutting_n.iter().map(|&c| c != 0.0).collect(),
+        cutting: parts
+            .cutting_n
+            .iter()
+            .map(|&c| c / params.cutting_force_n.max(f64::MIN_POSITIVE))
+            .collect(),
         structures,
         trial,
     }

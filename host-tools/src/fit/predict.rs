@@ -4,6 +4,7 @@
 
 use needle_holder::model::params::TissueParams;
 
+use super::cutting::{CuttingObserver, Odds};
 use super::jumps;
 use super::trial::TrialFit;
 use crate::trial::Trial;
@@ -76,6 +77,11 @@ pub fn predict_parts_at(
     let front_m = 3.0 * v.encoder_step_m;
     let mut cutting = true;
     let n = trial.len();
+    // In a moving tissue, with the force's noise known, the cutting state
+    // is followed from the force ([`CuttingObserver`]).
+    let observed = v.sd_mps > 0.0 && v.tissue_sd_m > 0.0 && v.force_sd_n > 0.0;
+    let mut observer =
+        CuttingObserver::at_puncture(trial.t_s.get(puncture).copied().unwrap_or(0.0));
     let mut p = Parts {
         stiffness_n: vec![0.0; n],
         friction_n: vec![0.0; n],
@@ -105,25 +111,35 @@ pub fn predict_parts_at(
             continue;
         }
         let here = Sliding::at(params, v.v_mps[i], l, last_sliding, last_basis);
-        let cut = |vi: f64, on: bool| {
-            let ahead = if on {
+        let t = trial.t_s[i];
+        let past_sd_m = observer.past_sd_m(t, front_m, v.sd_mps, v.tissue_sd_m);
+        let odds_at = |vi: f64| Odds {
+            v_over_band_mps: vi - params.half_band_mps,
+            v_sd_mps: v.sd_mps,
+            past_m: x - deepest,
+            past_sd_m,
+        };
+        let ahead = |on: bool| {
+            if on {
                 x >= deepest - front_m
             } else {
                 x > deepest + front_m
-            };
-            let on = ahead && vi >= params.half_band_mps;
-            let force = if ahead && v.sd_mps > 0.0 {
+            }
+        };
+        let cut = |vi: f64, on: bool| {
+            if observed {
+                observer.predict(odds_at(vi))
+            } else if v.sd_mps > 0.0 && ahead(on) {
                 // Known only to sd_mps, the velocity cuts as likely as it
                 // is above the band: a tissue moving along with the
                 // needle holds it near there for many samples.
-                let above = jumps::normal_cdf((vi - params.half_band_mps) / v.sd_mps);
-                params.cutting_force_n * above
+                jumps::normal_cdf((vi - params.half_band_mps) / v.sd_mps)
             } else {
-                params.cutting_n(vi, on)
-            };
-            (on, force)
+                f64::from(u8::from(ahead(on) && vi >= params.half_band_mps))
+            }
         };
-        let (on, cutting_n) = cut(v.v_mps[i], cutting);
+        let odds = cut(v.v_mps[i], cutting);
+        let cutting_n = params.cutting_force_n * odds;
         (p.friction_n[i], p.friction_basis[i], p.cutting_n[i]) =
             (here.friction_n, here.basis, cutting_n);
         // Next to a jump placed to within a fraction of a sample, the
@@ -131,7 +147,7 @@ pub fn predict_parts_at(
         // expected one over both.
         if let Some(&(_, v_other, prior)) = v.uncertain.iter().find(|u| u.0 == i) {
             let other = Sliding::at(params, v_other, l, last_sliding, last_basis);
-            let other_cutting_n = cut(v_other, cutting).1;
+            let other_cutting_n = params.cutting_force_n * cut(v_other, cutting);
             let w = other_side_odds(
                 prior,
                 trial.f_n[i],
@@ -149,6 +165,19 @@ pub fn predict_parts_at(
             p.cutting_n[i] = mix(cutting_n, other_cutting_n);
             p.other_side.push((i, w));
         }
+        let on = if observed {
+            let predicted = p.cutting_n[i] / params.cutting_force_n.max(f64::MIN_POSITIVE);
+            let friction_n = p.friction_n[i];
+            observer.correct(
+                odds_at(v.v_mps[i]),
+                predicted,
+                trial.f_n[i],
+                [friction_n, friction_n + params.cutting_force_n],
+                v.force_sd_n,
+            )
+        } else {
+            ahead(cutting) && v.v_mps[i] >= params.half_band_mps
+        };
         (last_basis, last_sliding, cutting) = (here.basis, here.last_sliding, on);
         p.length_m[i] = l;
         // The front follows the tip while it cuts and while it is not
@@ -156,8 +185,9 @@ pub fn predict_parts_at(
         // reading is the true deepest point), but not while it creeps
         // forward uncut by less than the jitter a sample: it would never
         // get past the front (a tissue moving along with the needle).
-        if on || v.v_mps[i] <= 0.0 {
-            deepest = deepest.max(x);
+        if (on || v.v_mps[i] <= 0.0) && x > deepest {
+            deepest = x;
+            observer.advanced(t);
         }
     }
     p.v_mps = v.v_mps;
@@ -170,7 +200,7 @@ pub fn predict_parts_at(
 /// at 3 mm/s to a third of a 2 ms sample; the load cell shows the whole
 /// cutting force come or go on the very sample, a step of hundreds of
 /// noise floors. Gaussian noise of `sd_n`; 0 keeps the prior.
-fn other_side_odds(prior: f64, f_n: f64, model_n: [f64; 2], sd_n: f64) -> f64 {
+pub(super) fn other_side_odds(prior: f64, f_n: f64, model_n: [f64; 2], sd_n: f64) -> f64 {
     if sd_n <= 0.0 {
         return prior;
     }
@@ -291,6 +321,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
         jumps,
         encoder_step_m: step_m,
         sd_mps: 0.0,
+        tissue_sd_m: 0.0,
         force_sd_n: 0.0,
     }
 }
@@ -310,6 +341,11 @@ pub struct NeedleVelocity {
     /// How well `v_mps` is known where that matters (relative to a moving
     /// tissue, whose velocity is itself estimated), m/s; 0 for exact.
     pub sd_mps: f64,
+    /// How well the needle's position relative to the tissue is known
+    /// (a moving tissue's fitted displacement), m; 0 for exact. With
+    /// `sd_mps` and `force_sd_n`, the cutting state is followed from the
+    /// force where these cannot tell it ([`CuttingObserver`]).
+    pub tissue_sd_m: f64,
     /// The load cell's noise, N, when the measured force is to settle which
     /// side of a jump an uncertain sample lies on; 0 leaves it to the
     /// encoder (a model drawn over data, not yet fitted to it).
