@@ -104,21 +104,28 @@ impl CuttingObserver {
     pub fn predict(&self, now: Odds) -> f64 {
         let phi = normal_cdf;
         let ([mz, az], [last_mz, last_az]) = (now.z(&now), now.z(&self.envelope));
-        let (m, a) = (phi(mz), phi(az));
-        let was_moving = phi(last_mz);
-        // One unknown offset each: still moving iff above both thresholds.
-        let kept_moving = phi(mz.min(last_mz));
+        let (m, was_moving) = (phi(mz), phi(last_mz));
+        // One unknown offset each: still moving iff above both thresholds
+        // (and Φ(min(a, b)) = min(Φ(a), Φ(b))).
+        let kept_moving = m.min(was_moving);
         let stays = if was_moving > TINY {
             kept_moving / was_moving
         } else {
             m
         };
-        let was_cutting = was_moving * phi(last_az);
-        let kept_both = kept_moving * phi(az.min(last_az));
-        let starts = if 1.0 - was_cutting > TINY {
-            ((m * a - kept_both) / (1.0 - was_cutting)).clamp(0.0, 1.0)
+        // Mostly the state is sure; then the other branch is not needed
+        // (this runs for every sample of every evaluation).
+        let starts = if self.seen > 1.0 - TINY {
+            0.0
         } else {
-            m * a
+            let (a, was_ahead) = (phi(az), phi(last_az));
+            let was_cutting = was_moving * was_ahead;
+            let kept_both = kept_moving * a.min(was_ahead);
+            if 1.0 - was_cutting > TINY {
+                ((m * a - kept_both) / (1.0 - was_cutting)).clamp(0.0, 1.0)
+            } else {
+                m * a
+            }
         };
         // Never quite sure: where the model has the switch wrong, the
         // force can still correct the state.

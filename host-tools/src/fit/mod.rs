@@ -122,10 +122,11 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
     };
     let (poly_rms, poly_r2) = stats(|t| t.polynomial);
     let (rat_rms, rat_r2) = stats(|t| t.rational);
-    let better = if poly_rms <= rat_rms || !rational_mean_holds(&all) {
-        "polynomial"
-    } else {
+    // A NaN rms (a trial the rational law could not fit) is no win.
+    let better = if rat_rms < poly_rms && rational_mean_holds(&all) {
         "rational"
+    } else {
+        "polynomial"
     };
     json!({
         "trials": all.len(),
