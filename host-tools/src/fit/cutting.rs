@@ -34,8 +34,6 @@ pub struct CuttingObserver {
     /// How likely the tip cut at the last sample, given the forces up to
     /// and including it.
     seen: f64,
-    /// Whether it cut at the last sample, as the forces show it.
-    cut: bool,
     /// The [`Odds`] that would have switched it since it last switched:
     /// while cutting, the least of each; while not, the greatest. Given
     /// that it has not switched, the unknown offsets lie beyond them (the
@@ -85,7 +83,6 @@ impl CuttingObserver {
     pub fn at_puncture(t_s: f64) -> Self {
         Self {
             seen: 1.0,
-            cut: true,
             envelope: Odds::SURE,
             deepest_t_s: t_s,
         }
@@ -143,10 +140,11 @@ impl CuttingObserver {
         model_n: [f64; 2],
         sd_n: f64,
     ) -> bool {
+        let was_cut = self.seen > 0.5;
         self.seen = other_side_odds(predicted, f_n, model_n, sd_n);
         let cut = self.seen > 0.5;
         let e = &mut self.envelope;
-        if cut != self.cut {
+        if cut != was_cut {
             *e = now;
         } else if cut {
             e.v_over_band_mps = e.v_over_band_mps.min(now.v_over_band_mps);
@@ -155,7 +153,6 @@ impl CuttingObserver {
             e.v_over_band_mps = e.v_over_band_mps.max(now.v_over_band_mps);
             e.past_m = e.past_m.max(now.past_m);
         }
-        self.cut = cut;
         cut
     }
 

@@ -128,18 +128,18 @@ pub fn predict_parts_at(
         };
         let cut = |vi: f64, on: bool| {
             if observed {
-                observer.predict(odds_at(vi))
+                params.cutting_force_n * observer.predict(odds_at(vi))
             } else if v.sd_mps > 0.0 && ahead(on) {
                 // Known only to sd_mps, the velocity cuts as likely as it
                 // is above the band: a tissue moving along with the
                 // needle holds it near there for many samples.
-                jumps::normal_cdf((vi - params.half_band_mps) / v.sd_mps)
+                let above = jumps::normal_cdf((vi - params.half_band_mps) / v.sd_mps);
+                params.cutting_force_n * above
             } else {
-                f64::from(u8::from(ahead(on) && vi >= params.half_band_mps))
+                params.cutting_n(vi, ahead(on))
             }
         };
-        let odds = cut(v.v_mps[i], cutting);
-        let cutting_n = params.cutting_force_n * odds;
+        let cutting_n = cut(v.v_mps[i], cutting);
         (p.friction_n[i], p.friction_basis[i], p.cutting_n[i]) =
             (here.friction_n, here.basis, cutting_n);
         // Next to a jump placed to within a fraction of a sample, the
@@ -147,7 +147,7 @@ pub fn predict_parts_at(
         // expected one over both.
         if let Some(&(_, v_other, prior)) = v.uncertain.iter().find(|u| u.0 == i) {
             let other = Sliding::at(params, v_other, l, last_sliding, last_basis);
-            let other_cutting_n = params.cutting_force_n * cut(v_other, cutting);
+            let other_cutting_n = cut(v_other, cutting);
             let w = other_side_odds(
                 prior,
                 trial.f_n[i],
