@@ -63,7 +63,7 @@ fn each_effect_and_none_is_named_with_a_real_shrink() {
     let cases = [
         ("none", 0.0, 1.5),
         ("viscoelasticity", 0.5, 1.5),
-        ("rate_dependent_friction", 0.03, 1.5),
+        ("rate_dependent_friction", 0.1, 1.5),
         ("presliding_hysteresis", 0.7, 1.5),
         ("internal_structures", 0.6, 1.5),
         ("depth_dependent_cutting", 0.6, 1.5),
@@ -120,10 +120,11 @@ fn another_form_of_the_physics_is_still_named() {
     // walls, saturating depth dependence, a drive with finite
     // acceleration, thermally settling drift (sim::Form::Alternate).
     // Non-sinusoidal breathing at a random phase. Logarithmic rate
-    // dependence is not found yet (README, "Diagnosis").
+    // strengthening.
     for effect in [
         "none",
         "viscoelasticity",
+        "rate_dependent_friction",
         "presliding_hysteresis",
         "internal_structures",
         "depth_dependent_cutting",

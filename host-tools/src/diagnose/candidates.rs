@@ -148,15 +148,27 @@ fn maxwell(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     vec![col]
 }
 
-/// Sliding damping l·v·(|v|/v_ref)^q beside l·v itself.
+/// Sliding damping l·v·(|v|/v_ref)^q beside l·v itself. At rest the
+/// nominal's Karnopp friction holds the sliding force it had when the
+/// needle stopped, and so do these (a dwell after a fast insertion holds
+/// that speed's damping).
 fn rate_friction(p: &Prepared, q: f64) -> Vec<Vec<f64>> {
     let n = p.trial.len();
     let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+    let mut held = (0.0, 0.0);
     for i in 0..n {
         let (v, l) = (p.velocity.v_mps[i], p.length_m[i]);
-        if l > 0.0 && v.abs() > 0.0005 {
-            a[i] = l * v * (v.abs() / 0.003).powf(q);
-            b[i] = l * v;
+        if l <= 0.0 {
+            held = (0.0, 0.0);
+        } else if v.abs() >= p.params.half_band_mps {
+            held = if v.abs() > 0.0005 {
+                (l * v * (v.abs() / 0.003).powf(q), l * v)
+            } else {
+                (0.0, 0.0)
+            };
+            (a[i], b[i]) = held;
+        } else if p.friction_basis[i] != [0.0; 4] {
+            (a[i], b[i]) = held;
         }
     }
     vec![a, b]
