@@ -16,7 +16,7 @@
 pub mod candidates;
 pub mod crossval;
 mod figure;
-mod motion;
+pub mod motion;
 pub mod prepare;
 mod report;
 
@@ -486,21 +486,7 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
     let mut last: Option<(Scored, Vec<Prepared>)> = None;
     for _ in 0..TISSUE_FRAME_ROUNDS {
         let found = motion::fit_shifts(data, &params, k, shifts.as_deref());
-        let refits: Vec<Refit> = data
-            .iter()
-            .zip(&found)
-            .map(|(p, s)| {
-                let moved = s.apply(&p.trial);
-                let geometry = fit_trial(&moved).ok()?;
-                Some(Refit {
-                    kept: moved.clone(),
-                    seen: moved,
-                    geometry,
-                    velocity: s.velocity_in_tissue(&p.velocity, &p.trial.t_s),
-                })
-            })
-            .collect::<Option<_>>()?;
-        let prepared = nominal_again(data, refits, refit_params).ok()?;
+        let prepared = moved_into(data, &found, refit_params)?;
         params = prepared[0].params;
         let scored = score(&prepared, &[], None);
         let done = last
@@ -513,6 +499,42 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
         }
     }
     last
+}
+
+/// Each trial moved into the tissue's frame by its `shifts`, and the
+/// nominal found again there. `None` when a moved trial no longer fits.
+fn moved_into(
+    data: &[Prepared],
+    shifts: &[motion::TissueShift],
+    refit_params: bool,
+) -> Option<Vec<Prepared>> {
+    let refits: Vec<Refit> = data
+        .iter()
+        .zip(shifts)
+        .map(|(p, s)| {
+            let moved = s.apply(&p.trial);
+            let geometry = fit_trial(&moved).ok()?;
+            Some(Refit {
+                kept: moved.clone(),
+                seen: moved,
+                geometry,
+                velocity: s.velocity_in_tissue(&p.velocity, &p.trial.t_s),
+            })
+        })
+        .collect::<Option<_>>()?;
+    nominal_again(data, refits, refit_params).ok()
+}
+
+/// The held-out RMS of the nominal found again in the tissue's frame
+/// with the tissue's displacement given rather than fitted (a tracker's,
+/// or a simulation's truth): how much of what tissue motion leaves is the
+/// fitted displacement's error. `None` when a moved trial no longer fits.
+pub fn heldout_rms_with_displacement(
+    data: &[Prepared],
+    shifts: &[motion::TissueShift],
+) -> Option<f64> {
+    let moved = moved_into(data, shifts, true)?;
+    Some(score(&moved, &[], None).rms())
 }
 
 /// `needle fit`'s estimates over per-trial fits, as tissue parameters.
