@@ -137,17 +137,29 @@ fn with_no_effect_the_gap_left_is_near_the_noise_floor() {
 
 #[test]
 fn both_effects_of_a_pair_are_named() {
-    for pair in [
-        ["sensor_drift", "internal_structures"],
-        ["holder_inertia", "depth_dependent_cutting"],
+    // At seed 3 sensor_drift shrinks most beside viscoelasticity, but not
+    // significantly (t = 3.0 under its residual); viscoelasticity is
+    // significant, and drift on top of it.
+    for (pair, seed) in [
+        (["sensor_drift", "internal_structures"], 7),
+        (["holder_inertia", "depth_dependent_cutting"], 7),
+        (["viscoelasticity", "sensor_drift"], 3),
     ] {
-        let out = diagnosis(&pair.join(","), Form::Standard, 7);
+        let out = diagnosis(&pair.join(","), Form::Standard, seed);
         let v = &out["verdict"];
         let mut named = [v["effect"].as_str().unwrap(), v["second"].as_str().unwrap()];
         named.sort();
         let mut want = pair;
         want.sort();
         assert_eq!(named, want, "{v}");
+        // (Beside drift at seed 3 the relaxation time viscoelasticity is
+        // named with is off, and 3.2 noise floors are left: README.)
+        let (after, noise) = (num(&v["heldout_rms_after_n"]), num(&out["noise_floor_n"]));
+        let most = if seed == 7 { 1.5 } else { 3.5 };
+        assert!(
+            after <= most * noise,
+            "{pair:?}: {after} N left, noise {noise} N"
+        );
     }
 }
 

@@ -571,7 +571,10 @@ pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
         .collect();
     ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
     let significant = |shrink: f64, t: f64| shrink >= MIN_SHRINK && t >= MIN_T;
-    let first = ranked.first().filter(|r| significant(r.2, r.3));
+    // The most shrink among the significant: a larger shrink that does
+    // not hold across the withheld trials (another effect's residual
+    // beside it) does not hide a smaller one that does.
+    let first = ranked.iter().find(|r| significant(r.2, r.3));
     let mut second_name = "none";
     let mut after = None;
     if let Some((ci, s, ..)) = first {
@@ -586,9 +589,10 @@ pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
                 let (shrink, t) = improvement(&alone, &with);
                 (cj, with, shrink, t)
             })
+            .filter(|b| significant(b.2, b.3))
             .max_by(|a, b| a.2.total_cmp(&b.2));
         after = Some(alone);
-        if let Some((cj, with, ..)) = best_second.filter(|b| significant(b.2, b.3)) {
+        if let Some((cj, with, ..)) = best_second {
             second_name = CANDIDATES[cj].effect;
             let mut both = fixed.clone();
             both.push((&CANDIDATES[cj], with.grid_value));
