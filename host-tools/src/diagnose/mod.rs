@@ -16,9 +16,11 @@
 pub mod candidates;
 pub mod crossval;
 mod figure;
-pub mod motion;
+mod motion;
 pub mod prepare;
 mod report;
+
+pub use motion::TissueShift;
 
 use std::path::{Path, PathBuf};
 
@@ -505,7 +507,7 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
 /// nominal found again there. `None` when a moved trial no longer fits.
 fn moved_into(
     data: &[Prepared],
-    shifts: &[motion::TissueShift],
+    shifts: &[TissueShift],
     refit_params: bool,
 ) -> Option<Vec<Prepared>> {
     let refits: Vec<Refit> = data
@@ -529,10 +531,7 @@ fn moved_into(
 /// with the tissue's displacement given rather than fitted (a tracker's,
 /// or a simulation's truth): how much of what tissue motion leaves is the
 /// fitted displacement's error. `None` when a moved trial no longer fits.
-pub fn heldout_rms_with_displacement(
-    data: &[Prepared],
-    shifts: &[motion::TissueShift],
-) -> Option<f64> {
+pub fn heldout_rms_with_displacement(data: &[Prepared], shifts: &[TissueShift]) -> Option<f64> {
     let moved = moved_into(data, shifts, true)?;
     Some(score(&moved, &[], None).rms())
 }
