@@ -55,9 +55,11 @@ pub fn repo_root() -> PathBuf {
         .unwrap_or_default()
 }
 
-/// Build the firmware image for `board`; returns the ELF path.
+/// Build the firmware image for `board`; returns the ELF path. Installs the
+/// board's Rust target first when the toolchain lacks it.
 pub fn build(board: Board) -> Result<PathBuf> {
     let root = repo_root();
+    ensure_target(&root, board.target())?;
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(&root)
@@ -85,6 +87,64 @@ pub fn build(board: Board) -> Result<PathBuf> {
         bail!("firmware build succeeded but {} is missing", elf.display());
     }
     Ok(elf)
+}
+
+/// What to do about a Rust target, given `rustup target list --installed`.
+#[derive(Debug, PartialEq, Eq)]
+pub enum TargetAction {
+    /// The toolchain has it.
+    Present,
+    /// It must be added with `rustup target add`.
+    Install,
+}
+
+/// Decide from rustup's list of installed targets (one triple a line).
+pub fn target_action(installed: &str, target: &str) -> TargetAction {
+    if installed.lines().any(|line| line.trim() == target) {
+        TargetAction::Present
+    } else {
+        TargetAction::Install
+    }
+}
+
+/// Make sure the toolchain that builds the firmware (the one
+/// `rust-toolchain.toml` pins, run from `root`) has `target`. rustup only
+/// applies that file's `targets` when it installs the toolchain itself, so
+/// a machine that already had the toolchain lacks the thumb targets.
+pub fn ensure_target(root: &Path, target: &str) -> Result<()> {
+    ensure_target_using(Path::new("rustup"), root, target)
+}
+
+/// [`ensure_target`] with another rustup program (the tests use a stand-in).
+pub fn ensure_target_using(rustup: &Path, root: &Path, target: &str) -> Result<()> {
+    let listed = Command::new(rustup)
+        .current_dir(root)
+        .args(["target", "list", "--installed"])
+        .output();
+    let installed = match listed {
+        Ok(out) if out.status.success() => String::from_utf8_lossy(&out.stdout).into_owned(),
+        // No rustup: cargo may still have the target (a distro toolchain);
+        // the build says so if not, and this says what to run.
+        _ => {
+            eprintln!(
+                "needle: cannot ask rustup whether {target} is installed; if the build fails, run `rustup target add {target}`"
+            );
+            return Ok(());
+        }
+    };
+    if target_action(&installed, target) == TargetAction::Present {
+        return Ok(());
+    }
+    eprintln!("needle: the Rust target {target} is missing: installing it with `rustup target add {target}`");
+    let status = Command::new(rustup)
+        .current_dir(root)
+        .args(["target", "add", target])
+        .status()
+        .context("cannot run rustup")?;
+    if !status.success() {
+        bail!("`rustup target add {target}` failed ({status}); run it by hand, then try again");
+    }
+    Ok(())
 }
 
 /// Make sure `qemu-system-arm` is on PATH, installing Debian's package if not.
