@@ -48,6 +48,9 @@ pub const FIRMWARE_ASSIST: AssistModes = {
     m
 };
 
+/// The fastest the needle drive moves, nm/s (100 mm/s).
+const MAX_DRIVE_NM_PER_S: i64 = 100_000_000;
+
 /// The firmware's default: liver 1 of the paper, converted at compile time.
 pub const DEFAULT: DeviceConfig = match DeviceConfig::for_tissue(&LIVER1) {
     Ok(config) => config,
@@ -87,9 +90,31 @@ impl DeviceConfig {
         self
     }
 
-    /// The same configuration at another sample rate.
+    /// The same configuration at another sample rate. Below 500 Hz the
+    /// encoder's jump limit grows so that it still means the drive's
+    /// 100 mm/s (a 100 Hz rig moves up to 1 mm between samples); it never
+    /// shrinks.
     pub const fn with_sample_rate(mut self, sample_rate_hz: u16) -> Self {
         self.velocity.sample_rate_hz = sample_rate_hz;
+        self.detect = self.detect.at_sample_rate(sample_rate_hz);
+        let per_sample = MAX_DRIVE_NM_PER_S
+            / (if sample_rate_hz == 0 {
+                1
+            } else {
+                sample_rate_hz as i64
+            })
+            / (if self.encoder.nm_per_count <= 0 {
+                1
+            } else {
+                self.encoder.nm_per_count as i64
+            });
+        if per_sample > self.encoder.max_counts_per_sample as i64 {
+            self.encoder.max_counts_per_sample = if per_sample > 16_000 {
+                16_000
+            } else {
+                per_sample as u16
+            };
+        }
         self
     }
 }

@@ -115,7 +115,9 @@ impl DeviceConfig {
         };
         state.faults_seen = state.faults_seen.union(faults);
         let placed = event.map(|e| (e.kind, e.x));
-        self.model.phase.update(&mut state.phase, placed, x, v);
+        self.model
+            .phase
+            .update(&mut state.phase, placed, x, v, force);
         let model = self.model.expected(&mut state.model, &state.phase, x, v);
         let phase = state.phase.phase;
         let sample = Sample {

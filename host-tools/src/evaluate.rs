@@ -68,6 +68,7 @@ pub fn cell(
         sensor,
         through: true,
         form: crate::sim::Form::Standard,
+        rig: crate::sim::Rig::default(),
     }
     .write(dir.path())?;
     let out = crate::detect::detect_dataset(dir.path(), &DeviceConfig::default())?;

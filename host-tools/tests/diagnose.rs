@@ -27,6 +27,7 @@ fn simulate(dir: &Path, effect_list: &str, form: Form, seed: u64) {
         sensor: SENSOR,
         through: false,
         form,
+        rig: Default::default(),
     }
     .write(dir)
     .unwrap();

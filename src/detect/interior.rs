@@ -5,8 +5,9 @@
 //!   following baseline, built over at least [`STRUCTURE_RISE_SAMPLES`],
 //!   then a fall of at least `structure_drop` below the highest of the last
 //!   [`SHARP_SAMPLES`] — a vessel wall loading up and giving way. The
-//!   baseline follows the force upwards with a time constant of 2^10
-//!   samples, so the slow growth of friction with depth is not a wall.
+//!   baseline follows the force upwards with a time constant of about 2 s
+//!   (2^`baseline_shift` samples), so the slow growth of friction with
+//!   depth is not a wall.
 //! - exit: at the cutting front, a fall of at least `exit_drop` (half the
 //!   cutting force) that takes the force that far below the baseline: the
 //!   tip left the tissue, so cutting stopped (the paper's air "control
@@ -17,6 +18,13 @@
 //! happened with the force still down: when the robot stops, cutting and
 //! sliding friction vanish in one sample too, and that is neither. A
 //! sample that is not advancing restarts the search.
+//!
+//! A fall that comes after a wall's rise is a structure wherever it ends: a
+//! membrane below the capsule (skin on muscle) gives way to a softer layer,
+//! under the level the force started from, and that is not the tip leaving
+//! the tissue. And after a puncture the search starts only once the
+//! capsule's own drop is over (two samples or more at 100 Hz): the puncture
+//! fires on the drop's first sample, and the rest of it is no exit.
 
 use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::protocol::{Event, EventKind};
@@ -26,8 +34,6 @@ use crate::units::{MicroNewtons, Nanometres};
 pub const SHARP_SAMPLES: usize = 3;
 /// Samples a structure's rise must take at least.
 pub const STRUCTURE_RISE_SAMPLES: u32 = 10;
-/// The baseline follows the force upwards by 2^-this per sample.
-pub const BASELINE_SHIFT: u32 = 10;
 
 /// A fall waiting for the encoder to move on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -50,6 +56,8 @@ pub struct InteriorState {
     /// Forces of the last samples while advancing, newest first.
     recent_force: [MicroNewtons; SHARP_SAMPLES],
     pending: Option<Pending>,
+    /// A puncture's drop is still going on.
+    settling: bool,
 }
 
 impl InteriorState {
@@ -63,12 +71,26 @@ impl InteriorState {
             peak_index: s.index,
             recent_force: [s.force; SHARP_SAMPLES],
             pending: None,
+            settling: false,
         };
+    }
+
+    /// Start afresh at a puncture, waiting for its drop to end.
+    pub fn after_puncture(&mut self, s: DetectInput) {
+        self.restart(s);
+        self.settling = true;
     }
 }
 
 /// One sample after puncture, with the needle advancing.
 pub fn update(c: &DetectConfig, st: &mut InteriorState, s: DetectInput) -> Option<Event> {
+    if st.settling {
+        // Still falling by a sharp step per sample: the drop goes on.
+        let falling = st.recent_force[0].sub(s.force).0 >= c.structure_drop.0 / 2;
+        st.restart(s);
+        st.settling = falling;
+        return None;
+    }
     if let Some(p) = st.pending.take() {
         if s.force <= p.ceiling {
             if s.x > p.x {
@@ -86,7 +108,7 @@ pub fn update(c: &DetectConfig, st: &mut InteriorState, s: DetectInput) -> Optio
         st.pending = Some(p);
         return None;
     }
-    follow(st, s);
+    follow(c, st, s);
     None
 }
 
@@ -95,7 +117,13 @@ fn fall(c: &DetectConfig, st: &InteriorState, s: DetectInput) -> Option<Pending>
     let before = st.recent_force.iter().copied().max().unwrap_or(s.force);
     let fall = before.sub(s.force);
     let below_baseline = st.baseline.sub(s.force);
-    let exit = s.at_cutting_front && fall >= c.exit_drop && below_baseline.0 >= c.exit_drop.0 / 2;
+    let rise = before.sub(st.baseline);
+    let rise_samples = st.peak_index.wrapping_sub(st.baseline_index);
+    let after_rise = rise >= c.structure_rise && rise_samples >= STRUCTURE_RISE_SAMPLES;
+    let exit = s.at_cutting_front
+        && !after_rise
+        && fall >= c.exit_drop
+        && below_baseline.0 >= c.exit_drop.0 / 2;
     if exit {
         let confidence = confidence_permille(fall, c.exit_drop);
         return Some(Pending {
@@ -104,11 +132,7 @@ fn fall(c: &DetectConfig, st: &InteriorState, s: DetectInput) -> Option<Pending>
             ceiling: before.sub(MicroNewtons(c.exit_drop.0 / 2)),
         });
     }
-    let rise = before.sub(st.baseline);
-    let rise_samples = st.peak_index.wrapping_sub(st.baseline_index);
-    let wall = rise >= c.structure_rise
-        && fall >= c.structure_drop
-        && rise_samples >= STRUCTURE_RISE_SAMPLES;
+    let wall = after_rise && fall >= c.structure_drop;
     wall.then(|| {
         let confidence = confidence_permille(fall, c.structure_drop);
         Pending {
@@ -126,14 +150,17 @@ fn fall(c: &DetectConfig, st: &InteriorState, s: DetectInput) -> Option<Pending>
 }
 
 /// No fall: move the baseline, the peak and the recent forces on.
-fn follow(st: &mut InteriorState, s: DetectInput) {
+fn follow(c: &DetectConfig, st: &mut InteriorState, s: DetectInput) {
     if s.force < st.baseline {
         st.restart(s);
         return;
     }
     // The baseline creeps up towards the force (rounding up, so it moves).
     let gap = s.force.sub(st.baseline).0;
-    st.baseline.0 += (gap + (1 << BASELINE_SHIFT) - 1) >> BASELINE_SHIFT;
+    // In i64: a gap near i32::MAX plus the rounding would overflow i32.
+    let shift = c.baseline_shift.min(30);
+    let step = (i64::from(gap) + (1i64 << shift) - 1) >> shift;
+    st.baseline = st.baseline.add(MicroNewtons(step as i32));
     if s.force > st.peak_force {
         st.peak_force = s.force;
         st.peak_x = s.x;

@@ -42,6 +42,10 @@ pub struct DetectConfig {
     /// Rise of the force, while loading the capsule with the encoder
     /// standing still, that means the encoder is stuck.
     pub stuck_rise: MicroNewtons,
+    /// The interior baseline follows the force upwards by 2^-this per
+    /// sample: a time constant of about 2 s at any sample rate
+    /// ([`DetectConfig::at_sample_rate`]).
+    pub baseline_shift: u32,
 }
 
 impl DetectConfig {
@@ -49,7 +53,11 @@ impl DetectConfig {
     /// once the force has peaked above 30 % of the expected puncture force
     /// and fallen by half the expected drop; exit at half the cutting
     /// force; a stuck encoder once the force has risen by a quarter of the
-    /// puncture force without the encoder moving.
+    /// puncture force without the encoder moving; a structure's rise and
+    /// fall at 2 and 1.6 times the contact force (0.1 N and 80 mN for
+    /// liver's 50 mN), since both must stand as far above the noise as a
+    /// touch does — `needle fit --toml` sets the contact force from the
+    /// recording's own noise. Baseline for 500 Hz.
     pub const fn for_tissue(p: &TissueParams) -> Self {
         let contact_force = MicroNewtons::from_n(p.contact_force_n);
         Self {
@@ -59,11 +67,28 @@ impl DetectConfig {
             puncture_drop: MicroNewtons::from_n(0.5 * (p.puncture_force_n - p.puncture_drop_to_n)),
             // Vessel walls in liver give way at 0.15 N and more (paper §3,
             // Figs. 2–3); 10–20× the 5–10 mN noise this is tuned for.
-            structure_rise: MicroNewtons(100_000),
-            structure_drop: MicroNewtons(80_000),
+            structure_rise: MicroNewtons::from_n(2.0 * p.contact_force_n),
+            structure_drop: MicroNewtons::from_n(1.6 * p.contact_force_n),
             exit_drop: MicroNewtons::from_n(0.5 * p.cutting_force_n),
             stuck_rise: MicroNewtons::from_n(0.25 * p.puncture_force_n),
+            baseline_shift: Self::baseline_shift_for(500),
         }
+    }
+
+    /// The same thresholds for a recording at `sample_rate_hz`.
+    pub const fn at_sample_rate(mut self, sample_rate_hz: u16) -> Self {
+        self.baseline_shift = Self::baseline_shift_for(sample_rate_hz);
+        self
+    }
+
+    /// The least shift whose time constant, 2^shift samples, reaches 2 s.
+    const fn baseline_shift_for(sample_rate_hz: u16) -> u32 {
+        let samples = 2 * sample_rate_hz as u32;
+        let mut shift = 0;
+        while shift < 16 && (1u32 << shift) < samples {
+            shift += 1;
+        }
+        shift
     }
 }
 
@@ -120,7 +145,7 @@ impl DetectConfig {
             Phase::Loading => {
                 let event = puncture::update(self, &mut state.puncture, s);
                 if event.is_some() {
-                    state.interior.restart(s);
+                    state.interior.after_puncture(s);
                 }
                 (event, Faults::NONE)
             }

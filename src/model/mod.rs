@@ -64,6 +64,7 @@ impl ModelConfig {
             phase: PhaseConfig {
                 relaxation: FractionQ16::from_ratio(p.relaxation),
                 withdrawal_speed: WITHDRAWAL_SPEED,
+                hold_force: MicroNewtons::from_n(p.contact_force_n),
             },
         })
     }

@@ -2,17 +2,25 @@
 //! paper's Figure 4):
 //!
 //! ```text
-//! out ──contact (x_s1)──> loading ──puncture (x_s2)──> inserted ⇄ withdrawal ──x ≤ x_s3──> out
+//! out ──contact (x_s1)──> loading ──puncture (x_s2)──> inserted ⇄ withdrawal ──x ≤ x_s3, let go──> out
 //!  ^                         │ x < x_s1 (backed off)                  (v ≷ ∓ withdrawal speed)
 //!  └─────────────────────────┘
 //! ```
 //!
 //! At puncture the surface relaxes to x_s3 = x_s1 + ρ·(x_s2 − x_s1), and
 //! the length of needle in tissue is l = x − x_s3 from then on.
+//!
+//! A withdrawing needle drags the tissue out with it: real recordings pull
+//! on the needle until 1.5–9 mm *before* x_s1 (DESIGN.md §1). So behind
+//! x_s3 a withdrawal only ends once the tissue lets go — the pull falls
+//! under the contact threshold — or the tip is further before x_s1 than the
+//! capsule was pushed in before it gave way (x_s2 − x_s1): a tissue cannot
+//! be drawn out further than it was pushed in, and a pull beyond that is a
+//! fault for the contact detector to find.
 
 use super::fixed::FractionQ16;
 use crate::protocol::{EventKind, Phase};
-use crate::units::{Nanometres, NanometresPerSecond};
+use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// Phase machine configuration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -22,6 +30,8 @@ pub struct PhaseConfig {
     /// Outward speed that turns `inserted` into `withdrawal` (and inward
     /// speed that turns it back).
     pub withdrawal_speed: NanometresPerSecond,
+    /// A pull on the needle beyond this means the tissue still holds it.
+    pub hold_force: MicroNewtons,
 }
 
 /// Phase and the surface positions found so far.
@@ -64,14 +74,23 @@ impl PhaseState {
 }
 
 impl PhaseConfig {
+    /// Whether the tissue still holds a needle at `x` behind x_s3 pulled
+    /// by `force` (see the module notes).
+    fn dragged(&self, s: &PhaseState, x: Nanometres, force: MicroNewtons) -> bool {
+        let furthest = s.surface.sub(s.puncture.sub(s.surface));
+        force.0 < -self.hold_force.0 && x > furthest
+    }
+
     /// Advance by one sample. `event` is what the detectors fired this
-    /// sample (kind and where it places the surface or puncture).
+    /// sample (kind and where it places the surface or puncture); `force`
+    /// the measured force.
     pub fn update(
         &self,
         s: &mut PhaseState,
         event: Option<(EventKind, Nanometres)>,
         x: Nanometres,
         v: NanometresPerSecond,
+        force: MicroNewtons,
     ) {
         match (s.phase, event) {
             (Phase::Out, Some((EventKind::Contact, x_s1))) => {
@@ -88,7 +107,11 @@ impl PhaseConfig {
             }
             (Phase::Loading, _) if x < s.surface => s.phase = Phase::Out,
             (Phase::Inserted | Phase::Withdrawal, _) if x <= s.relaxed_surface => {
-                s.phase = Phase::Out
+                s.phase = if self.dragged(s, x, force) {
+                    Phase::Withdrawal
+                } else {
+                    Phase::Out
+                }
             }
             (Phase::Inserted, _) if v.0 <= -self.withdrawal_speed.0 => s.phase = Phase::Withdrawal,
             (Phase::Withdrawal, _) if v.0 >= self.withdrawal_speed.0 => s.phase = Phase::Inserted,

@@ -556,6 +556,14 @@ pub enum Nominal {
     Device,
 }
 
+/// The verdict when the held-out residual stays above
+/// [`EXPLAINED_FACTOR`] noise floors and no candidate is significant.
+pub const UNEXPLAINED: &str = "unexplained";
+
+/// A held-out RMS within this many noise floors counts as explained: the
+/// gap the issues set as closed.
+pub const EXPLAINED_FACTOR: f64 = 1.5;
+
 /// The whole diagnosis as JSON (the keys of the issue).
 pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
     let baseline = score(data, &[], None);
@@ -599,6 +607,15 @@ pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
         }
     }
     let noise = noise_floor(data);
+    let left = after.as_ref().unwrap_or(&baseline);
+    let gap_open = left.rms() > EXPLAINED_FACTOR * noise;
+    // Never `none` over a gap: a residual well above the noise that no
+    // candidate takes away is something none of them is.
+    let effect = match first {
+        Some(f) => CANDIDATES[f.0].effect,
+        None if gap_open => UNEXPLAINED,
+        None => "none",
+    };
     let verdict_shrink = after
         .as_ref()
         .map_or(0.0, |a| 1.0 - a.rms() / baseline.rms());
@@ -637,10 +654,12 @@ pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
             })
         }).collect::<Vec<_>>(),
         "verdict": {
-            "effect": first.map_or("none", |f| CANDIDATES[f.0].effect),
+            "effect": effect,
             "shrink": verdict_shrink,
             "second": second_name,
-            "heldout_rms_after_n": after.as_ref().map_or(baseline.rms(), Scored::rms),
+            "heldout_rms_after_n": left.rms(),
+            "explained": !gap_open,
+            "left_by_phase": by_phase(left),
         },
     })
 }

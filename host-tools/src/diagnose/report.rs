@@ -12,7 +12,7 @@ pub fn headline(out: &Value) -> String {
     let num = |v: &Value| v.as_f64().unwrap_or(0.0);
     let v = &out["verdict"];
     format!(
-        "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {} (+ {}), shrink {:.0} %",
+        "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {} (+ {}), shrink {:.0} %{}",
         out["trials"],
         num(&out["noise_floor_n"]),
         num(&out["baseline"]["heldout_rms_n"]),
@@ -20,6 +20,11 @@ pub fn headline(out: &Value) -> String {
         v["effect"].as_str().unwrap_or("none"),
         v["second"].as_str().unwrap_or("none"),
         100.0 * num(&v["shrink"]),
+        if v["explained"].as_bool() == Some(false) {
+            "; the gap left is more than 1.5 noise floors: not explained"
+        } else {
+            ""
+        },
     )
 }
 

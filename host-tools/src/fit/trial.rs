@@ -38,6 +38,48 @@ pub struct TrialFit {
     /// reached and the value is D; otherwise it is only a bound on D.
     pub dp: Option<Held>,
     pub dn: Option<Held>,
+    /// Friction per length while inserting, from a trial with no inward
+    /// stroke inside the cut track (insert–dwell–withdraw): one speed, so
+    /// only c_p + b_p·v at that speed. `None` when strokes gave c_p, b_p.
+    pub insertion: Option<AtSpeed>,
+    /// Friction per length while withdrawing at one speed, c_n + b_n·v,
+    /// in the same case.
+    pub withdrawal: Option<AtSpeed>,
+    /// Whether x_s3 (so ρ, and the cutting force, which trades against
+    /// friction × x_s3) is identified: the withdrawing needle let go inside
+    /// the tissue, between x_s1 and x_s2.
+    pub relaxation_identified: bool,
+    /// Where the withdrawing needle let go of the tissue, m.
+    pub let_go_x_m: Option<f64>,
+    /// Relaxation of the force during the longest rest inside the tissue.
+    pub dwell: Option<DwellRelaxation>,
+    /// Membranes punctured after the capsule, in order.
+    pub layers: Vec<LayerPuncture>,
+}
+
+/// A friction coefficient per length seen at one speed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AtSpeed {
+    pub speed_mps: f64,
+    pub n_per_m: f64,
+}
+
+/// How the force relaxed while the needle rested inside the tissue.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DwellRelaxation {
+    pub duration_s: f64,
+    /// Fall of the force over the rest, as a fraction of its start.
+    pub fraction: f64,
+    /// Time constant of the single exponential fitted to it, s.
+    pub tau_s: f64,
+}
+
+/// A membrane's puncture after the capsule's: the peak before a sharp fall.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerPuncture {
+    pub x_m: f64,
+    pub force_n: f64,
+    pub drop_to_n: f64,
 }
 
 /// Static friction seen at a stop: held force per length, and whether it
@@ -280,48 +322,23 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
             rests.push(i);
         }
     }
-    let fit_at = |x_s3: f64| {
-        let (mut pos, mut neg, mut outside) = (Lsq::<2>::default(), Lsq::<2>::default(), 0.0);
-        for &(xi, vi, fi) in &track {
-            let l = xi - x_s3;
-            if l <= 0.0 {
-                outside += fi * fi;
-            } else if vi > 0.0 {
-                pos.add([l, vi * l], fi);
-            } else {
-                neg.add([l, vi * l], fi);
-            }
-        }
-        let cp = pos.solve();
-        let cn = neg.solve();
-        let sse = outside + cp.map_or(0.0, |c| pos.sse(&c)) + cn.map_or(0.0, |c| neg.sse(&c));
-        (sse, cp, cn)
-    };
     let x_s2 = x[ip];
-    let (mut best, mut best_rho) = (f64::INFINITY, 0.0);
-    for k in 0..=200 {
-        let rho = k as f64 / 200.0;
-        let (sse, cp, cn) = fit_at(contact_x_m + rho * (x_s2 - contact_x_m));
-        if cp.is_some() && cn.is_some() && sse < best {
-            (best, best_rho) = (sse, rho);
-        }
-    }
-    if !best.is_finite() {
-        bail!("no strokes both ways inside the tissue to fit friction on");
-    }
-    let relaxed_x_m = contact_x_m + best_rho * (x_s2 - contact_x_m);
-    let (_, cp, cn) = fit_at(relaxed_x_m);
-    let ([cp, bp], [cn, bn]) = (cp.unwrap_or_default(), cn.unwrap_or_default());
-
-    let cutting: Vec<f64> = advancing
-        .iter()
-        .map(|&(xi, vi, fi)| fi - (cp + bp * vi) * (xi - relaxed_x_m).max(0.0))
-        .collect();
-    let cutting_force_n = if cutting.is_empty() {
-        0.0
+    let inward = track.iter().filter(|s| s.1 > 0.0).count() >= MIN_STROKE_SAMPLES;
+    let friction = if inward {
+        both_ways(&track, &advancing, contact_x_m, x_s2)?
     } else {
-        cutting.iter().sum::<f64>() / cutting.len() as f64
+        one_way(&track, &advancing, contact_x_m, x_s2, noise_n)?
     };
+    let OneTrialFriction {
+        relaxed_x_m,
+        rho: best_rho,
+        cp,
+        bp,
+        cn,
+        bn,
+        cutting_force_n,
+        ..
+    } = friction;
 
     // Static band: the force held at rest, per length, against the sliding
     // force just before the stop.
@@ -379,7 +396,308 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         cutting_force_n,
         dp,
         dn,
+        insertion: friction.insertion,
+        withdrawal: friction.withdrawal,
+        relaxation_identified: friction.identified,
+        let_go_x_m: friction.let_go_x_m,
+        dwell: dwell_relaxation(trial, &v, ip),
+        layers: layers_after(trial, &v, ip, noise_n),
     })
+}
+
+/// Samples a stroke needs to count.
+const MIN_STROKE_SAMPLES: usize = 20;
+
+/// Friction, x_s3 and cutting of one trial.
+struct OneTrialFriction {
+    relaxed_x_m: f64,
+    rho: f64,
+    identified: bool,
+    let_go_x_m: Option<f64>,
+    cp: f64,
+    bp: f64,
+    cn: f64,
+    bn: f64,
+    cutting_force_n: f64,
+    insertion: Option<AtSpeed>,
+    withdrawal: Option<AtSpeed>,
+}
+
+/// (x, v, f) of one sample.
+type Xvf = (f64, f64, f64);
+
+/// Strokes both ways inside the cut track (the paper's oscillation): c and
+/// b on each side, x_s3 on a grid over ρ so that the friction vanishes
+/// where the withdrawing needle leaves the tissue, cutting as what is left
+/// while advancing into new tissue.
+fn both_ways(
+    track: &[Xvf],
+    advancing: &[Xvf],
+    contact_x_m: f64,
+    x_s2: f64,
+) -> Result<OneTrialFriction> {
+    let fit_at = |x_s3: f64| {
+        let (mut pos, mut neg, mut outside) = (Lsq::<2>::default(), Lsq::<2>::default(), 0.0);
+        for &(xi, vi, fi) in track {
+            let l = xi - x_s3;
+            if l <= 0.0 {
+                outside += fi * fi;
+            } else if vi > 0.0 {
+                pos.add([l, vi * l], fi);
+            } else {
+                neg.add([l, vi * l], fi);
+            }
+        }
+        let cp = pos.solve();
+        let cn = neg.solve();
+        let sse = outside + cp.map_or(0.0, |c| pos.sse(&c)) + cn.map_or(0.0, |c| neg.sse(&c));
+        (sse, cp, cn)
+    };
+    let (mut best, mut best_rho) = (f64::INFINITY, 0.0);
+    for k in 0..=200 {
+        let rho = k as f64 / 200.0;
+        let (sse, cp, cn) = fit_at(contact_x_m + rho * (x_s2 - contact_x_m));
+        if cp.is_some() && cn.is_some() && sse < best {
+            (best, best_rho) = (sse, rho);
+        }
+    }
+    if !best.is_finite() {
+        bail!("no strokes both ways inside the tissue to fit friction on");
+    }
+    let relaxed_x_m = contact_x_m + best_rho * (x_s2 - contact_x_m);
+    let (_, cp, cn) = fit_at(relaxed_x_m);
+    let ([cp, bp], [cn, bn]) = (cp.unwrap_or_default(), cn.unwrap_or_default());
+    let cutting: Vec<f64> = advancing
+        .iter()
+        .map(|&(xi, vi, fi)| fi - (cp + bp * vi) * (xi - relaxed_x_m).max(0.0))
+        .collect();
+    let cutting_force_n = if cutting.is_empty() {
+        0.0
+    } else {
+        cutting.iter().sum::<f64>() / cutting.len() as f64
+    };
+    Ok(OneTrialFriction {
+        relaxed_x_m,
+        rho: best_rho,
+        identified: true,
+        let_go_x_m: Some(relaxed_x_m),
+        cp,
+        bp,
+        cn,
+        bn,
+        cutting_force_n,
+        insertion: None,
+        withdrawal: None,
+    })
+}
+
+/// Insert–dwell–withdraw: no inward stroke inside the cut track, each
+/// direction at one speed. The withdrawal gives where the needle lets go
+/// (a grid from x_s2 back to as far before x_s1 as the capsule was pushed
+/// in: a dragged tissue lets go before x_s1) and its friction per length
+/// c_n + b_n·v at that speed; the insertion, a straight line in l through
+/// the advancing samples (membranes' loading taken out as outliers), gives
+/// c_p + b_p·v at its speed and the cutting force as the intercept. Each
+/// speed's coefficient is written as damping alone (c = 0, as the paper
+/// found in liver) — `needle fit` splits c and b when trials ran at
+/// several speeds. x_s3 is where the needle let go when that lies between
+/// x_s1 and x_s2; otherwise it is not identified and x_s1 is used, and the
+/// cutting force carries c_p·(x_s3 − x_s1) with it.
+fn one_way(
+    track: &[Xvf],
+    advancing: &[Xvf],
+    contact_x_m: f64,
+    x_s2: f64,
+    noise_n: f64,
+) -> Result<OneTrialFriction> {
+    let out: Vec<Xvf> = track.iter().copied().filter(|s| s.1 < 0.0).collect();
+    let depth = x_s2 - contact_x_m;
+    let withdraw_at = |x_w: f64| {
+        let (mut fit, mut outside) = (Lsq::<1>::default(), 0.0);
+        for &(xi, _, fi) in &out {
+            if xi > x_w {
+                fit.add([xi - x_w], fi);
+            } else {
+                outside += fi * fi;
+            }
+        }
+        let c = fit.solve();
+        (outside + c.map_or(f64::INFINITY, |c| fit.sse(&c)), c)
+    };
+    let mut let_go = None;
+    if out.len() >= MIN_STROKE_SAMPLES {
+        let (mut best, mut best_x) = (f64::INFINITY, contact_x_m);
+        for k in 0..=400 {
+            let x_w = contact_x_m - depth + 2.0 * depth * k as f64 / 400.0;
+            let (sse, c) = withdraw_at(x_w);
+            if c.is_some() && sse < best {
+                (best, best_x) = (sse, x_w);
+            }
+        }
+        let_go = best.is_finite().then_some(best_x);
+    }
+    let identified = let_go.is_some_and(|x_w| x_w >= contact_x_m && x_w <= x_s2);
+    let relaxed_x_m = let_go.unwrap_or(contact_x_m).clamp(contact_x_m, x_s2);
+    let rho = if depth > 0.0 {
+        (relaxed_x_m - contact_x_m) / depth
+    } else {
+        0.0
+    };
+    let mean_speed = |s: &[Xvf]| s.iter().map(|p| p.1).sum::<f64>() / s.len().max(1) as f64;
+    let withdrawal = let_go.and_then(|x_w| {
+        let [c] = withdraw_at(x_w).1?;
+        Some(AtSpeed {
+            speed_mps: mean_speed(&out),
+            n_per_m: c,
+        })
+    });
+    let (cutting_force_n, insertion) = insertion_line(advancing, relaxed_x_m, noise_n)
+        .map(|(cut, k)| {
+            let at = AtSpeed {
+                speed_mps: mean_speed(advancing),
+                n_per_m: k,
+            };
+            (cut, Some(at))
+        })
+        .unwrap_or((0.0, None));
+    let damping = |at: Option<AtSpeed>| {
+        at.filter(|a| a.speed_mps.abs() > 0.0)
+            .map_or(0.0, |a| a.n_per_m / a.speed_mps)
+    };
+    Ok(OneTrialFriction {
+        relaxed_x_m,
+        rho,
+        identified,
+        let_go_x_m: let_go,
+        cp: 0.0,
+        bp: damping(insertion),
+        cn: 0.0,
+        bn: damping(withdrawal),
+        cutting_force_n,
+        insertion,
+        withdrawal,
+    })
+}
+
+/// f = cut + k·(x − x_s3) through the advancing samples, refitted without
+/// those more than 3 noise sd above the line until it settles: a membrane
+/// loading ahead of the tip only ever adds force, so the line sinks to the
+/// friction and cutting under it. Returns (cut, k).
+fn insertion_line(advancing: &[Xvf], x_s3: f64, noise_n: f64) -> Option<(f64, f64)> {
+    let mut keep = vec![true; advancing.len()];
+    let mut line = None;
+    for _ in 0..20 {
+        let mut fit = Lsq::<2>::default();
+        for (&(xi, _, fi), _) in advancing.iter().zip(&keep).filter(|(_, k)| **k) {
+            fit.add([1.0, xi - x_s3], fi);
+        }
+        let [cut, k] = fit.solve()?;
+        line = Some((cut, k));
+        let mut changed = false;
+        for (keep, &(xi, _, fi)) in keep.iter_mut().zip(advancing) {
+            let under = fi - cut - k * (xi - x_s3) <= 3.0 * noise_n.max(1e-4);
+            changed |= under != *keep;
+            *keep = under;
+        }
+        if !changed {
+            break;
+        }
+    }
+    line
+}
+
+/// Rest shorter than this is no dwell, s.
+const DWELL_MIN_S: f64 = 1.0;
+
+/// The longest rest inside the tissue after the puncture: how far the
+/// force fell over it, and the time constant of one exponential through
+/// it (a grid over τ, log-spaced 0.05–50 s, the level and amplitude by
+/// least squares at each).
+fn dwell_relaxation(trial: &Trial, v: &[f64], ip: usize) -> Option<DwellRelaxation> {
+    let (t, f) = (&trial.t_s, &trial.f_n);
+    let (mut best, mut run_start) = (None::<(usize, usize)>, None);
+    for i in ip..=trial.len() {
+        let resting = i < trial.len() && v[i].abs() < REST_MPS;
+        match (resting, run_start) {
+            (true, None) => run_start = Some(i),
+            (false, Some(a)) => {
+                if best.is_none_or(|(b0, b1)| t[i - 1] - t[a] > t[b1] - t[b0]) {
+                    best = Some((a, i - 1));
+                }
+                run_start = None;
+            }
+            _ => {}
+        }
+    }
+    let (a, b) = best?;
+    let duration_s = t[b] - t[a];
+    if duration_s < DWELL_MIN_S || f[a].abs() < 1e-9 {
+        return None;
+    }
+    // The level at either end over a tenth of a second, against noise.
+    let level = |from: usize, to: usize| f[from..=to].iter().sum::<f64>() / (to - from + 1) as f64;
+    let tenth = ((0.1 * trial.rate_hz()) as usize).max(1);
+    let (first, last) = (
+        level(a, (a + tenth).min(b)),
+        level(b.saturating_sub(tenth).max(a), b),
+    );
+    let mut best_tau = (f64::INFINITY, 0.0);
+    for k in 0..=60 {
+        let tau = 0.05 * 1000f64.powf(k as f64 / 60.0);
+        let mut fit = Lsq::<2>::default();
+        for j in a..=b {
+            fit.add([1.0, (-(t[j] - t[a]) / tau).exp()], f[j]);
+        }
+        if let Some(c) = fit.solve() {
+            let sse = fit.sse(&c);
+            if sse < best_tau.0 {
+                best_tau = (sse, tau);
+            }
+        }
+    }
+    Some(DwellRelaxation {
+        duration_s,
+        fraction: (first - last) / first,
+        tau_s: best_tau.1,
+    })
+}
+
+/// Membranes after the capsule: while advancing into new tissue, a fall
+/// of more than max(0.3 N, 10 noise sd) within two samples (or 20 ms,
+/// whichever is longer), DESIGN.md §1's sharp drop; the peak before it and
+/// where the force fell to.
+fn layers_after(trial: &Trial, v: &[f64], ip: usize, noise_n: f64) -> Vec<LayerPuncture> {
+    let (x, f) = (&trial.x_m, &trial.f_n);
+    let span = ((0.02 * trial.rate_hz()).round() as usize).max(2);
+    let threshold = (10.0 * noise_n).max(0.3);
+    let mut layers = Vec::new();
+    // Past the capsule's own drop: once the force has stopped falling.
+    let mut i = ip + 1;
+    while i + 1 < trial.len() && f[i + 1] < f[i] - threshold / 2.0 {
+        i += 1;
+    }
+    let mut deepest = x[i];
+    while i + span < trial.len() {
+        deepest = deepest.max(x[i]);
+        let advancing = v[i] > SLIDING_MPS && x[i] >= deepest;
+        let low = (i + 1..=i + span)
+            .min_by(|&a, &b| f[a].total_cmp(&f[b]))
+            .unwrap_or(i);
+        // Still advancing one sample past the fall: a stop drops the
+        // cutting force as sharply, and that is no membrane.
+        let moving_on = (i + 1..=(low + 1).min(trial.len() - 1)).all(|j| x[j] > x[j - 1]);
+        if advancing && moving_on && f[i] - f[low] > threshold && f[i] >= f[i.saturating_sub(1)] {
+            layers.push(LayerPuncture {
+                x_m: x[i],
+                force_n: f[i],
+                drop_to_n: f[low],
+            });
+            i = low + 1;
+            continue;
+        }
+        i += 1;
+    }
+    layers
 }
 
 /// Of two static-friction readings, the one that says most: a clamped one

@@ -54,6 +54,60 @@ pub struct Protocol {
     /// no more needle in tissue.
     pub far_surface_x_m: Option<f64>,
     pub segments: Vec<Segment>,
+    /// Membranes below the capsule (skin on muscle, a vessel wall): each
+    /// loads and gives way like the capsule, a sharp drop mid-insertion.
+    pub layers: Vec<Layer>,
+    /// How far before the contact point the withdrawing needle lets go of
+    /// the tissue, m: the tissue is drawn out with the needle, so the
+    /// withdrawal friction acts over the needle from a surface dragged
+    /// there (DESIGN.md §1: zero force 1.5–9 mm before first contact).
+    /// 0: it lets go at x_s3, as the paper's model has it.
+    pub drag_m: f64,
+    /// Residual tare offset of the load cell, N.
+    pub tare_n: f64,
+    /// Sample times, s (a rig's jittered clock with gaps); `None`: every
+    /// 1/rate from 0.
+    #[serde(skip)]
+    pub times_s: Option<Vec<f64>>,
+}
+
+/// A membrane inside the tissue.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Layer {
+    /// Depth of the membrane past the tissue surface (tissue frame), m.
+    pub depth_m: f64,
+    /// Its stiffness while it is pushed ahead of the tip, N/m.
+    pub k_n_per_m: f64,
+    /// The force at which it gives way, N.
+    pub rupture_n: f64,
+}
+
+/// Which motion the robot runs in each trial.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ProtocolKind {
+    /// The paper's: approach, puncture, insert, dwell, oscillate inside
+    /// the tissue (reversals), dwell, withdraw.
+    #[default]
+    Paper,
+    /// The field's commonest: insert 25 mm past the surface at 1, 2 or
+    /// 3 mm/s from a stage 2–15 mm before it, hold 5 s, withdraw. No
+    /// oscillation; the tissue is dragged out on withdrawal.
+    InsertDwellWithdraw,
+}
+
+/// How the rig records, beyond the sensor's noise and resolution.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Rig {
+    pub protocol: ProtocolKind,
+    /// Membranes below the capsule in each trial (each trial draws
+    /// 0..=layers of them).
+    pub layers: u32,
+    /// Jittered sample times (sd 10 % of the period) and gaps of up to
+    /// 70 ms.
+    pub jitter: bool,
+    /// Standard deviation of each trial's residual tare offset, N.
+    pub tare_sd_n: f64,
 }
 
 /// A ground-truth event.
@@ -91,6 +145,10 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
     let cycles = if rng.gen_bool(0.5) { 2.0 } else { 2.5 };
     Protocol {
         far_surface_x_m: None,
+        layers: Vec::new(),
+        drag_m: 0.0,
+        tare_n: 0.0,
+        times_s: None,
         surface_x_m: surface,
         segments: vec![
             Segment::Move {
@@ -117,6 +175,101 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
             Segment::Dwell { duration_s: 0.5 },
         ],
     }
+}
+
+/// Insert–dwell–withdraw as real rigs run it (DESIGN.md §1): the stage
+/// starts 2–15 mm before the surface, inserts 25 mm past it at 1, 2 or
+/// 3 mm/s, holds 5 s and withdraws; the tissue lets go of the withdrawing
+/// needle 1.5–9 mm before the contact point; up to `max_layers` membranes
+/// ([`draw_layers`]).
+pub fn insert_dwell_withdraw(
+    tissue: &TissueParams,
+    max_layers: u32,
+    rng: &mut impl Rng,
+) -> Protocol {
+    let surface = rng.gen_range(0.002..0.015);
+    let speed = [0.001, 0.002, 0.003][rng.gen_range(0..3)];
+    let deepest = surface + 0.025;
+    let layers = draw_layers(tissue, max_layers, 0.025, rng);
+    Protocol {
+        surface_x_m: surface,
+        far_surface_x_m: None,
+        segments: vec![
+            Segment::Move {
+                to_m: deepest,
+                speed_mps: speed,
+            },
+            Segment::Dwell { duration_s: 5.0 },
+            Segment::Move {
+                to_m: 0.0,
+                speed_mps: speed,
+            },
+            Segment::Dwell { duration_s: 0.5 },
+        ],
+        layers,
+        drag_m: rng.gen_range(0.0015..0.009),
+        tare_n: 0.0,
+        times_s: None,
+    }
+}
+
+/// Up to `max_layers` membranes between 4 mm past the capsule's puncture
+/// and 2 mm short of `reach_m` past the surface, each giving way at
+/// 30–90 % of the capsule's puncture force after 2–5 mm of stretch, each
+/// clear of the next one's stretch by 1 mm.
+fn draw_layers(
+    tissue: &TissueParams,
+    max_layers: u32,
+    reach_m: f64,
+    rng: &mut impl Rng,
+) -> Vec<Layer> {
+    let mut layers: Vec<Layer> = Vec::new();
+    let (lo, hi) = (tissue.puncture_depth_m + 0.004, reach_m - 0.002);
+    if hi <= lo {
+        return layers;
+    }
+    for _ in 0..rng.gen_range(0..=max_layers) {
+        for _attempt in 0..20 {
+            let rupture_n = tissue.puncture_force_n * rng.gen_range(0.3..0.9);
+            let stretch_m = rng.gen_range(0.002..0.005);
+            let depth_m = rng.gen_range(lo..hi);
+            let clear = layers.iter().all(|o| {
+                depth_m > o.depth_m + o.rupture_n / o.k_n_per_m + WALL_GAP_M
+                    || o.depth_m > depth_m + stretch_m + WALL_GAP_M
+            });
+            if clear && depth_m + stretch_m < reach_m {
+                layers.push(Layer {
+                    depth_m,
+                    k_n_per_m: rupture_n / stretch_m,
+                    rupture_n,
+                });
+                break;
+            }
+        }
+    }
+    layers.sort_by(|a, b| a.depth_m.total_cmp(&b.depth_m));
+    layers
+}
+
+/// A rig's sample clock at `rate_hz` over `duration_s`: each period off by
+/// a normal 10 % (clipped to ±30 %), and now and then (one sample in 500)
+/// a gap of up to 70 ms where samples were lost.
+pub fn jittered_times(rate_hz: f64, duration_s: f64, rng: &mut impl Rng) -> Vec<f64> {
+    let dt = 1.0 / rate_hz;
+    let spread: Normal<f64> = Normal::new(0.0, 0.1).expect("constant sd");
+    let mut times = vec![0.0];
+    let mut t = 0.0;
+    loop {
+        t += dt * (1.0 + spread.sample(rng).clamp(-0.3, 0.3));
+        if rng.gen_bool(0.002) {
+            t += rng.gen_range(0.0..(0.07 - dt).max(dt));
+        }
+        if t > duration_s {
+            break;
+        }
+        times.push(t);
+    }
+    times
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -157,8 +310,10 @@ pub fn simulate_trial_in(
     } else {
         0.0
     };
-    let m = motion::sample(&protocol.segments, 0.0, sensor.rate_hz);
-    let dt = 1.0 / sensor.rate_hz;
+    let m = match &protocol.times_s {
+        Some(times) => motion::sample_at(&protocol.segments, 0.0, times),
+        None => motion::sample(&protocol.segments, 0.0, sensor.rate_hz),
+    };
     let s1 = protocol.surface_x_m;
     let noise = Normal::new(0.0, sensor.noise_n.max(0.0)).unwrap_or(Normal::new(0.0, 0.0).unwrap());
     let deepest_planned = m.x_m.iter().copied().fold(0.0, f64::max);
@@ -205,6 +360,7 @@ pub fn simulate_trial_in(
     }
     truth.structures.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut ruptured = vec![false; truth.structures.len()];
+    let mut layers_ruptured = vec![false; protocol.layers.len()];
 
     let mut trial = Trial::default();
     let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
@@ -213,6 +369,11 @@ pub fn simulate_trial_in(
     let mut prev_p = 0.0;
     for i in 0..m.t_s.len() {
         let (t, x, v, a) = (m.t_s[i], m.x_m[i], m.v_mps[i], m.a_mps2[i]);
+        let dt = if i == 0 {
+            1.0 / sensor.rate_hz
+        } else {
+            t - m.t_s[i - 1]
+        };
         // Position and velocity relative to the tissue.
         let (mut p, mut vr) = (x, v);
         for effect in effects {
@@ -265,7 +426,13 @@ pub fn simulate_trial_in(
             }
         } else if phase == Contact::Inserted {
             let far = protocol.far_surface_x_m.unwrap_or(f64::INFINITY);
-            let l = p.min(far) - x_s3;
+            // A withdrawing needle draws the tissue out with it.
+            let exit_m = if protocol.drag_m > 0.0 && vr < 0.0 {
+                s1 - protocol.drag_m
+            } else {
+                x_s3
+            };
+            let l = p.min(far) - exit_m;
             if p >= far && deepest < far {
                 truth.events.push(TruthEvent {
                     kind: "exit",
@@ -306,6 +473,23 @@ pub fn simulate_trial_in(
                 }
                 deepest = deepest.max(p);
                 f = friction + cutting;
+                for (k, layer) in protocol.layers.iter().enumerate() {
+                    let stretch = p - (s1 + layer.depth_m);
+                    if layers_ruptured[k] || stretch <= 0.0 {
+                        continue;
+                    }
+                    let membrane = layer.k_n_per_m * stretch;
+                    if membrane >= layer.rupture_n {
+                        layers_ruptured[k] = true;
+                        truth.events.push(TruthEvent {
+                            kind: "structure",
+                            t_s: t,
+                            x_m: x,
+                        });
+                    } else {
+                        f += membrane;
+                    }
+                }
                 for (k, &(depth, rupture)) in truth.structures.iter().enumerate() {
                     let k_v = effects.iter().find_map(|e| match *e {
                         Effect::InternalStructures { k_n_per_m, .. } => Some(k_n_per_m),
@@ -370,6 +554,7 @@ pub fn simulate_trial_in(
                 _ => {}
             }
         }
+        f += protocol.tare_n;
         prev_p = p;
         let x_counts = (x / sensor.encoder_m).round() * sensor.encoder_m;
         trial.push(t, x_counts, f + noise.sample(rng));
@@ -455,6 +640,10 @@ pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
     let protocol = Protocol {
         surface_x_m: plan.surface_x_m,
         far_surface_x_m: None,
+        layers: Vec::new(),
+        drag_m: 0.0,
+        tare_n: 0.0,
+        times_s: None,
         segments: vec![
             Segment::Move {
                 to_m: deepest,
@@ -519,6 +708,20 @@ pub struct SimulateArgs {
     /// puncture depth or deeper, 4 mm short of the deepest point at most.
     #[arg(long)]
     pub through: bool,
+    /// Motion of each trial: `paper` (with oscillation) or
+    /// `insert-dwell-withdraw` (the field's commonest; tissue dragged out
+    /// on withdrawal).
+    #[arg(long, value_enum, default_value_t = ProtocolKind::Paper)]
+    pub protocol: ProtocolKind,
+    /// Membranes below the capsule: each trial draws 0 to this many.
+    #[arg(long, default_value_t = 0)]
+    pub layers: u32,
+    /// Jittered sample times (10 % of the period) and gaps of up to 70 ms.
+    #[arg(long)]
+    pub jitter: bool,
+    /// Standard deviation of each trial's residual tare offset, N.
+    #[arg(long, default_value_t = 0.0)]
+    pub tare_n: f64,
 }
 
 #[derive(Serialize)]
@@ -529,6 +732,7 @@ struct TruthFile<'a> {
     effect_form: Form,
     seed: u64,
     sensor: Sensor,
+    rig: Rig,
     trials: Vec<TruthTrial<'a>>,
 }
 
@@ -548,6 +752,12 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if !(args.noise_n.is_finite() && args.noise_n >= 0.0) {
         bail!("--noise-n must be a finite number ≥ 0");
     }
+    if !(args.tare_n.is_finite() && args.tare_n >= 0.0) {
+        bail!("--tare-n must be a finite number ≥ 0");
+    }
+    if args.layers > 3 {
+        bail!("--layers must be within 0..=3");
+    }
     let tissue = crate::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
     let effects = effects::parse_list(&args.effects)?;
     let sensor = Sensor {
@@ -564,6 +774,12 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         sensor,
         through: args.through,
         form: args.effect_form,
+        rig: Rig {
+            protocol: args.protocol,
+            layers: args.layers,
+            jitter: args.jitter,
+            tare_sd_n: args.tare_n,
+        },
     }
     .write(&args.out)?;
     eprintln!("wrote {written} trials to {}", args.out.display());
@@ -583,6 +799,8 @@ pub struct Dataset<'a> {
     /// The far side of the sample lies inside the motion (`--through`).
     pub through: bool,
     pub form: Form,
+    /// Protocol, layers, clock and tare.
+    pub rig: Rig,
 }
 
 /// Simulate `trials` trials into `dir` (not through the sample).
@@ -604,6 +822,7 @@ pub fn simulate_dataset(
         sensor: *sensor,
         through: false,
         form: Form::Standard,
+        rig: Rig::default(),
     }
     .write(dir)
 }
@@ -621,6 +840,7 @@ impl Dataset<'_> {
             ref sensor,
             through,
             form,
+            rig,
         } = *self;
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
@@ -629,9 +849,25 @@ impl Dataset<'_> {
         for k in 0..trials {
             let mut rng =
                 ChaCha8Rng::seed_from_u64(seed.wrapping_mul(1_000_003).wrapping_add(k as u64));
-            let mut protocol = random_protocol(&mut rng);
+            let mut protocol = match rig.protocol {
+                ProtocolKind::Paper => random_protocol(&mut rng),
+                ProtocolKind::InsertDwellWithdraw => {
+                    insert_dwell_withdraw(tissue, rig.layers, &mut rng)
+                }
+            };
+            if rig.protocol == ProtocolKind::Paper && rig.layers > 0 {
+                let reach_m = deepest_x_m(&protocol) - protocol.surface_x_m;
+                protocol.layers = draw_layers(tissue, rig.layers, reach_m, &mut rng);
+            }
             if through {
                 protocol.far_surface_x_m = far_surface(tissue, &protocol, &mut rng);
+            }
+            if rig.tare_sd_n > 0.0 {
+                protocol.tare_n = rng.sample(Normal::new(0.0, rig.tare_sd_n)?);
+            }
+            if rig.jitter {
+                let duration_s = motion::duration_s(&protocol.segments, 0.0);
+                protocol.times_s = Some(jittered_times(sensor.rate_hz, duration_s, &mut rng));
             }
             let (trial, truth) =
                 simulate_trial_in(tissue, &protocol, effects, form, sensor, &mut rng);
@@ -653,6 +889,7 @@ impl Dataset<'_> {
             effect_form: form,
             seed,
             sensor: *sensor,
+            rig,
             trials: truths
                 .iter()
                 .map(|(name, truth)| TruthTrial {
@@ -671,13 +908,18 @@ impl Dataset<'_> {
 /// A far side for the sample, between 8 mm past the puncture depth and
 /// 4 mm short of the deepest point of the motion (`None` if no room).
 fn far_surface(tissue: &TissueParams, protocol: &Protocol, rng: &mut impl Rng) -> Option<f64> {
-    let deepest = motion::sample(&protocol.segments, 0.0, 100.0)
-        .x_m
-        .into_iter()
-        .fold(0.0, f64::max);
+    let deepest = deepest_x_m(protocol);
     let lo = protocol.surface_x_m + tissue.puncture_depth_m + 0.008;
     let hi = deepest - 0.004;
     (hi > lo).then(|| rng.gen_range(lo..hi))
+}
+
+/// The deepest point of a protocol's motion, m (sampled at 100 Hz).
+fn deepest_x_m(protocol: &Protocol) -> f64 {
+    motion::sample(&protocol.segments, 0.0, 100.0)
+        .x_m
+        .into_iter()
+        .fold(0.0, f64::max)
 }
 
 /// What the sensors read for a needle at `x_m` under `f_n`: ADC counts

@@ -72,9 +72,8 @@ pub struct Sampled {
     pub segment: Vec<usize>,
 }
 
-/// Sample `segments`, starting at `start_m`, at `rate_hz`.
-pub fn sample(segments: &[Segment], start_m: f64, rate_hz: f64) -> Sampled {
-    let dt = 1.0 / rate_hz;
+/// Start time and position of each segment, and the total duration, s.
+fn starts(segments: &[Segment], start_m: f64) -> (Vec<(f64, f64)>, f64) {
     let mut starts = Vec::with_capacity(segments.len());
     let (mut t0, mut x0) = (0.0, start_m);
     for seg in segments {
@@ -82,12 +81,28 @@ pub fn sample(segments: &[Segment], start_m: f64, rate_hz: f64) -> Sampled {
         t0 += seg.duration_s(x0);
         x0 = seg.end(x0);
     }
-    let total_s = t0;
+    (starts, t0)
+}
+
+/// How long `segments` take from `start_m`, s.
+pub fn duration_s(segments: &[Segment], start_m: f64) -> f64 {
+    starts(segments, start_m).1
+}
+
+/// Sample `segments`, starting at `start_m`, at `rate_hz`.
+pub fn sample(segments: &[Segment], start_m: f64, rate_hz: f64) -> Sampled {
+    let n = (duration_s(segments, start_m) * rate_hz).floor() as usize + 1;
+    let times: Vec<f64> = (0..n).map(|i| i as f64 / rate_hz).collect();
+    sample_at(segments, start_m, &times)
+}
+
+/// Sample `segments` at the given increasing times (a real rig's clock
+/// jitters and drops samples).
+pub fn sample_at(segments: &[Segment], start_m: f64, times_s: &[f64]) -> Sampled {
+    let (starts, _) = starts(segments, start_m);
     let mut out = Sampled::default();
     let mut k = 0;
-    let n = (total_s * rate_hz).floor() as usize + 1;
-    for i in 0..n {
-        let t = i as f64 * dt;
+    for &t in times_s {
         while k + 1 < segments.len() && t >= starts[k + 1].0 {
             k += 1;
         }
@@ -100,12 +115,12 @@ pub fn sample(segments: &[Segment], start_m: f64, rate_hz: f64) -> Sampled {
     }
     // Acceleration by differences of the commanded velocity: a step change
     // of speed shows as a one-sample pulse, as a real drive's would be short.
-    out.a_mps2 = (0..n)
+    out.a_mps2 = (0..times_s.len())
         .map(|i| {
             if i == 0 {
                 0.0
             } else {
-                (out.v_mps[i] - out.v_mps[i - 1]) * rate_hz
+                (out.v_mps[i] - out.v_mps[i - 1]) / (times_s[i] - times_s[i - 1])
             }
         })
         .collect();
