@@ -94,7 +94,20 @@ pub struct TrialDetection {
 /// it) and the faults it raises.
 pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
     let rate = trial.rate_hz().round().clamp(1.0, 65_535.0) as u16;
-    let config = config.with_sample_rate(rate);
+    let mut config = config.with_sample_rate(rate);
+    // A recording may have lost samples (a rig's gaps of up to 70 ms); the
+    // device never does. The drive's 100 mm/s over the longest step, not
+    // over one period, is what the encoder can move between two rows.
+    let longest_step_s = trial
+        .t_s
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .fold(0.0, f64::max);
+    let nm_per_count = f64::from(config.encoder.nm_per_count.max(1));
+    let over_gap = (0.1 * longest_step_s * 1e9 / nm_per_count).ceil();
+    if over_gap > f64::from(config.encoder.max_counts_per_sample) {
+        config.encoder.max_counts_per_sample = over_gap.min(16_000.0) as u16;
+    }
     let mut state = PipelineState::default();
     let mut found = TrialDetection::default();
     for i in 0..trial.len() {

@@ -193,3 +193,20 @@ fn diagnose_runs_on_them_and_never_says_none_over_a_gap() {
         "{v}"
     );
 }
+
+#[test]
+fn a_gap_in_a_recording_is_no_encoder_jump() {
+    // 1 kHz at 3 mm/s with 70 ms lost: 210 µm between two rows, more than
+    // one period's limit (200 counts) but well within the drive's 100 mm/s.
+    let mut trial = host_tools::trial::Trial::default();
+    let mut t = 0.0;
+    for i in 0..3000 {
+        if i == 1500 {
+            t += 0.07;
+        }
+        trial.push(t, 0.003 * t, 0.0);
+        t += 0.001;
+    }
+    let found = host_tools::detect::detect_trial(&trial, &DeviceConfig::default());
+    assert!(found.faults.is_empty(), "{:?}", found.faults);
+}
