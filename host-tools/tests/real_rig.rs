@@ -93,13 +93,12 @@ fn fit_recovers_what_insert_dwell_withdraw_identifies() {
         .as_str()
         .unwrap()
         .contains("several speeds"));
-    // The dragged tissue lets go before the contact point, so where the
-    // surface relaxed to is not seen: said, not invented.
-    assert!(
-        fit["relaxation"]["value"].is_null(),
-        "{}",
-        fit["relaxation"]
-    );
+    // The dragged tissue lets go before the contact point, but where the
+    // insertion stops into the dwell cutting ends in a sample while the
+    // friction holds: that fall is the cutting force, and the insertion
+    // line's intercept then places x_s3.
+    within(&fit, "cutting_force_n", p.cutting_force_n, 0.1);
+    within(&fit, "relaxation", p.relaxation, 0.1);
     let drag = value_of(&fit["let_go_before_contact_m"]).unwrap();
     assert!((0.0015..0.009).contains(&drag), "{drag}");
     // Every membrane's puncture, none from the stops.
@@ -187,11 +186,10 @@ fn diagnose_runs_on_them_and_never_says_none_over_a_gap() {
         v["effect"] != "none" || v["explained"].as_bool().unwrap(),
         "{v}"
     );
-    // The dwell shows the relaxation: it is among what the verdict names.
-    assert!(
-        v["effect"] == "viscoelasticity" || v["second"] == "viscoelasticity",
-        "{v}"
-    );
+    // The membranes first (they are most of the gap), then the relaxation
+    // the dwell shows.
+    assert_eq!(v["effect"], "internal_structures", "{v}");
+    assert_eq!(v["second"], "viscoelasticity", "{v}");
 }
 
 #[test]
@@ -209,4 +207,46 @@ fn a_gap_in_a_recording_is_no_encoder_jump() {
     }
     let found = host_tools::detect::detect_trial(&trial, &DeviceConfig::default());
     assert!(found.faults.is_empty(), "{:?}", found.faults);
+}
+
+/// The diagnosis of ten trials with `effect_list` and no membranes.
+fn diagnosis_without_layers(effect_list: &str) -> Value {
+    let dir = tempfile::tempdir().unwrap();
+    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
+    let list = effects::parse_list(effect_list).unwrap();
+    Dataset {
+        tissue_name: "skin_phantom",
+        tissue: &skin.params,
+        effects: &list,
+        trials: 10,
+        seed: 5,
+        sensor: SENSOR,
+        through: false,
+        form: Form::Standard,
+        rig: Rig { layers: 0, ..RIG },
+    }
+    .write(dir.path())
+    .unwrap();
+    let (_, data) = load(dir.path(), None).unwrap();
+    diagnose(&data, Nominal::Fitted)
+}
+
+#[test]
+fn with_no_effect_the_nominal_holds_through_dwell_and_dragged_withdrawal() {
+    // The stop into the dwell at 100 Hz with a jittered clock is a jump
+    // of the velocity, the Karnopp friction holds the insertion's, and the
+    // withdrawal lets go where the dragged tissue does.
+    let out = diagnosis_without_layers("");
+    let noise = out["noise_floor_n"].as_f64().unwrap();
+    let base = out["baseline"]["heldout_rms_n"].as_f64().unwrap();
+    assert!(base < 1.2 * noise, "{base} vs {noise}");
+    assert_eq!(out["verdict"]["effect"], "none");
+}
+
+#[test]
+fn viscoelasticity_is_named_from_the_dwell_and_the_gap_closes() {
+    let out = diagnosis_without_layers("viscoelasticity");
+    let v = &out["verdict"];
+    assert_eq!(v["effect"], "viscoelasticity", "{v}");
+    assert!(v["explained"].as_bool().unwrap(), "{v}");
 }

@@ -53,7 +53,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         effect: "viscoelasticity",
         grid_name: "tau_s",
         grid: &[0.25, 0.5, 1.0, 2.0, 4.0],
-        linear: &["k_n_per_m"],
+        linear: &["k_fast_n_per_m", "k_n_per_m", "k_slow_n_per_m"],
         columns: maxwell,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
@@ -78,8 +78,8 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
     Candidate {
         effect: "internal_structures",
-        grid_name: "k_n_per_m",
-        grid: &[100.0, 200.0, 400.0, 800.0],
+        grid_name: "stiffening_exponent",
+        grid: &[1.0, 1.5, 2.0, 3.0],
         linear: &["wall_gain"],
         columns: walls,
         grid_params: grid_as_named,
@@ -131,21 +131,35 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
 ];
 
-/// Maxwell branch state: dm/dt = v − m/τ in tissue (θ = its stiffness).
+/// A spectrum of relaxation times around τ on the grid: Maxwell branches
+/// at τ/3, τ and 3τ, each state dm/dt = v − m/τ_k in tissue (θ_k = the
+/// branch's stiffness). One branch is the standard linear solid; the
+/// three together hold a Prony series over a decade, and with the grid
+/// 0.25–4 s a spectrum from 0.08 to 12 s — Fung's quasi-linear
+/// viscoelasticity has a continuous one, a power law a flat one. Each
+/// step is integrated exactly for a velocity held over it, so a rig's
+/// jittered clock and its gaps cost nothing.
 fn maxwell(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
-    let dt = 1.0 / p.trial.rate_hz();
+    [tau_s / 3.0, tau_s, 3.0 * tau_s]
+        .iter()
+        .map(|&tau| maxwell_branch(p, tau))
+        .collect()
+}
+
+fn maxwell_branch(p: &Prepared, tau_s: f64) -> Vec<f64> {
+    let t = &p.trial.t_s;
     let mut m = 0.0;
-    let col = (0..p.trial.len())
+    (0..p.trial.len())
         .map(|i| {
-            m = if p.in_tissue(i) {
-                m + (p.velocity.v_mps[i] - m / tau_s) * dt
+            m = if p.in_tissue(i) && i > 0 {
+                let decay = (-(t[i] - t[i - 1]) / tau_s).exp();
+                m * decay + p.velocity.v_mps[i] * tau_s * (1.0 - decay)
             } else {
                 0.0
             };
             m
         })
-        .collect();
-    vec![col]
+        .collect()
 }
 
 /// Sliding damping l·v·(|v|/v_ref)^q beside l·v itself. At rest the
@@ -197,18 +211,34 @@ fn friction_lag(p: &Prepared, x_c: f64) -> Vec<Vec<f64>> {
     vec![col]
 }
 
-/// Walls where the detector found them: a force rising at k per metre up
-/// to the wall force seen falling there.
-fn walls(p: &Prepared, k: f64) -> Vec<Vec<f64>> {
+/// Walls and membranes where the detector found them, each a local
+/// stiffening up to the force seen falling there: wall_n·s^n over its own
+/// stretch s (0 where it began to load, 1 where it gave way), n on the
+/// grid — 1 a linear spring, 2 and 3 a collagen wall stiffening as it
+/// stretches (Fung). Each wall's stretch is its own (a vessel wall and a
+/// muscle fascia differ tenfold): walking back from the peak, the residual
+/// comes down to a little above the level it fell to (2 % of the wall
+/// force, three noise sd at least), and the straight line from there to
+/// the peak, carried on to that level, says where the wall began to load.
+fn walls(p: &Prepared, n: f64) -> Vec<Vec<f64>> {
     let mut col = vec![0.0; p.trial.len()];
+    let (x, r) = (&p.trial.x_m, &p.residual_n);
     for &(peak, x_peak, wall_n) in &p.structures {
-        let start = x_peak - wall_n / k;
+        let after = r[peak + 1..(peak + 6).min(r.len())].iter().sum::<f64>()
+            / (peak + 6).min(r.len()).saturating_sub(peak + 1).max(1) as f64;
+        let level = (0.02 * wall_n).max(3.0 * p.noise_n).min(0.5 * wall_n);
+        let begun = (0..peak)
+            .rev()
+            .find(|&i| r[i] <= after + level || x[i] <= p.geometry.puncture_x_m)
+            .unwrap_or(0);
+        let start_m = x[begun] - (x_peak - x[begun]) * level / (wall_n - level).max(1e-9);
+        let stretch_m = (x_peak - start_m).max(1e-6);
         for i in (0..=peak).rev() {
-            let x = p.trial.x_m[i];
-            if x < start {
+            if x[i] < start_m {
                 break;
             }
-            col[i] += wall_n - k * (x_peak - x);
+            let s = ((x[i] - start_m) / stretch_m).clamp(0.0, 1.0);
+            col[i] += wall_n * s.powf(n);
         }
     }
     vec![col]

@@ -466,6 +466,11 @@ fn scored_with_backfit<'c>(
             break;
         };
         let next = score(&again, &forces, None);
+        // A round that makes the withheld trials worse is not kept: the
+        // refitted nominal took up what the effect should have.
+        if next.rms() > scored.rms() {
+            break;
+        }
         let change = (next.rms() - scored.rms()).abs();
         let done = change < BACKFIT_TOL * scored.rms();
         (scored, current) = (next, again);

@@ -176,8 +176,16 @@ pub fn fit_relaxation(
                     ..(*geometry).clone()
                 };
                 let parts = predict_parts_at(params, &g, trial, (*v).clone());
+                // Each sample's square capped at ten noise sd: a membrane's
+                // or a wall's few newtons, which no ρ explains, must not
+                // decide it.
+                let cap = (10.0 * geometry.noise_n).powi(2).max(f64::MIN_POSITIVE);
                 (parts.puncture_index + 1..trial.len())
-                    .map(|i| (trial.f_n[i] - parts.friction_n[i] - parts.cutting_n[i]).powi(2))
+                    .map(|i| {
+                        (trial.f_n[i] - parts.friction_n[i] - parts.cutting_n[i])
+                            .powi(2)
+                            .min(cap)
+                    })
                     .sum::<f64>()
             })
             .sum::<f64>()

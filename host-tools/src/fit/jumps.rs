@@ -10,10 +10,11 @@
 //! its sample by where the straight motions either side of it meet.
 
 /// Velocity differences over `k` samples either side of the gap between
-/// samples i − 1 and i: ahead from x[i], back up to x[i − 1].
-fn contrast(x: &[f64], i: usize, k: usize, dt: f64) -> f64 {
-    let ahead = (x[i + k] - x[i]) / (k as f64 * dt);
-    let back = (x[i - 1] - x[i - 1 - k]) / (k as f64 * dt);
+/// samples i − 1 and i: ahead from x[i], back up to x[i − 1], each over
+/// its own time span (a rig's clock jitters, and loses samples).
+fn contrast(t: &[f64], x: &[f64], i: usize, k: usize) -> f64 {
+    let ahead = (x[i + k] - x[i]) / (t[i + k] - t[i]).max(1e-12);
+    let back = (x[i - 1] - x[i - 1 - k]) / (t[i - 1] - t[i - 1 - k]).max(1e-12);
     ahead - back
 }
 
@@ -85,12 +86,11 @@ pub fn velocity_steps(t: &[f64], x: &[f64], k: usize, least_mps: f64, step_m: f6
     if k == 0 || n < 4 * k + 4 {
         return steps;
     }
-    let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
     // Up to 2k samples either side of a jump, the long window sees it and
     // the short one does not, which the combination turns into a phantom
     // jump the other way; the short window's own contrast rules it out.
     let jump = |i: usize| {
-        let (ck, c2k) = (contrast(x, i, k, dt), contrast(x, i, 2 * k, dt));
+        let (ck, c2k) = (contrast(t, x, i, k), contrast(t, x, i, 2 * k));
         let j = ((2 * k + 1) as f64 * ck - (k + 1) as f64 * c2k) / k as f64;
         if ck.abs() >= least_mps && j * ck > 0.0 {
             j.abs()

@@ -137,16 +137,36 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
         .copied()
         .filter(|t| t.relaxation_identified)
         .collect();
+    // Trials that place x_s3 (strokes in the cut track, a stop into a
+    // dwell, a needle let go inside the tissue) give ρ and the cutting
+    // force; the others' cutting carries friction × (x_s3 − x_s1).
     let (relaxation, cutting) = if identified.len() == all.len() {
         (
             estimate(&col(|t| t.relaxation)),
             estimate(&col(|t| t.cutting_force_n)),
         )
+    } else if !identified.is_empty() {
+        let note = format!(
+            "from the {} of {} trials that place x_s3 (a stop into a dwell, or the needle let go inside the tissue)",
+            identified.len(),
+            all.len()
+        );
+        let (rho, rho_sd) = mean_sd(&identified.iter().map(|t| t.relaxation).collect::<Vec<_>>());
+        let (cut, cut_sd) = mean_sd(
+            &identified
+                .iter()
+                .map(|t| t.cutting_force_n)
+                .collect::<Vec<_>>(),
+        );
+        (
+            json!({ "value": rho, "sd": rho_sd, "note": note }),
+            json!({ "value": cut, "sd": cut_sd, "note": note }),
+        )
     } else {
-        let note = "not identified: on withdrawal the tissue held the needle until it was behind the contact point (dragged out), so where the surface relaxed to is not seen; x_s3 = x_s1 is used, and the cutting force then carries c_p·(x_s3 − x_s1)";
+        let note = "not identified: no trial stopped into a dwell at the cutting front, and on withdrawal the tissue held the needle until it was behind the contact point (dragged out), so where the surface relaxed to is not seen; x_s3 = x_s1 is used, and the cutting force then carries c_p·(x_s3 − x_s1)";
         let (with_x_s1, sd) = mean_sd(&col(|t| t.cutting_force_n));
         (
-            json!({ "value": Value::Null, "identified_in_trials": identified.len(), "model_uses": 0.0, "note": note }),
+            json!({ "value": Value::Null, "model_uses": 0.0, "note": note }),
             json!({ "value": with_x_s1, "sd": sd, "note": "confounded with friction × x_s3 (see relaxation)" }),
         )
     };

@@ -106,7 +106,13 @@ pub fn predict_parts_at(
             };
             continue;
         }
-        let l = x - geometry.relaxed_x_m;
+        // A withdrawing needle holds the tissue until it lets go, which a
+        // dragged tissue does before x_s3 (even before x_s1).
+        let exit_m = match geometry.let_go_x_m {
+            Some(let_go) if v.v_mps[i] < -params.half_band_mps => let_go.min(geometry.relaxed_x_m),
+            _ => geometry.relaxed_x_m,
+        };
+        let l = x - exit_m;
         if l <= 0.0 {
             continue;
         }
@@ -273,7 +279,9 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     }
     let (t, x) = (&trial.t_s, &trial.x_m);
     let dt = 1.0 / trial.rate_hz();
-    let k = ((0.01 / dt).round() as usize).max(1);
+    // 10 ms, but three samples at least: a jump is placed where lines
+    // through the samples either side cross, and a line needs two.
+    let k = ((0.01 / dt).round() as usize).max(3);
     // Ten encoder steps over a 10 ms window: well above what quantisation
     // makes of a smooth motion.
     let step_m = encoder_step_m(trial);
@@ -352,15 +360,21 @@ pub struct NeedleVelocity {
     pub force_sd_n: f64,
 }
 
-/// The encoder's resolution as the data show it: the least non-zero step.
+/// The encoder's resolution as the data show it: the least gap between
+/// two positions it read.
 fn encoder_step_m(trial: &Trial) -> f64 {
-    trial
-        .x_m
+    // The least gap between distinct positions anywhere in the trial, not
+    // between neighbouring samples: at 100 Hz a needle moves ten counts a
+    // sample, but the withdrawal's positions fall between the insertion's.
+    // At least 0.1 µm: a position stored in floating point is no encoder.
+    let mut distinct = trial.x_m.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct
         .windows(2)
-        .map(|w| (w[1] - w[0]).abs())
-        .filter(|&d| d > 0.0)
+        .map(|w| w[1] - w[0])
+        .filter(|&d| d > 1e-12)
         .fold(f64::INFINITY, f64::min)
-        .min(1e-4)
+        .clamp(1e-7, 1e-4)
 }
 
 #[cfg(test)]

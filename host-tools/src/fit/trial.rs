@@ -49,7 +49,10 @@ pub struct TrialFit {
     /// friction × x_s3) is identified: the withdrawing needle let go inside
     /// the tissue, between x_s1 and x_s2.
     pub relaxation_identified: bool,
-    /// Where the withdrawing needle let go of the tissue, m.
+    /// Where the withdrawing needle let go of the tissue, m, when found
+    /// apart from x_s3 (a one-way trial: a dragged tissue lets go before
+    /// x_s3, even before x_s1); `None` when the strokes' grid over ρ
+    /// placed x_s3 there.
     pub let_go_x_m: Option<f64>,
     /// Relaxation of the force during the longest rest inside the tissue.
     pub dwell: Option<DwellRelaxation>,
@@ -67,6 +70,12 @@ pub struct AtSpeed {
 /// How the force relaxed while the needle rested inside the tissue.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DwellRelaxation {
+    /// Where the needle rested, m.
+    pub x_m: f64,
+    /// The force at the rest's first instant, from the exponential fitted
+    /// through it (the noise averaged out, the relaxation extrapolated
+    /// back), N.
+    pub start_level_n: f64,
     pub duration_s: f64,
     /// Fall of the force over the rest, as a fraction of its start.
     pub fraction: f64,
@@ -147,14 +156,17 @@ fn noise(f: &[f64]) -> f64 {
 }
 
 /// The capsule puncture: the first sharp fall (below 60 % of the running
-/// peak, the peak well above noise); returns the peak's index.
-fn find_puncture(f: &[f64], noise_n: f64) -> Option<usize> {
+/// peak, the peak well above noise) with the needle further in than at the
+/// peak — a force that falls at rest (a tissue relaxing through a dwell,
+/// cutting stopping with the needle) is no puncture; returns the peak's
+/// index.
+fn find_puncture(f: &[f64], x: &[f64], noise_n: f64) -> Option<usize> {
     let mut peak = 0;
     for i in 0..f.len() {
         if f[i] > f[peak] {
             peak = i;
         }
-        if f[peak] > 0.1 + 10.0 * noise_n && f[i] < 0.6 * f[peak] {
+        if f[peak] > 0.1 + 10.0 * noise_n && f[i] < 0.6 * f[peak] && x[i] > x[peak] {
             return Some(peak);
         }
     }
@@ -204,7 +216,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let (x, f) = (&trial.x_m, &trial.f_n);
     let v = velocity(trial);
     let noise_n = noise(f);
-    let Some(ip) = find_puncture(f, noise_n) else {
+    let Some(ip) = find_puncture(f, x, noise_n) else {
         bail!("no capsule puncture (no peak followed by a sharp drop)");
     };
 
@@ -324,10 +336,11 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     }
     let x_s2 = x[ip];
     let inward = track.iter().filter(|s| s.1 > 0.0).count() >= MIN_STROKE_SAMPLES;
+    let dwell = dwell_relaxation(trial, &v, ip);
     let friction = if inward {
         both_ways(&track, &advancing, contact_x_m, x_s2)?
     } else {
-        one_way(&track, &advancing, contact_x_m, x_s2, noise_n)?
+        one_way(&track, &advancing, contact_x_m, x_s2, noise_n, dwell)?
     };
     let OneTrialFriction {
         relaxed_x_m,
@@ -400,7 +413,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         withdrawal: friction.withdrawal,
         relaxation_identified: friction.identified,
         let_go_x_m: friction.let_go_x_m,
-        dwell: dwell_relaxation(trial, &v, ip),
+        dwell,
         layers: layers_after(trial, &v, ip, noise_n),
     })
 }
@@ -480,7 +493,8 @@ fn both_ways(
         relaxed_x_m,
         rho: best_rho,
         identified: true,
-        let_go_x_m: Some(relaxed_x_m),
+        // The grid over ρ is where the withdrawing needle let go.
+        let_go_x_m: None,
         cp,
         bp,
         cn,
@@ -500,15 +514,19 @@ fn both_ways(
 /// c_p + b_p·v at its speed and the cutting force as the intercept. Each
 /// speed's coefficient is written as damping alone (c = 0, as the paper
 /// found in liver) — `needle fit` splits c and b when trials ran at
-/// several speeds. x_s3 is where the needle let go when that lies between
-/// x_s1 and x_s2; otherwise it is not identified and x_s1 is used, and the
-/// cutting force carries c_p·(x_s3 − x_s1) with it.
+/// several speeds. The cutting force is the fall of the force where the
+/// insertion stops into a dwell (cutting ends in a sample, friction holds),
+/// and x_s3 follows from the line's intercept; with no such stop x_s3 is
+/// where the needle let go when that lies between x_s1 and x_s2, and
+/// otherwise it is not identified: x_s1 is used, and the cutting force
+/// carries c_p·(x_s3 − x_s1) with it.
 fn one_way(
     track: &[Xvf],
     advancing: &[Xvf],
     contact_x_m: f64,
     x_s2: f64,
     noise_n: f64,
+    dwell: Option<DwellRelaxation>,
 ) -> Result<OneTrialFriction> {
     let out: Vec<Xvf> = track.iter().copied().filter(|s| s.1 < 0.0).collect();
     let depth = x_s2 - contact_x_m;
@@ -551,15 +569,35 @@ fn one_way(
             n_per_m: c,
         })
     });
-    let (cutting_force_n, insertion) = insertion_line(advancing, relaxed_x_m, noise_n)
-        .map(|(cut, k)| {
-            let at = AtSpeed {
-                speed_mps: mean_speed(advancing),
-                n_per_m: k,
-            };
-            (cut, Some(at))
-        })
-        .unwrap_or((0.0, None));
+    let line = insertion_line(advancing, contact_x_m, noise_n);
+    let insertion = line.map(|(_, k)| AtSpeed {
+        speed_mps: mean_speed(advancing),
+        n_per_m: k,
+    });
+    // At a stop at the deepest point cutting ends in a sample while the
+    // friction holds (Karnopp): the drop is the cutting force, and the
+    // line's intercept then places x_s3.
+    let deepest = advancing
+        .iter()
+        .map(|s| s.0)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let at_stop = line.zip(dwell.filter(|d| d.x_m >= deepest - 0.0005));
+    let from_stop = at_stop.and_then(|((c0, k), d)| {
+        let cutting = c0 + k * (d.x_m - contact_x_m) - d.start_level_n;
+        let rho = (cutting - c0) / (k * depth);
+        (k > 0.0 && depth > 0.0 && (-0.1..=1.1).contains(&rho))
+            .then_some((cutting, rho.clamp(0.0, 1.0)))
+    });
+    let (identified, rho) = match from_stop {
+        Some((_, rho)) => (true, rho),
+        None => (identified, rho),
+    };
+    let relaxed_x_m = contact_x_m + rho * depth;
+    let cutting_force_n = match (from_stop, line) {
+        (Some((cutting, _)), _) => cutting,
+        (None, Some((c0, k))) => c0 + k * (relaxed_x_m - contact_x_m),
+        (None, None) => 0.0,
+    };
     let damping = |at: Option<AtSpeed>| {
         at.filter(|a| a.speed_mps.abs() > 0.0)
             .map_or(0.0, |a| a.n_per_m / a.speed_mps)
@@ -641,7 +679,7 @@ fn dwell_relaxation(trial: &Trial, v: &[f64], ip: usize) -> Option<DwellRelaxati
         level(a, (a + tenth).min(b)),
         level(b.saturating_sub(tenth).max(a), b),
     );
-    let mut best_tau = (f64::INFINITY, 0.0);
+    let mut best_tau = (f64::INFINITY, 0.0, first);
     for k in 0..=60 {
         let tau = 0.05 * 1000f64.powf(k as f64 / 60.0);
         let mut fit = Lsq::<2>::default();
@@ -651,11 +689,13 @@ fn dwell_relaxation(trial: &Trial, v: &[f64], ip: usize) -> Option<DwellRelaxati
         if let Some(c) = fit.solve() {
             let sse = fit.sse(&c);
             if sse < best_tau.0 {
-                best_tau = (sse, tau);
+                best_tau = (sse, tau, c[0] + c[1]);
             }
         }
     }
     Some(DwellRelaxation {
+        x_m: trial.x_m[a],
+        start_level_n: best_tau.2,
         duration_s,
         fraction: (first - last) / first,
         tau_s: best_tau.1,
