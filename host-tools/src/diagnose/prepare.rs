@@ -28,7 +28,7 @@ pub const LOADING: usize = 1;
 const INSERTION: usize = 2;
 const DWELL: usize = 3;
 const REVERSAL: usize = 4;
-const WITHDRAWAL: usize = 5;
+pub const WITHDRAWAL: usize = 5;
 pub const AFTER: usize = 6;
 
 /// Moving, for the phase split, m/s.
