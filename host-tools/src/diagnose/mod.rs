@@ -587,6 +587,17 @@ pub const EXPLAINED_FACTOR: f64 = 1.5;
 
 /// The whole diagnosis as JSON (the keys of the issue).
 pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
+    diagnose_with_progress(data, nominal, &mut |_| {})
+}
+
+/// [`diagnose`], telling `progress` what it is about to do (the command
+/// line prints it once a diagnosis has taken more than a second).
+pub fn diagnose_with_progress(
+    data: &[Prepared],
+    nominal: Nominal,
+    progress: &mut dyn FnMut(&str),
+) -> Value {
+    progress("scoring the baseline and every candidate on withheld trials");
     let baseline = score(data, &[], None);
     let mut ranked: Vec<(usize, Scored, f64, f64)> = CANDIDATES
         .iter()
@@ -607,6 +618,10 @@ pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
         .iter()
         .find(|r| significant(r.2, r.3))
         .map(|(ci, s, ..)| {
+            progress(&format!(
+                "backfitting the nominal under {}",
+                CANDIDATES[*ci].effect
+            ));
             let fixed = [(&CANDIDATES[*ci], s.grid_value)];
             (*ci, scored_with_backfit(data, &fixed, nominal))
         })
@@ -616,12 +631,16 @@ pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
             // along an insertion at constant speed is a friction slope)
             // shows only once the nominal is found again without it.
             (baseline.rms() > EXPLAINED_FACTOR * noise)
-                .then(|| backfitted_first(data, &baseline, &ranked, nominal))
+                .then(|| {
+                    progress("no candidate significant: backfitting the leading ones");
+                    backfitted_first(data, &baseline, &ranked, nominal)
+                })
                 .flatten()
         });
     let mut second_name = "none";
     let mut after = None;
     if let Some((ci, (alone, cleaned, fixed))) = &first {
+        progress("searching for a second effect");
         let best_second = CANDIDATES
             .iter()
             .enumerate()
@@ -871,6 +890,15 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         Some(file) => Some(crate::tissue::resolve(args.tissue.as_deref(), Some(file))?.params),
         None => None,
     };
+    // A progress line on stderr once the diagnosis has taken a second.
+    let started = std::time::Instant::now();
+    let mut progress = |what: &str| {
+        let elapsed = started.elapsed().as_secs_f64();
+        if elapsed > 1.0 {
+            eprintln!("needle diagnose: {elapsed:5.1} s: {what}");
+        }
+    };
+    progress("reading and fitting the trials");
     let (_, mut data) = load(&args.dir, params.as_ref())?;
     if args.device_model {
         for p in &mut data {
@@ -885,7 +913,8 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         (false, Some(_)) => Nominal::Given,
         (false, None) => Nominal::Fitted,
     };
-    let out = diagnose(&data, nominal);
+    let out = diagnose_with_progress(&data, nominal, &mut progress);
+    progress("done");
     eprintln!("{}", report::headline(&out));
     if let Some(path) = &args.residuals {
         write_residuals(path, &data)?;

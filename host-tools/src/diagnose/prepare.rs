@@ -197,8 +197,10 @@ pub fn fit_relaxation(
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .map_or(params.relaxation, |(rho, _)| rho)
     };
-    let coarse = best_on(0.0, 1.0, 40);
-    best_on((coarse - 0.025).max(0.0), (coarse + 0.025).min(1.0), 10)
+    // 0.05 apart, then 0.005 about the best (each step a prediction of
+    // every trial: the grid is most of a backfit round's cost).
+    let coarse = best_on(0.0, 1.0, 20);
+    best_on((coarse - 0.05).max(0.0), (coarse + 0.05).min(1.0), 20)
 }
 
 /// x_s3 for relaxation `rho`.
