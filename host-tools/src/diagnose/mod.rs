@@ -455,11 +455,15 @@ const TISSUE_FRAME_ROUNDS: usize = 6;
 /// `set` scored after backfitting the nominal under it, with the data the
 /// last round left and the part of `set` still to be added as columns
 /// (tissue motion is in the data's positions once backfitted).
+/// A set scored after backfitting: the score, the data the last round
+/// left, and the part of the set still to add as columns.
+type Backfitted<'c> = (Scored, Vec<Prepared>, Vec<(&'c Candidate, f64)>);
+
 fn scored_with_backfit<'c>(
     data: &[Prepared],
     set: &[(&'c Candidate, f64)],
     nominal: Nominal,
-) -> (Scored, Vec<Prepared>, Vec<(&'c Candidate, f64)>) {
+) -> Backfitted<'c> {
     if nominal == Nominal::Device {
         return (score(data, set, None), data.to_vec(), set.to_vec());
     }
@@ -728,7 +732,7 @@ fn backfitted_first<'c>(
     baseline: &Scored,
     ranked: &[(usize, Scored, f64, f64)],
     nominal: Nominal,
-) -> Option<(usize, (Scored, Vec<Prepared>, Vec<(&'c Candidate, f64)>))> {
+) -> Option<(usize, Backfitted<'c>)> {
     ranked
         .iter()
         .filter(|r| r.2 > 0.0)
