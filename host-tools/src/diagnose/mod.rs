@@ -452,13 +452,13 @@ const BACKFIT_TOL: f64 = 0.01;
 /// (seeds 3, 7, 11), and each round costs about 1 s of the 10 s budget.
 const TISSUE_FRAME_ROUNDS: usize = 6;
 
-/// `set` scored after backfitting the nominal under it, with the data the
-/// last round left and the part of `set` still to be added as columns
-/// (tissue motion is in the data's positions once backfitted).
 /// A set scored after backfitting: the score, the data the last round
 /// left, and the part of the set still to add as columns.
 type Backfitted<'c> = (Scored, Vec<Prepared>, Vec<(&'c Candidate, f64)>);
 
+/// `set` scored after backfitting the nominal under it, with the data the
+/// last round left and the part of `set` still to be added as columns
+/// (tissue motion is in the data's positions once backfitted).
 fn scored_with_backfit<'c>(
     data: &[Prepared],
     set: &[(&'c Candidate, f64)],
