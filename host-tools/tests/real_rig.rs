@@ -250,3 +250,109 @@ fn viscoelasticity_is_named_from_the_dwell_and_the_gap_closes() {
     assert_eq!(v["effect"], "viscoelasticity", "{v}");
     assert!(v["explained"].as_bool().unwrap(), "{v}");
 }
+
+/// The verdict on ten insert–dwell–withdraw trials (skin phantom, 100 Hz,
+/// jitter, tare, no membranes) with one effect in `form`: (named, second,
+/// explained, held-out RMS before and after, noise floor).
+fn verdict_on(effect: &str, form: Form) -> (String, String, bool, f64, f64, f64) {
+    let dir = tempfile::tempdir().unwrap();
+    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
+    let list = effects::parse_list(effect).unwrap();
+    Dataset {
+        tissue_name: "skin_phantom",
+        tissue: &skin.params,
+        effects: &list,
+        trials: 10,
+        seed: 5,
+        sensor: SENSOR,
+        through: false,
+        form,
+        rig: Rig { layers: 0, ..RIG },
+    }
+    .write(dir.path())
+    .unwrap();
+    let (_, data) = load(dir.path(), None).unwrap();
+    let out = diagnose(&data, Nominal::Fitted);
+    let v = &out["verdict"];
+    let num = |v: &Value| v.as_f64().unwrap();
+    let text = |v: &Value| v.as_str().unwrap().to_owned();
+    (
+        text(&v["effect"]),
+        text(&v["second"]),
+        v["explained"].as_bool().unwrap(),
+        num(&out["baseline"]["heldout_rms_n"]),
+        num(&v["heldout_rms_after_n"]),
+        num(&out["noise_floor_n"]),
+    )
+}
+
+/// Each effect in each form on real rigs' protocol: what is named, and
+/// never `none` over a gap. `Some(name)`: the verdict must name it;
+/// `None`: too weak on this protocol to be seen, so `none` with the gap
+/// explained. The literature forms (Fung's box spectrum, Stribeck, Dahl's
+/// exponent 2, …) were written after the candidates and kept out of their
+/// tuning: for them only the rule is asserted, and the table is printed
+/// (`cargo test -p host-tools --test real_rig confusion -- --nocapture`).
+#[test]
+fn confusion_on_insert_dwell_withdraw() {
+    let expected: [(&str, Option<&str>, Option<&str>); 9] = [
+        ("none", Some("none"), Some("none")),
+        (
+            "viscoelasticity",
+            Some("viscoelasticity"),
+            Some("viscoelasticity"),
+        ),
+        ("rate_dependent_friction", None, None),
+        (
+            "presliding_hysteresis",
+            Some("presliding_hysteresis"),
+            Some("presliding_hysteresis"),
+        ),
+        (
+            "internal_structures",
+            Some("internal_structures"),
+            Some("internal_structures"),
+        ),
+        // Standard form: named wrong (viscoelasticity), with the gap
+        // reported as not explained; see the README.
+        ("depth_dependent_cutting", Some("?"), None),
+        ("holder_inertia", None, None),
+        ("sensor_drift", Some("sensor_drift"), Some("sensor_drift")),
+        (
+            "tissue_motion",
+            Some("tissue_motion"),
+            Some("tissue_motion"),
+        ),
+    ];
+    eprintln!("| hidden | form | named (second) | before → after (floor) | explained |");
+    eprintln!("|---|---|---|---|---|");
+    for (effect, standard, alternate) in expected {
+        for (form, want) in [
+            (Form::Standard, Some(standard)),
+            (Form::Alternate, Some(alternate)),
+            (Form::Literature, None),
+        ] {
+            let (named, second, explained, before, after, floor) = verdict_on(effect, form);
+            eprintln!(
+                "| {effect} | {form:?} | {named} ({second}) | {:.1} → {:.1} mN ({:.1}) | {explained} |",
+                before * 1e3,
+                after * 1e3,
+                floor * 1e3
+            );
+            // Never none over a gap, in any form.
+            assert!(
+                named != "none" || explained,
+                "{effect} {form:?}: none over a gap"
+            );
+            assert_eq!(explained, after <= 1.5 * floor, "{effect} {form:?}");
+            match want {
+                Some(Some("?")) => assert!(!explained, "{effect} {form:?}: {named}"),
+                Some(Some(name)) => assert_eq!(named, name, "{effect} {form:?}"),
+                Some(None) => {
+                    assert_eq!(named, "none", "{effect} {form:?}");
+                }
+                None => {}
+            }
+        }
+    }
+}

@@ -51,11 +51,13 @@ fn grid_as_named(name: &'static str, g: f64) -> Vec<(&'static str, f64)> {
 pub const CANDIDATES: [Candidate; 8] = [
     Candidate {
         effect: "viscoelasticity",
-        grid_name: "tau_s",
-        grid: &[0.25, 0.5, 1.0, 2.0, 4.0],
-        linear: &["k_fast_n_per_m", "k_n_per_m", "k_slow_n_per_m"],
+        grid_name: "spectrum",
+        grid: &[
+            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0,
+        ],
+        linear: &["k_n_per_m"],
         columns: maxwell,
-        grid_params: grid_as_named,
+        grid_params: spectrum_params,
         backfit: Backfit::Force,
     },
     Candidate {
@@ -131,19 +133,44 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
 ];
 
-/// A spectrum of relaxation times around τ on the grid: Maxwell branches
-/// at τ/3, τ and 3τ, each state dm/dt = v − m/τ_k in tissue (θ_k = the
-/// branch's stiffness). One branch is the standard linear solid; the
-/// three together hold a Prony series over a decade, and with the grid
-/// 0.25–4 s a spectrum from 0.08 to 12 s — Fung's quasi-linear
-/// viscoelasticity has a continuous one, a power law a flat one. Each
-/// step is integrated exactly for a velocity held over it, so a rig's
-/// jittered clock and its gaps cost nothing.
-fn maxwell(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
-    [tau_s / 3.0, tau_s, 3.0 * tau_s]
-        .iter()
-        .map(|&tau| maxwell_branch(p, tau))
-        .collect()
+/// Relaxation spectra on the grid: a centre τ of 0.25–4 s × a width of
+/// one time constant (the standard linear solid), one decade or two
+/// (Fung's quasi-linear viscoelasticity has a continuous box spectrum, a
+/// power law a flat one over decades). The spectrum's shape is chosen on
+/// the grid and its branches share one stiffness: a free weight per
+/// branch would let them cancel one another, fit the training trials'
+/// noise and miss the withheld ones.
+const SPECTRUM_TAU_S: [f64; 5] = [0.25, 0.5, 1.0, 2.0, 4.0];
+const SPECTRUM_DECADES: [f64; 3] = [0.0, 1.0, 2.0];
+
+fn spectrum_at(g: f64) -> (f64, f64) {
+    let k = (g as usize).min(SPECTRUM_TAU_S.len() * SPECTRUM_DECADES.len() - 1);
+    (
+        SPECTRUM_TAU_S[k % SPECTRUM_TAU_S.len()],
+        SPECTRUM_DECADES[k / SPECTRUM_TAU_S.len()],
+    )
+}
+
+fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
+    let (tau_s, decades) = spectrum_at(g);
+    vec![("tau_s", tau_s), ("spectrum_decades", decades)]
+}
+
+/// Maxwell branches spread evenly in log τ over the spectrum's width
+/// (half a decade apart), each state dm/dt = v − m/τ_k in tissue, summed
+/// with equal stiffness. Each step is integrated exactly for a velocity
+/// held over it, so a rig's jittered clock and its gaps cost nothing.
+fn maxwell(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
+    let (tau_s, decades) = spectrum_at(g);
+    let branches = (2.0 * decades) as i32;
+    let mut col = vec![0.0; p.trial.len()];
+    for b in -branches / 2..=branches / 2 {
+        let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
+        for (c, m) in col.iter_mut().zip(maxwell_branch(p, tau)) {
+            *c += m / f64::from(branches + 1);
+        }
+    }
+    vec![col]
 }
 
 fn maxwell_branch(p: &Prepared, tau_s: f64) -> Vec<f64> {

@@ -33,6 +33,15 @@ pub enum Form {
     #[default]
     Standard,
     Alternate,
+    /// Forms from the literature, kept out of the diagnosis's tuning
+    /// (written after it, and only measured): Fung's quasi-linear
+    /// viscoelasticity with a box spectrum (five branches, 0.05–20 s),
+    /// Stribeck friction (a low-speed boost falling off by 0.5 mm/s), Dahl
+    /// presliding with his exponent 2, walls stiffening exponentially
+    /// (Fung's collagen), cutting growing with the square root of depth, a
+    /// load cell on a mount ringing at 8 Hz, a drift that accelerates as a
+    /// bridge warms up, breathing whose period wanders by ±20 %.
+    Literature,
 }
 
 /// Sensor realism.
@@ -207,7 +216,9 @@ pub fn insert_dwell_withdraw(
             Segment::Dwell { duration_s: 0.5 },
         ],
         layers,
-        drag_m: rng.gen_range(0.0015..0.009),
+        // The tissue lets go before the stage is back at 0: a rig
+        // withdraws until the force is back to zero.
+        drag_m: rng.gen_range(0.0015..0.009_f64.min(surface - 0.0005).max(0.0016)),
         tare_n: 0.0,
         times_s: None,
     }
@@ -304,8 +315,9 @@ pub fn simulate_trial_in(
     rng: &mut impl Rng,
 ) -> (Trial, TrialTruth) {
     let alternate = form == Form::Alternate;
+    let literature = form == Form::Literature;
     // Breathing does not start with the trial (alternate form).
-    let breath_phase = if alternate {
+    let breath_phase = if alternate || literature {
         rng.gen_range(0.0..std::f64::consts::TAU)
     } else {
         0.0
@@ -366,6 +378,10 @@ pub fn simulate_trial_in(
     let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
     let (mut last_sliding, mut friction, mut maxwell) = (0.0, 0.0, 0.0);
     let (mut maxwell_slow, mut a_filtered) = (0.0, 0.0);
+    // Literature forms' state: the box spectrum's branches, the mount's
+    // deflection and its rate.
+    let mut branches = [0.0_f64; 5];
+    let (mut mount, mut mount_rate) = (0.0_f64, 0.0_f64);
     let mut prev_p = 0.0;
     for i in 0..m.t_s.len() {
         let (t, x, v, a) = (m.t_s[i], m.x_m[i], m.v_mps[i], m.a_mps2[i]);
@@ -382,7 +398,17 @@ pub fn simulate_trial_in(
                 freq_hz,
             } = *effect
             {
-                if alternate {
+                if literature {
+                    // The breathing period wanders by ±20 % over 30 s.
+                    let (w, w_m) = (
+                        std::f64::consts::TAU * freq_hz,
+                        std::f64::consts::TAU / 30.0,
+                    );
+                    let beta = 0.2 * w / w_m;
+                    let th = w * t + beta * (w_m * t).sin() + breath_phase;
+                    p -= amplitude_m * th.sin();
+                    vr -= amplitude_m * th.cos() * (w + beta * w_m * (w_m * t).cos());
+                } else if alternate {
                     // Breathing is not a sine: a sharper inhale, 0.8 f.
                     let w = 0.8 * std::f64::consts::TAU * freq_hz;
                     let th = w * t + breath_phase;
@@ -455,6 +481,13 @@ pub fn simulate_trial_in(
                         let most = target.abs().max(0.05) * dx / x_c;
                         friction + (target - friction).clamp(-most, most)
                     }
+                    // Dahl with exponent 2: dF/dx ∝ (1 − F/F_c)², a
+                    // sharper start and a slower approach.
+                    Some(x_c) if literature => {
+                        let (gap, scale) = (target - friction, target.abs().max(0.05));
+                        let rel = (gap.abs() / scale).min(2.0);
+                        friction + gap.signum() * (scale * dx / x_c * rel * rel).min(gap.abs())
+                    }
                     Some(x_c) => friction + (target - friction) * (dx / x_c).min(1.0),
                     None => target,
                 };
@@ -462,7 +495,11 @@ pub fn simulate_trial_in(
                 for effect in effects {
                     if let Effect::DepthDependentCutting { g_per_m } = *effect {
                         let depth = p - s1;
-                        cutting *= if alternate {
+                        cutting *= if literature {
+                            // Growing as the square root of depth, the
+                            // same at 10 mm.
+                            1.0 + g_per_m * (depth.max(0.0) * 0.01).sqrt()
+                        } else if alternate {
                             // Saturating over 20 mm, same initial slope.
                             const L_M: f64 = 0.02;
                             1.0 + g_per_m * L_M * (1.0 - (-depth / L_M).exp())
@@ -500,7 +537,11 @@ pub fn simulate_trial_in(
                     }
                     let stretch = p - depth;
                     let mut wall = k_v.unwrap_or(0.0) * stretch;
-                    if alternate {
+                    if literature {
+                        // Fung's exponential collagen law, over 0.5 mm.
+                        const L_M: f64 = 0.0005;
+                        wall = k_v.unwrap_or(0.0) * L_M * ((stretch / L_M).exp() - 1.0);
+                    } else if alternate {
                         // Stiffening (a collagen wall), doubling at 1 mm.
                         wall *= 1.0 + stretch / 0.001;
                     }
@@ -522,6 +563,21 @@ pub fn simulate_trial_in(
         }
         for effect in effects {
             match *effect {
+                Effect::Viscoelasticity { k_n_per_m, tau_s } if literature => {
+                    // Fung's box spectrum, discretised: five branches of
+                    // k/2 each, τ log-spaced over 0.05–20 s (τ of the
+                    // effect is the box's centre, 1 s by default).
+                    for (k, m) in branches.iter_mut().enumerate() {
+                        let tau = tau_s * 0.05 * 400f64.powf(k as f64 / 4.0);
+                        *m = if phase == Contact::Out {
+                            0.0
+                        } else {
+                            let decay = (-dt / tau).exp();
+                            *m * decay + 0.5 * k_n_per_m * vr * tau * (1.0 - decay)
+                        };
+                        f += *m;
+                    }
+                }
                 Effect::Viscoelasticity { k_n_per_m, tau_s } => {
                     // Alternate: a Prony series of two branches.
                     let (k1, tau1, k2, tau2) = if alternate {
@@ -537,10 +593,28 @@ pub fn simulate_trial_in(
                     }
                     f += maxwell + maxwell_slow;
                 }
+                Effect::HolderInertia { mass_kg } if literature => {
+                    // A mount ringing at 8 Hz, damping ratio 0.3: the load
+                    // cell feels the holder's acceleration through it
+                    // (integrated in sub-steps, stable over a 70 ms gap).
+                    let (w, zeta) = (std::f64::consts::TAU * 8.0, 0.3);
+                    let steps = ((dt * w / 0.1).ceil() as usize).max(1);
+                    let h = dt / steps as f64;
+                    for _ in 0..steps {
+                        mount_rate += (w * w * (a - mount) - 2.0 * zeta * w * mount_rate) * h;
+                        mount += mount_rate * h;
+                    }
+                    f += mass_kg * mount;
+                }
                 Effect::HolderInertia { mass_kg } => {
                     // Alternate: the drive reaches its speed over ~10 ms.
                     a_filtered += (a - a_filtered) * if alternate { dt / 0.01 } else { 1.0 };
                     f += mass_kg * a_filtered;
+                }
+                Effect::SensorDrift { rate_n_per_s } if literature => {
+                    // A bridge warming up: the drift accelerates, reaching
+                    // the standard rate at 20 s.
+                    f += rate_n_per_s * t * t / (2.0 * 20.0);
                 }
                 Effect::SensorDrift { rate_n_per_s } => {
                     // Alternate: a bridge settling thermally over 30 s.
@@ -579,6 +653,14 @@ fn friction_target(
         } = *effect
         {
             let speed = v.abs().max(tissue.half_band_mps);
+            if form == Form::Literature {
+                // Stribeck: sliding friction boosted at low speed, the
+                // boost falling off by 0.5 mm/s (20 N/m at strength 1).
+                let boost = 20.0 * (1.0 - exponent) / 0.5 * (-(speed / 0.0005).powi(2)).exp();
+                p.cp_n_per_m += boost;
+                p.cn_n_per_m -= boost;
+                continue;
+            }
             let scale = if form == Form::Alternate {
                 // Logarithmic strengthening, as strong as the power law.
                 let s = (1.0 - exponent) / 0.5;
