@@ -356,3 +356,36 @@ fn confusion_on_insert_dwell_withdraw() {
         }
     }
 }
+
+#[test]
+fn a_puncture_drop_spread_over_samples_is_no_exit() {
+    // 100 Hz at 2 mm/s into a skin phantom: loading to 4.8 N, the drop to
+    // 1.5 N over three samples (a real rig's skin, DESIGN.md §1), then
+    // cutting and a friction slowly growing. Before, the drop's tail read
+    // as an exit.
+    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
+    let mut trial = host_tools::trial::Trial::default();
+    let (rate, speed) = (100.0, 0.002);
+    let (contact, puncture) = (0.005, 0.015);
+    let mut fell = 0;
+    for i in 0..1500 {
+        let t = i as f64 / rate;
+        let x = speed * t;
+        let f = if x < contact {
+            0.0
+        } else if x < puncture {
+            skin.params.stiffness_n(x - contact).min(4.8)
+        } else if fell < 3 {
+            fell += 1;
+            4.8 - 1.1 * fell as f64
+        } else {
+            1.5 + 30.0 * (x - puncture)
+        };
+        trial.push(t, x, f);
+    }
+    let config = DeviceConfig::for_tissue(&skin.params).unwrap();
+    let found = host_tools::detect::detect_trial(&trial, &config);
+    let kinds: Vec<&str> = found.events.iter().map(|e| e.kind).collect();
+    assert_eq!(kinds, ["contact", "puncture"], "{:?}", found.events);
+    assert!(found.faults.is_empty(), "{:?}", found.faults);
+}
