@@ -40,6 +40,19 @@ impl Gram {
         self.count += 1;
     }
 
+    /// The same sums with `extra` columns appended, their sums zero.
+    pub fn with_columns(&self, extra: usize) -> Gram {
+        let n = self.n + extra;
+        let mut g = Gram::new(n);
+        for i in 0..self.n {
+            g.ata[i * n..i * n + self.n].copy_from_slice(&self.ata[i * self.n..(i + 1) * self.n]);
+        }
+        g.aty[..self.n].copy_from_slice(&self.aty);
+        g.yy = self.yy;
+        g.count = self.count;
+        g
+    }
+
     pub fn merge(&mut self, other: &Gram) {
         for (a, b) in self.ata.iter_mut().zip(&other.ata) {
             *a += b;
