@@ -389,3 +389,56 @@ fn a_puncture_drop_spread_over_samples_is_no_exit() {
     assert_eq!(kinds, ["contact", "puncture"], "{:?}", found.events);
     assert!(found.faults.is_empty(), "{:?}", found.faults);
 }
+
+#[test]
+fn fit_and_detect_hold_from_50_hz_to_2_khz() {
+    // The slowest rigs and the device's fastest rate: at 2 kHz a needle at
+    // 1 mm/s reads the same 1 µm count for samples on end, and must not
+    // look stopped (a membrane's fall was an exit, and the dragged
+    // tissue's pull a fault, before).
+    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
+    for rate_hz in [50.0, 2000.0] {
+        let dir = tempfile::tempdir().unwrap();
+        let list = effects::parse_list("viscoelasticity=3").unwrap();
+        Dataset {
+            tissue_name: "skin_phantom",
+            tissue: &skin.params,
+            effects: &list,
+            trials: 6,
+            seed: 9,
+            sensor: Sensor { rate_hz, ..SENSOR },
+            through: false,
+            form: Form::Standard,
+            rig: RIG,
+        }
+        .write(dir.path())
+        .unwrap();
+        let fit = fit_dataset(dir.path()).unwrap();
+        assert_eq!(fit["trials"], 6, "{rate_hz} Hz: {}", fit["skipped"]);
+        let layers: u64 = fit["layers"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|l| l["trials"].as_u64().unwrap())
+            .sum();
+        assert_eq!(
+            layers as usize,
+            truth_events(dir.path(), "structure"),
+            "{rate_hz} Hz"
+        );
+        let tissue = host_tools::tissue::parse(&to_toml(&fit), Path::new("fitted.toml"))
+            .unwrap()
+            .remove(0);
+        let config = DeviceConfig::for_tissue(&tissue.params).unwrap();
+        let out = detect_dataset(dir.path(), &config).unwrap();
+        for t in out["trials"].as_array().unwrap() {
+            assert_eq!(t["faults"], serde_json::json!([]), "{rate_hz} Hz: {t}");
+        }
+        let eval = out["evaluation"].as_array().unwrap();
+        for kind in ["puncture", "structure", "exit"] {
+            let k = eval.iter().find(|k| k["kind"] == kind).unwrap();
+            assert_eq!(k["misses"], 0, "{rate_hz} Hz: {k}");
+            assert_eq!(k["false_alarms"], 0, "{rate_hz} Hz: {k}");
+        }
+    }
+}

@@ -8,7 +8,10 @@
 //! [`NO_CONTACT_FAULT_SAMPLES`] while the needle is not advancing cannot
 //! come from the tissue, which only pushes back on an advancing tip before
 //! puncture: it is a drifting or bumped load cell, or a stuck encoder, and
-//! raises [`Faults::FORCE_WITHOUT_CONTACT`].
+//! raises [`Faults::FORCE_WITHOUT_CONTACT`]. A pull on a needle being
+//! withdrawn is the one exception: tissue dragged out with it lets go a
+//! few millimetres later (DESIGN.md §1), and the phase machine's own
+//! judgement of where it let go is only as good as one noisy sample.
 
 use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::faults::Faults;
@@ -30,12 +33,13 @@ pub struct ContactState {
 pub fn update(c: &DetectConfig, st: &mut ContactState, s: DetectInput) -> (Option<Event>, Faults) {
     let above = s.force.abs() > c.contact_force;
     let touching = s.force > c.contact_force && s.v.0 > 0;
+    let dragged = s.force.0 < 0 && s.v.0 < 0;
     st.touching_samples = if touching {
         st.touching_samples.saturating_add(1)
     } else {
         0
     };
-    st.unexplained_samples = if above && !touching {
+    st.unexplained_samples = if above && !touching && !dragged {
         st.unexplained_samples.saturating_add(1)
     } else {
         0

@@ -17,7 +17,8 @@
 //! Either fall is only *pending* until the encoder has moved past where it
 //! happened with the force still down: when the robot stops, cutting and
 //! sliding friction vanish in one sample too, and that is neither. A
-//! sample that is not advancing restarts the search.
+//! needle that has not advanced for 10 ms restarts the search (a sample
+//! between two encoder steps of a slow needle is skipped).
 //!
 //! A fall that comes after a wall's rise is a structure wherever it ends: a
 //! membrane below the capsule (skin on muscle) gives way to a softer layer,

@@ -46,6 +46,11 @@ pub struct DetectConfig {
     /// sample: a time constant of about 2 s at any sample rate
     /// ([`DetectConfig::at_sample_rate`]).
     pub baseline_shift: u32,
+    /// Samples the encoder may read no advance before the needle counts
+    /// as stopped (10 ms, two at least): at 1 mm/s and 2 kHz a 1 µm
+    /// encoder steps every other sample, and a sample between two steps
+    /// is no stop.
+    pub still_samples: u32,
 }
 
 impl DetectConfig {
@@ -72,13 +77,25 @@ impl DetectConfig {
             exit_drop: MicroNewtons::from_n(0.5 * p.cutting_force_n),
             stuck_rise: MicroNewtons::from_n(0.25 * p.puncture_force_n),
             baseline_shift: Self::baseline_shift_for(500),
+            still_samples: Self::still_samples_for(500),
         }
     }
 
     /// The same thresholds for a recording at `sample_rate_hz`.
     pub const fn at_sample_rate(mut self, sample_rate_hz: u16) -> Self {
         self.baseline_shift = Self::baseline_shift_for(sample_rate_hz);
+        self.still_samples = Self::still_samples_for(sample_rate_hz);
         self
+    }
+
+    /// Samples in 10 ms, two at least.
+    const fn still_samples_for(sample_rate_hz: u16) -> u32 {
+        let samples = sample_rate_hz as u32 / 100;
+        if samples < 2 {
+            2
+        } else {
+            samples
+        }
     }
 
     /// The least shift whose time constant, 2^shift samples, reaches 2 s.
@@ -97,6 +114,8 @@ impl DetectConfig {
 pub struct DetectState {
     /// Positions of the last two samples, newest first.
     previous_x: [Nanometres; 2],
+    /// Consecutive samples inside the tissue with no advance.
+    still: u32,
     contact: contact::ContactState,
     puncture: puncture::PunctureState,
     interior: interior::InteriorState,
@@ -150,7 +169,13 @@ impl DetectConfig {
                 (event, Faults::NONE)
             }
             Phase::Inserted if advancing => {
+                state.still = 0;
                 (interior::update(self, &mut state.interior, s), Faults::NONE)
+            }
+            // Between two encoder steps: nothing new to look at.
+            Phase::Inserted if state.still < self.still_samples => {
+                state.still += 1;
+                (None, Faults::NONE)
             }
             Phase::Inserted | Phase::Withdrawal => {
                 state.interior.restart(s);

@@ -711,9 +711,12 @@ fn layers_after(trial: &Trial, v: &[f64], ip: usize, noise_n: f64) -> Vec<LayerP
     let span = ((0.02 * trial.rate_hz()).round() as usize).max(2);
     let threshold = (10.0 * noise_n).max(0.3);
     let mut layers = Vec::new();
-    // Past the capsule's own drop: once the force has stopped falling.
+    // Past the capsule's peak and its own drop (the peak's top can span
+    // samples at a high rate): once the force is well below the peak and
+    // has stopped falling.
+    let below_peak = threshold.min(0.3 * f[ip]);
     let mut i = ip + 1;
-    while i + 1 < trial.len() && f[i + 1] < f[i] - threshold / 2.0 {
+    while i + 1 < trial.len() && (f[i] > f[ip] - below_peak || f[i + 1] < f[i] - threshold / 2.0) {
         i += 1;
     }
     let mut deepest = x[i];
@@ -723,9 +726,11 @@ fn layers_after(trial: &Trial, v: &[f64], ip: usize, noise_n: f64) -> Vec<LayerP
         let low = (i + 1..=i + span)
             .min_by(|&a, &b| f[a].total_cmp(&f[b]))
             .unwrap_or(i);
-        // Still advancing one sample past the fall: a stop drops the
-        // cutting force as sharply, and that is no membrane.
-        let moving_on = (i + 1..=(low + 1).min(trial.len() - 1)).all(|j| x[j] > x[j - 1]);
+        // Still advancing after the fall: a stop drops the cutting force
+        // as sharply, and that is no membrane. (Net over the span: a slow
+        // needle at a high rate reads the same encoder count for several
+        // samples.)
+        let moving_on = x[(low + span).min(trial.len() - 1)] > x[low];
         if advancing && moving_on && f[i] - f[low] > threshold && f[i] >= f[i.saturating_sub(1)] {
             layers.push(LayerPuncture {
                 x_m: x[i],

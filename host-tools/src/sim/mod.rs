@@ -828,8 +828,9 @@ struct TruthTrial<'a> {
 
 /// Run `needle simulate`.
 pub fn run(args: &SimulateArgs) -> Result<()> {
-    if !(args.rate_hz >= 100.0 && args.rate_hz <= 65_535.0) {
-        bail!("--rate-hz must be within 100..=65535");
+    // 50 Hz: the slowest rigs the analysis commands take (DESIGN.md §1).
+    if !(args.rate_hz >= 50.0 && args.rate_hz <= 65_535.0) {
+        bail!("--rate-hz must be within 50..=65535");
     }
     if !(args.noise_n.is_finite() && args.noise_n >= 0.0) {
         bail!("--noise-n must be a finite number ≥ 0");
