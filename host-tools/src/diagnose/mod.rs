@@ -49,7 +49,9 @@ pub struct DiagnoseArgs {
     /// fitting it (its first entry, or --tissue).
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// Entry of --params to use.
+    /// Entry of --params to use; without --params, the tissue of the
+    /// built-in library to take the nominal model from (as `needle detect
+    /// --tissue`): an unknown name is an error, never ignored.
     #[arg(long)]
     pub tissue: Option<String>,
     /// Write the diagnosis as JSON here (default: standard output).
@@ -928,9 +930,9 @@ fn residual_tests(data: &[Prepared]) -> Value {
 }
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
-    let params = match &args.params {
-        Some(file) => Some(crate::tissue::resolve(args.tissue.as_deref(), Some(file))?.params),
-        None => None,
+    let params = match (&args.params, &args.tissue) {
+        (None, None) => None,
+        (file, tissue) => Some(crate::tissue::resolve(tissue.as_deref(), file.as_deref())?.params),
     };
     // A progress line on stderr once the diagnosis has taken a second.
     let started = std::time::Instant::now();
@@ -950,7 +952,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
                 .with_context(|| format!("{}: `model_n`", path.display()))?;
         }
     }
-    let nominal = match (args.device_model, &args.params) {
+    let nominal = match (args.device_model, &params) {
         (true, _) => Nominal::Device,
         (false, Some(_)) => Nominal::Given,
         (false, None) => Nominal::Fitted,
