@@ -29,24 +29,71 @@ const RIG: Rig = Rig {
     tare_sd_n: 0.004,
 };
 
+/// What varies between the tests' datasets; the rest is [`SENSOR`] and
+/// [`RIG`]: skin phantom, insert–dwell–withdraw, 100 Hz, jitter, tare.
+#[derive(Clone, Copy)]
+struct Skin {
+    effects: &'static str,
+    form: Form,
+    layers: u32,
+    rate_hz: f64,
+    trials: usize,
+    seed: u64,
+}
+
+/// Ten trials at seed 5 with up to two membranes, standard form.
+const SKIN: Skin = Skin {
+    effects: "",
+    form: Form::Standard,
+    layers: 2,
+    rate_hz: 100.0,
+    trials: 10,
+    seed: 5,
+};
+
+impl Skin {
+    /// Write the dataset into `dir`; returns the true parameters.
+    fn write(self, dir: &Path) -> needle_holder::model::params::TissueParams {
+        let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
+        let list = effects::parse_list(self.effects).unwrap();
+        Dataset {
+            tissue_name: "skin_phantom",
+            tissue: &skin.params,
+            effects: &list,
+            trials: self.trials,
+            seed: self.seed,
+            sensor: Sensor {
+                rate_hz: self.rate_hz,
+                ..SENSOR
+            },
+            through: false,
+            form: self.form,
+            rig: Rig {
+                layers: self.layers,
+                ..RIG
+            },
+        }
+        .write(dir)
+        .unwrap();
+        skin.params
+    }
+
+    /// The diagnosis of the dataset, fitted nominal.
+    fn diagnosis(self) -> Value {
+        let dir = tempfile::tempdir().unwrap();
+        self.write(dir.path());
+        let (_, data) = load(dir.path(), None).unwrap();
+        diagnose(&data, Nominal::Fitted)
+    }
+}
+
 /// Ten skin-phantom trials with `effect_list`; returns the true params.
-fn simulate(dir: &Path, effect_list: &str) -> needle_holder::model::params::TissueParams {
-    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
-    let list = effects::parse_list(effect_list).unwrap();
-    Dataset {
-        tissue_name: "skin_phantom",
-        tissue: &skin.params,
-        effects: &list,
-        trials: 10,
-        seed: 5,
-        sensor: SENSOR,
-        through: false,
-        form: Form::Standard,
-        rig: RIG,
+fn simulate(dir: &Path, effect_list: &'static str) -> needle_holder::model::params::TissueParams {
+    Skin {
+        effects: effect_list,
+        ..SKIN
     }
     .write(dir)
-    .unwrap();
-    skin.params
 }
 
 fn within(fit: &Value, key: &str, truth: f64, tolerance: f64) {
@@ -117,9 +164,8 @@ fn fit_recovers_what_insert_dwell_withdraw_identifies() {
 #[test]
 fn fit_reports_one_speed_as_a_combination() {
     let dir = tempfile::tempdir().unwrap();
-    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
     // Keep only the trials that ran at 2 mm/s (six of seed 5's ten).
-    simulate(dir.path(), "");
+    let p = simulate(dir.path(), "");
     let fit = fit_dataset(dir.path()).unwrap();
     let speeds: Vec<f64> = fit["insertion_friction"]["speed_mps"]
         .as_array()
@@ -137,7 +183,6 @@ fn fit_reports_one_speed_as_a_combination() {
     let note = one["bp_ns_per_m2"]["note"].as_str().unwrap();
     assert!(note.contains("not separable"), "{note}");
     // The combination at that speed is right.
-    let p = skin.params;
     let b = value_of(&one["bp_ns_per_m2"]).unwrap();
     let truth = p.cp_n_per_m + p.bp_ns_per_m2 * commonest;
     assert!((b * commonest - truth).abs() < 0.1 * truth, "{b}");
@@ -210,25 +255,13 @@ fn a_gap_in_a_recording_is_no_encoder_jump() {
 }
 
 /// The diagnosis of ten trials with `effect_list` and no membranes.
-fn diagnosis_without_layers(effect_list: &str) -> Value {
-    let dir = tempfile::tempdir().unwrap();
-    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
-    let list = effects::parse_list(effect_list).unwrap();
-    Dataset {
-        tissue_name: "skin_phantom",
-        tissue: &skin.params,
-        effects: &list,
-        trials: 10,
-        seed: 5,
-        sensor: SENSOR,
-        through: false,
-        form: Form::Standard,
-        rig: Rig { layers: 0, ..RIG },
+fn diagnosis_without_layers(effect_list: &'static str) -> Value {
+    Skin {
+        effects: effect_list,
+        layers: 0,
+        ..SKIN
     }
-    .write(dir.path())
-    .unwrap();
-    let (_, data) = load(dir.path(), None).unwrap();
-    diagnose(&data, Nominal::Fitted)
+    .diagnosis()
 }
 
 #[test]
@@ -254,25 +287,14 @@ fn viscoelasticity_is_named_from_the_dwell_and_the_gap_closes() {
 /// The verdict on ten insert–dwell–withdraw trials (skin phantom, 100 Hz,
 /// jitter, tare, no membranes) with one effect in `form`: (named, second,
 /// explained, held-out RMS before and after, noise floor).
-fn verdict_on(effect: &str, form: Form) -> (String, String, bool, f64, f64, f64) {
-    let dir = tempfile::tempdir().unwrap();
-    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
-    let list = effects::parse_list(effect).unwrap();
-    Dataset {
-        tissue_name: "skin_phantom",
-        tissue: &skin.params,
-        effects: &list,
-        trials: 10,
-        seed: 5,
-        sensor: SENSOR,
-        through: false,
+fn verdict_on(effect: &'static str, form: Form) -> (String, String, bool, f64, f64, f64) {
+    let out = Skin {
+        effects: effect,
         form,
-        rig: Rig { layers: 0, ..RIG },
+        layers: 0,
+        ..SKIN
     }
-    .write(dir.path())
-    .unwrap();
-    let (_, data) = load(dir.path(), None).unwrap();
-    let out = diagnose(&data, Nominal::Fitted);
+    .diagnosis();
     let v = &out["verdict"];
     let num = |v: &Value| v.as_f64().unwrap();
     let text = |v: &Value| v.as_str().unwrap().to_owned();
@@ -396,23 +418,16 @@ fn fit_and_detect_hold_from_50_hz_to_2_khz() {
     // 1 mm/s reads the same 1 µm count for samples on end, and must not
     // look stopped (a membrane's fall was an exit, and the dragged
     // tissue's pull a fault, before).
-    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
     for rate_hz in [50.0, 2000.0] {
         let dir = tempfile::tempdir().unwrap();
-        let list = effects::parse_list("viscoelasticity=3").unwrap();
-        Dataset {
-            tissue_name: "skin_phantom",
-            tissue: &skin.params,
-            effects: &list,
+        Skin {
+            effects: "viscoelasticity=3",
+            rate_hz,
             trials: 6,
             seed: 9,
-            sensor: Sensor { rate_hz, ..SENSOR },
-            through: false,
-            form: Form::Standard,
-            rig: RIG,
+            ..SKIN
         }
-        .write(dir.path())
-        .unwrap();
+        .write(dir.path());
         let fit = fit_dataset(dir.path()).unwrap();
         assert_eq!(fit["trials"], 6, "{rate_hz} Hz: {}", fit["skipped"]);
         let layers: u64 = fit["layers"]
