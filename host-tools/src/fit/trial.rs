@@ -554,13 +554,10 @@ fn one_way(
         }
         let_go = best.is_finite().then_some(best_x);
     }
-    let identified = let_go.is_some_and(|x_w| x_w >= contact_x_m && x_w <= x_s2);
-    let relaxed_x_m = let_go.unwrap_or(contact_x_m).clamp(contact_x_m, x_s2);
-    let rho = if depth > 0.0 {
-        (relaxed_x_m - contact_x_m) / depth
-    } else {
-        0.0
-    };
+    // Where the needle let go is x_s3 when it lies inside the tissue.
+    let from_let_go = let_go
+        .filter(|x_w| depth > 0.0 && (contact_x_m..=x_s2).contains(x_w))
+        .map(|x_w| (x_w - contact_x_m) / depth);
     let mean_speed = |s: &[Xvf]| s.iter().map(|p| p.1).sum::<f64>() / s.len().max(1) as f64;
     let withdrawal = let_go.and_then(|x_w| {
         let [c] = withdraw_at(x_w).1?;
@@ -588,9 +585,9 @@ fn one_way(
         (k > 0.0 && depth > 0.0 && (-0.1..=1.1).contains(&rho))
             .then_some((cutting, rho.clamp(0.0, 1.0)))
     });
-    let (identified, rho) = match from_stop {
-        Some((_, rho)) => (true, rho),
-        None => (identified, rho),
+    let (identified, rho) = match (from_stop, from_let_go) {
+        (Some((_, rho)), _) | (None, Some(rho)) => (true, rho),
+        (None, None) => (false, 0.0),
     };
     let relaxed_x_m = contact_x_m + rho * depth;
     let cutting_force_n = match (from_stop, line) {
