@@ -104,6 +104,15 @@ fn within(fit: &Value, key: &str, truth: f64, tolerance: f64) {
     );
 }
 
+/// `needle detect --params` with the tissue `needle fit --toml` wrote.
+fn detect_with_fitted(dir: &Path, fit: &Value) -> Value {
+    let tissue = host_tools::tissue::parse(&to_toml(fit), Path::new("fitted.toml"))
+        .unwrap()
+        .remove(0);
+    let config = DeviceConfig::for_tissue(&tissue.params).unwrap();
+    detect_dataset(dir, &config).unwrap()
+}
+
 fn truth_events(dir: &Path, kind: &str) -> usize {
     let truth: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
@@ -192,12 +201,7 @@ fn fit_reports_one_speed_as_a_combination() {
 fn detect_with_the_fitted_tissue_raises_no_fault_and_finds_every_membrane() {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), "viscoelasticity=5");
-    let fit = fit_dataset(dir.path()).unwrap();
-    let tissue = host_tools::tissue::parse(&to_toml(&fit), Path::new("fitted.toml"))
-        .unwrap()
-        .remove(0);
-    let config = DeviceConfig::for_tissue(&tissue.params).unwrap();
-    let out = detect_dataset(dir.path(), &config).unwrap();
+    let out = detect_with_fitted(dir.path(), &fit_dataset(dir.path()).unwrap());
     for t in out["trials"].as_array().unwrap() {
         assert_eq!(t["faults"], serde_json::json!([]), "{t}");
         assert!(t["halt"].is_null(), "{t}");
@@ -441,11 +445,7 @@ fn fit_and_detect_hold_from_50_hz_to_2_khz() {
             truth_events(dir.path(), "structure"),
             "{rate_hz} Hz"
         );
-        let tissue = host_tools::tissue::parse(&to_toml(&fit), Path::new("fitted.toml"))
-            .unwrap()
-            .remove(0);
-        let config = DeviceConfig::for_tissue(&tissue.params).unwrap();
-        let out = detect_dataset(dir.path(), &config).unwrap();
+        let out = detect_with_fitted(dir.path(), &fit);
         for t in out["trials"].as_array().unwrap() {
             assert_eq!(t["faults"], serde_json::json!([]), "{rate_hz} Hz: {t}");
         }
