@@ -113,6 +113,16 @@ fn detect_with_fitted(dir: &Path, fit: &Value) -> Value {
     detect_dataset(dir, &config).unwrap()
 }
 
+/// Membrane punctures `needle fit` found after the capsule, all layers.
+fn membranes_found(fit: &Value) -> usize {
+    fit["layers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["trials"].as_u64().unwrap() as usize)
+        .sum()
+}
+
 fn truth_events(dir: &Path, kind: &str) -> usize {
     let truth: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
@@ -158,13 +168,7 @@ fn fit_recovers_what_insert_dwell_withdraw_identifies() {
     let drag = value_of(&fit["let_go_before_contact_m"]).unwrap();
     assert!((0.0015..0.009).contains(&drag), "{drag}");
     // Every membrane's puncture, none from the stops.
-    let layers: u64 = fit["layers"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|l| l["trials"].as_u64().unwrap())
-        .sum();
-    assert_eq!(layers as usize, truth_events(dir.path(), "structure"));
+    assert_eq!(membranes_found(&fit), truth_events(dir.path(), "structure"));
     // With no viscoelasticity nothing relaxes in the dwell but the noise.
     let fraction = value_of(&fit["dwell_relaxation"]["fraction"]).unwrap();
     assert!(fraction.abs() < 0.05, "{fraction}");
@@ -434,14 +438,8 @@ fn fit_and_detect_hold_from_50_hz_to_2_khz() {
         .write(dir.path());
         let fit = fit_dataset(dir.path()).unwrap();
         assert_eq!(fit["trials"], 6, "{rate_hz} Hz: {}", fit["skipped"]);
-        let layers: u64 = fit["layers"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|l| l["trials"].as_u64().unwrap())
-            .sum();
         assert_eq!(
-            layers as usize,
+            membranes_found(&fit),
             truth_events(dir.path(), "structure"),
             "{rate_hz} Hz"
         );

@@ -515,17 +515,13 @@ pub fn simulate_trial_in(
                     if layers_ruptured[k] || stretch <= 0.0 {
                         continue;
                     }
-                    let membrane = layer.k_n_per_m * stretch;
-                    if membrane >= layer.rupture_n {
-                        layers_ruptured[k] = true;
-                        truth.events.push(TruthEvent {
-                            kind: "structure",
-                            t_s: t,
-                            x_m: x,
-                        });
-                    } else {
-                        f += membrane;
-                    }
+                    f += give_way(
+                        layer.k_n_per_m * stretch,
+                        layer.rupture_n,
+                        &mut layers_ruptured[k],
+                        &mut truth.events,
+                        (t, x),
+                    );
                 }
                 for (k, &(depth, rupture)) in truth.structures.iter().enumerate() {
                     let k_v = effects.iter().find_map(|e| match *e {
@@ -545,16 +541,7 @@ pub fn simulate_trial_in(
                         // Stiffening (a collagen wall), doubling at 1 mm.
                         wall *= 1.0 + stretch / 0.001;
                     }
-                    if wall >= rupture {
-                        ruptured[k] = true;
-                        truth.events.push(TruthEvent {
-                            kind: "structure",
-                            t_s: t,
-                            x_m: x,
-                        });
-                    } else {
-                        f += wall;
-                    }
+                    f += give_way(wall, rupture, &mut ruptured[k], &mut truth.events, (t, x));
                 }
             }
         }
@@ -634,6 +621,28 @@ pub fn simulate_trial_in(
         trial.push(t, x_counts, f + noise.sample(rng));
     }
     (trial, truth)
+}
+
+/// The force a wall or membrane pushes back with, or, once it reaches
+/// `rupture_n`, nothing: it gives way (a `structure` event at `(t, x)`)
+/// and stays ruptured.
+fn give_way(
+    force_n: f64,
+    rupture_n: f64,
+    ruptured: &mut bool,
+    events: &mut Vec<TruthEvent>,
+    (t_s, x_m): (f64, f64),
+) -> f64 {
+    if force_n < rupture_n {
+        return force_n;
+    }
+    *ruptured = true;
+    events.push(TruthEvent {
+        kind: "structure",
+        t_s,
+        x_m,
+    });
+    0.0
 }
 
 /// Karnopp friction with the rate-dependent damping effect applied.
