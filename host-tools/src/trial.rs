@@ -32,11 +32,38 @@ impl Trial {
         1.0 / *dt.select_nth_unstable_by(mid, f64::total_cmp).1
     }
 
+    /// Every `step`-th sample, from the first: a slower rig's recording of
+    /// the same insertion (no averaging, so the encoder's positions stay
+    /// on its grid and the force keeps its per-sample noise).
+    pub fn thinned(&self, step: usize) -> Trial {
+        Trial {
+            t_s: every(&self.t_s, step),
+            x_m: every(&self.x_m, step),
+            f_n: every(&self.f_n, step),
+        }
+    }
+
+    /// The step [`Self::thinned`] takes to bring this trial to `most_hz`
+    /// or below: 1 when it is there already.
+    pub fn thinning_step(&self, most_hz: f64) -> usize {
+        let ratio = self.rate_hz() / most_hz;
+        if ratio.is_finite() && ratio > 1.0 {
+            ratio.ceil() as usize
+        } else {
+            1
+        }
+    }
+
     pub fn push(&mut self, t_s: f64, x_m: f64, f_n: f64) {
         self.t_s.push(t_s);
         self.x_m.push(x_m);
         self.f_n.push(f_n);
     }
+}
+
+/// Every `step`-th value, from the first.
+pub fn every(values: &[f64], step: usize) -> Vec<f64> {
+    values.iter().step_by(step.max(1)).copied().collect()
 }
 
 /// Read a trial, checking columns, numbers and time order.

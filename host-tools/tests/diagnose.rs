@@ -267,11 +267,16 @@ fn the_devices_residual_stream_is_diagnosed_the_same() {
     );
     assert!(num(&host["verdict"]["shrink"]) > 0.5);
     // Against the firmware's own model (its residual stream): the drift is
-    // still named, beside what the device's online geometry misses.
+    // still found, beside what the device's online geometry misses (which
+    // leaves most of that gap open: then it is the closest candidate of an
+    // `unexplained` verdict).
     let device = diagnose_live(&["--device-model"]);
     let v = &device["verdict"];
+    let closest = v["closest"].as_array().unwrap();
     assert!(
-        v["effect"] == "sensor_drift" || v["second"] == "sensor_drift",
+        v["effect"] == "sensor_drift"
+            || v["second"] == "sensor_drift"
+            || (v["effect"] == "unexplained" && closest.contains(&"sensor_drift".into())),
         "{v}"
     );
 }

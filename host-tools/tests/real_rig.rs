@@ -10,7 +10,7 @@
 use std::path::Path;
 
 use host_tools::detect::detect_dataset;
-use host_tools::diagnose::{diagnose, load, Nominal};
+use host_tools::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
 use host_tools::fit::{fit_dataset, to_toml, value_of};
 use host_tools::sim::{effects, Dataset, Form, ProtocolKind, Rig, Sensor};
 use needle_holder::config::DeviceConfig;
@@ -317,20 +317,25 @@ fn verdict_on(effect: &'static str, form: Form) -> (String, String, bool, f64, f
 }
 
 /// Each effect in each form on real rigs' protocol: what is named, and
-/// never `none` over a gap. `Some(name)`: the verdict must name it;
-/// `None`: too weak on this protocol to be seen, so `none` with the gap
-/// explained. The literature forms (Fung's box spectrum, Stribeck, Dahl's
-/// exponent 2, …) were written after the candidates and kept out of their
-/// tuning: for them only the rule is asserted, and the table is printed
+/// never `none` over a gap. In every form the verdict is the effect
+/// hidden, `unexplained` (the gap left open, the closest candidates
+/// beside it), or `none` with the gap closed (too weak on this protocol
+/// to be seen). The table pins what the standard and alternate forms give
+/// (`None`: too weak, so `none` with the gap explained). The literature
+/// forms (Fung's box spectrum, Stribeck, Dahl's exponent 2, …) were
+/// written after the candidates and kept out of their tuning: for them
+/// only the rule is asserted, and the table is printed
 /// (`cargo test -p host-tools --test real_rig confusion -- --nocapture`).
 #[test]
 fn confusion_on_insert_dwell_withdraw() {
     let expected: [(&str, Option<&str>, Option<&str>); 9] = [
         ("none", Some("none"), Some("none")),
+        // Alternate: two branches, the slow one (3 s) most of it; taken
+        // for presliding, which closes under a third of the gap.
         (
             "viscoelasticity",
             Some("viscoelasticity"),
-            Some("viscoelasticity"),
+            Some(UNEXPLAINED),
         ),
         ("rate_dependent_friction", None, None),
         (
@@ -343,9 +348,11 @@ fn confusion_on_insert_dwell_withdraw() {
             Some("internal_structures"),
             Some("internal_structures"),
         ),
-        // Standard form: named wrong (viscoelasticity), with the gap
-        // reported as not explained; see the README.
-        ("depth_dependent_cutting", Some("?"), None),
+        (
+            "depth_dependent_cutting",
+            Some("depth_dependent_cutting"),
+            None,
+        ),
         ("holder_inertia", None, None),
         ("sensor_drift", Some("sensor_drift"), Some("sensor_drift")),
         (
@@ -369,18 +376,16 @@ fn confusion_on_insert_dwell_withdraw() {
                 after * 1e3,
                 floor * 1e3
             );
-            // Never none over a gap, in any form.
-            assert!(
-                named != "none" || explained,
-                "{effect} {form:?}: none over a gap"
-            );
             assert_eq!(explained, after <= 1.5 * floor, "{effect} {form:?}");
+            // The rule, in every form: the effect itself, unexplained, or
+            // none with nothing left to explain.
+            assert!(
+                named == effect || named == UNEXPLAINED || (named == "none" && explained),
+                "{effect} {form:?}: {named}"
+            );
             match want {
-                Some(Some("?")) => assert!(!explained, "{effect} {form:?}: {named}"),
                 Some(Some(name)) => assert_eq!(named, name, "{effect} {form:?}"),
-                Some(None) => {
-                    assert_eq!(named, "none", "{effect} {form:?}");
-                }
+                Some(None) => assert_eq!(named, "none", "{effect} {form:?}"),
                 None => {}
             }
         }

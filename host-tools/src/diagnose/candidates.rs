@@ -369,29 +369,35 @@ fn motion_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
 fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let (f_hz, amplitude_m) = motion_at(g);
     let t0 = p.trial.t_s[0];
-    let n = p.trial.len();
     let omega_rad_s = TAU * f_hz;
-    // The harmonics once; each phase is a pair of coefficients on them.
-    let harmonics = harmonics_along(omega_rad_s, t0, &p.trial.t_s);
-    let mut best: Option<(f64, Vec<Vec<f64>>)> = None;
-    for k in 0..MOTION_PHASES {
+    // A·sin(ωt + φ) = A·cos φ·sin ωt + A·sin φ·cos ωt.
+    let sine = |k: usize| {
         let (s, c) = (TAU * k as f64 / MOTION_PHASES as f64).sin_cos();
-        // A·sin(ωt + φ) = A·cos φ·sin ωt + A·sin φ·cos ωt.
-        let sine = TissueShift {
+        TissueShift {
             omega_rad_s,
             t_ref_s: t0,
             coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
-        };
-        let cols = moved_nominal(p, &|i| sine.at_harmonics(harmonics[i]));
-        let sse: f64 = (0..n)
-            .filter(|&i| p.phase[i] != LOADING)
-            .map(|i| (p.residual_n[i] - cols[0][i]).powi(2))
-            .sum();
-        if best.as_ref().is_none_or(|b| sse < b.0) {
-            best = Some((sse, cols));
         }
-    }
-    best.map_or_else(|| vec![vec![0.0; n]; 5], |b| b.1)
+    };
+    // The phase is searched on the trial at the search rate, the columns
+    // made at the full one.
+    let coarse = p.for_search();
+    let harmonics = harmonics_along(omega_rad_s, t0, &coarse.trial.t_s);
+    let best = (0..MOTION_PHASES)
+        .map(|k| {
+            let shift = sine(k);
+            let cols = moved_nominal(&coarse, &|i| shift.at_harmonics(harmonics[i]));
+            let sse: f64 = (0..coarse.trial.len())
+                .filter(|&i| coarse.phase[i] != LOADING)
+                .map(|i| (coarse.residual_n[i] - cols[0][i]).powi(2))
+                .sum();
+            (k, sse)
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(0, |b| b.0);
+    let harmonics = harmonics_along(omega_rad_s, t0, &p.trial.t_s);
+    let shift = sine(best);
+    moved_nominal(p, &|i| shift.at_harmonics(harmonics[i]))
 }
 
 /// Columns of [`tissue_motion`] for one tissue displacement and velocity

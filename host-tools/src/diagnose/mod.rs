@@ -144,19 +144,61 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
     cols
 }
 
+/// The runs of samples in one phase, in order: the Gram sums are dot
+/// products over each run (contiguous slices, which the compiler
+/// vectorises), not a rank-one update per sample (a third of a
+/// diagnosis's time before).
+fn phase_runs(phase: &[usize]) -> Vec<(usize, std::ops::Range<usize>)> {
+    let mut runs: Vec<(usize, std::ops::Range<usize>)> = Vec::new();
+    for (i, &ph) in phase.iter().enumerate() {
+        match runs.last_mut() {
+            Some((last, r)) if *last == ph => r.end = i + 1,
+            _ => runs.push((ph, i..i + 1)),
+        }
+    }
+    runs
+}
+
+/// Σ a·b in four interleaved sums: one running sum waits on each add
+/// (floating point is not reassociated for it), four keep the adder busy.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut lanes = [0.0; 4];
+    for (x, y) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        for k in 0..4 {
+            lanes[k] += x[k] * y[k];
+        }
+    }
+    let tail = n - n % 4;
+    let rest: f64 = a[tail..].iter().zip(&b[tail..]).map(|(x, y)| x * y).sum();
+    (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]) + rest
+}
+
 /// Gram sums per trial and phase of `fixed` columns (one set per trial,
 /// computed once by the caller).
 fn grams(data: &[Prepared], fixed: &[Vec<Vec<f64>>]) -> Vec<[Gram; PHASES.len()]> {
     data.iter()
         .zip(fixed)
         .map(|(p, cols)| {
-            let mut g: [Gram; PHASES.len()] = std::array::from_fn(|_| Gram::new(cols.len()));
-            let mut phi = vec![0.0; cols.len()];
-            for i in 0..p.trial.len() {
-                for (k, c) in cols.iter().enumerate() {
-                    phi[k] = c[i];
+            let n = cols.len();
+            let mut g: [Gram; PHASES.len()] = std::array::from_fn(|_| Gram::new(n));
+            for (ph, r) in phase_runs(&p.phase) {
+                let gp = &mut g[ph];
+                let y = &p.residual_n[r.clone()];
+                for (k, ck) in cols.iter().enumerate() {
+                    let ck = &ck[r.clone()];
+                    for (l, cl) in cols.iter().enumerate().skip(k) {
+                        let v = dot(ck, &cl[r.clone()]);
+                        gp.ata[k * n + l] += v;
+                        if l != k {
+                            gp.ata[l * n + k] += v;
+                        }
+                    }
+                    gp.aty[k] += dot(ck, y);
                 }
-                g[p.phase[i]].add(&phi, p.residual_n[i]);
+                gp.yy += dot(y, y);
+                gp.count += r.len();
             }
             g
         })
@@ -180,24 +222,25 @@ fn extended(
             let mut g: [Gram; PHASES.len()] =
                 std::array::from_fn(|ph| base[ph].with_columns(extra.len()));
             let nf = fixed.len();
-            for i in 0..p.trial.len() {
-                let gp = &mut g[p.phase[i]];
+            for (ph, r) in phase_runs(&p.phase) {
+                let gp = &mut g[ph];
                 let n = gp.n;
-                let y = p.residual_n[i];
                 for (e, ce) in extra.iter().enumerate() {
-                    let (row, pe) = (nf + e, ce[i]);
-                    if pe == 0.0 {
+                    let ce = &ce[r.clone()];
+                    // Most effects act in some phases only.
+                    if ce.iter().all(|&v| v == 0.0) {
                         continue;
                     }
+                    let row = nf + e;
                     for (f, cf) in fixed.iter().enumerate() {
-                        let v = pe * cf[i];
+                        let v = dot(ce, &cf[r.clone()]);
                         gp.ata[row * n + f] += v;
                         gp.ata[f * n + row] += v;
                     }
                     for (e2, c2) in extra.iter().enumerate() {
-                        gp.ata[row * n + nf + e2] += pe * c2[i];
+                        gp.ata[row * n + nf + e2] += dot(ce, &c2[r.clone()]);
                     }
-                    gp.aty[row] += pe * y;
+                    gp.aty[row] += dot(ce, &p.residual_n[r.clone()]);
                 }
             }
             g
@@ -511,14 +554,32 @@ fn scored_with_backfit<'c>(
     let (moving, forces): (Vec<_>, Vec<_>) = set
         .iter()
         .partition(|(c, _)| c.backfit == Backfit::TissueFrame);
+    let as_columns = || (score(data, set, None), data.to_vec(), set.to_vec());
     let moved = (!moving.is_empty())
         .then(|| backfit_tissue_frame(data, refit_params))
         .flatten();
     let (mut scored, mut current) = match moved {
-        Some((scored, moved)) if forces.is_empty() => return (scored, moved, forces),
-        Some((_, moved)) => (score(&moved, &forces, None), moved),
+        // Moving the trials into a displacement fitted wrong (to another
+        // effect's residual) can leave them worse than the motion as
+        // columns: the better of the two on the withheld trials stands.
+        Some((scored, moved)) if forces.is_empty() => {
+            let columns = as_columns();
+            return if scored.rms() <= columns.0.rms() {
+                (scored, moved, forces)
+            } else {
+                columns
+            };
+        }
+        Some((_, moved)) => {
+            let columns = as_columns();
+            let in_frame = score(&moved, &forces, None);
+            if in_frame.rms() > columns.0.rms() {
+                return columns;
+            }
+            (in_frame, moved)
+        }
         // A moved trial no longer fits: the motion stays as columns.
-        None if !moving.is_empty() => return (score(data, set, None), data.to_vec(), set.to_vec()),
+        None if !moving.is_empty() => return as_columns(),
         None => (score(data, set, None), data.to_vec()),
     };
     for _ in 0..BACKFIT_ROUNDS {
@@ -551,8 +612,10 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
     let mut params = data[0].params;
     let mut shifts: Option<Vec<motion::TissueShift>> = None;
     let mut last: Option<(Scored, Vec<Prepared>)> = None;
+    // The displacement is fitted at the search rate, applied at the full one.
+    let searched: Vec<Prepared> = data.iter().map(Prepared::for_search).collect();
     for _ in 0..TISSUE_FRAME_ROUNDS {
-        let found = motion::fit_shifts(data, &params, k, shifts.as_deref());
+        let found = motion::fit_shifts(&searched, &params, k, shifts.as_deref());
         let prepared = moved_into(data, &found, refit_params)?;
         params = prepared[0].params;
         let scored = score(&prepared, &[], None);
@@ -628,6 +691,18 @@ pub const UNEXPLAINED: &str = "unexplained";
 /// A held-out RMS within this many noise floors counts as explained: the
 /// gap the issues set as closed.
 pub const EXPLAINED_FACTOR: f64 = 1.5;
+
+/// Least share of the gap above the noise floor (in mean square) the
+/// named effects must take away, when they leave it open, to be named
+/// as its cause rather than as the closest candidates.
+pub const MOST_OF_GAP: f64 = 0.5;
+
+/// Share of the mean square above the noise floor that goes from
+/// `before_n` to `after_n` (RMS, N).
+fn gap_taken(before_n: f64, after_n: f64, noise_n: f64) -> f64 {
+    let excess = |rms: f64| (rms * rms - noise_n * noise_n).max(0.0);
+    1.0 - excess(after_n) / excess(before_n).max(f64::MIN_POSITIVE)
+}
 
 /// The whole diagnosis as JSON (the keys of the issue).
 pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
@@ -707,9 +782,21 @@ pub fn diagnose_with_progress(
     let left = after.as_ref().unwrap_or(&baseline);
     let gap_open = left.rms() > EXPLAINED_FACTOR * noise;
     // Never `none` over a gap: a residual well above the noise that no
-    // candidate takes away is something none of them is.
+    // candidate takes away is something none of them is. Nor is a gap
+    // the named effects leave mostly open theirs: they stand as the
+    // closest, and the verdict is `unexplained`.
+    let closest: Vec<&str> = first
+        .iter()
+        .map(|f| CANDIDATES[f.0].effect)
+        .chain((second_name != "none").then_some(second_name))
+        .collect();
+    let credible = !gap_open || gap_taken(baseline.rms(), left.rms(), noise) >= MOST_OF_GAP;
     let effect = match &first {
-        Some(f) => CANDIDATES[f.0].effect,
+        Some(f) if credible => CANDIDATES[f.0].effect,
+        Some(_) => {
+            second_name = "none";
+            UNEXPLAINED
+        }
         None if gap_open => UNEXPLAINED,
         None => "none",
     };
@@ -756,6 +843,7 @@ pub fn diagnose_with_progress(
             "second": second_name,
             "heldout_rms_after_n": left.rms(),
             "explained": !gap_open,
+            "closest": closest,
             "left_by_phase": by_phase(left),
         },
     })

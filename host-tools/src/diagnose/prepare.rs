@@ -36,6 +36,33 @@ const MOVING_MPS: f64 = 0.0005;
 /// Least time at rest that is a dwell, not the turning point of a stroke.
 const DWELL_S: f64 = 0.1;
 
+/// Fastest sample rate the diagnosis's searches run at: the capsule's
+/// relaxation ρ, a moving tissue's displacement and a breathing's phase
+/// are each found on every k-th sample of a faster trial, then the
+/// candidates are scored on all of them. What they search for moves at
+/// a few hertz at most (breathing 0.1–0.7 Hz, a relaxed surface that is
+/// one number a trial), real rigs record at about 100 Hz, and each
+/// search evaluates the model along the trial hundreds of times.
+pub const SEARCH_RATE_HZ: f64 = 50.0;
+
+/// A trial, its geometry and its velocity along every `step`-th sample
+/// (the geometry's puncture index moved to the kept sample at or before it).
+pub fn thinned(
+    trial: &Trial,
+    geometry: &TrialFit,
+    velocity: &NeedleVelocity,
+    step: usize,
+) -> (Trial, TrialFit, NeedleVelocity) {
+    (
+        trial.thinned(step),
+        TrialFit {
+            puncture_index: geometry.puncture_index / step.max(1),
+            ..geometry.clone()
+        },
+        velocity.thinned(step),
+    )
+}
+
 /// A trial with its nominal model and signals.
 #[derive(Clone, Debug)]
 pub struct Prepared {
@@ -86,6 +113,19 @@ impl Prepared {
             .collect();
         self.nominal_n = model_n;
         Ok(())
+    }
+
+    /// This trial as a rig at [`SEARCH_RATE_HZ`] or slower would have
+    /// recorded it, prepared against the same nominal (itself when it is
+    /// that slow already).
+    pub fn for_search(&self) -> Prepared {
+        let step = self.trial.thinning_step(SEARCH_RATE_HZ);
+        if step == 1 {
+            return self.clone();
+        }
+        let (trial, geometry, velocity) =
+            thinned(&self.trial, &self.geometry, &self.velocity, step);
+        prepare(self.file.clone(), trial, geometry, &self.params, velocity)
     }
 
     /// The needle touches tissue at sample `i` (loading or after puncture,
@@ -167,8 +207,12 @@ pub fn fit_relaxation(
     trials: &[(&Trial, &TrialFit, &NeedleVelocity)],
     params: &TissueParams,
 ) -> f64 {
+    let searched: Vec<_> = trials
+        .iter()
+        .map(|(t, g, v)| thinned(t, g, v, t.thinning_step(SEARCH_RATE_HZ)))
+        .collect();
     let sse = |rho: f64| {
-        trials
+        searched
             .iter()
             .map(|(trial, geometry, v)| {
                 let g = TrialFit {

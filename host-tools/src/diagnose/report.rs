@@ -11,14 +11,24 @@ use serde_json::Value;
 pub fn headline(out: &Value) -> String {
     let num = |v: &Value| v.as_f64().unwrap_or(0.0);
     let v = &out["verdict"];
+    let closest: Vec<&str> = v["closest"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+        .collect();
+    let named = match v["effect"].as_str().unwrap_or("none") {
+        "unexplained" if !closest.is_empty() => {
+            format!("unexplained (closest: {})", closest.join(" + "))
+        }
+        effect => format!("{effect} (+ {})", v["second"].as_str().unwrap_or("none")),
+    };
     format!(
-        "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {} (+ {}), shrink {:.0} %{}",
+        "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {named}, shrink {:.0} %{}",
         out["trials"],
         num(&out["noise_floor_n"]),
         num(&out["baseline"]["heldout_rms_n"]),
         num(&v["heldout_rms_after_n"]),
-        v["effect"].as_str().unwrap_or("none"),
-        v["second"].as_str().unwrap_or("none"),
         100.0 * num(&v["shrink"]),
         if v["explained"].as_bool() == Some(false) {
             "; the gap left is more than 1.5 noise floors: not explained"

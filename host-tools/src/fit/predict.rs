@@ -282,10 +282,13 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     // 10 ms, but three samples at least: a jump is placed where lines
     // through the samples either side cross, and a line needs two.
     let k = ((0.01 / dt).round() as usize).max(3);
-    // Ten encoder steps over a 10 ms window: well above what quantisation
-    // makes of a smooth motion.
+    // Five encoder steps over a 10 ms window: above the two steps
+    // quantisation can make of a smooth motion's contrast, and below the
+    // stop of a 1 mm/s insertion read to 1 µm (ten steps, 1 mm/s, missed
+    // it at 500 Hz and above: the model cut on into the dwell and held
+    // the friction of a velocity window tapering across the stop).
     let step_m = encoder_step_m(trial);
-    let least_mps = 10.0 * step_m / (k as f64 * dt);
+    let least_mps = 5.0 * step_m / (k as f64 * dt);
     let jumps = jumps::velocity_steps(t, x, k, least_mps, step_m);
     let mut bounds: Vec<usize> = jumps.iter().map(|j| j.index).collect();
     bounds.push(n);
@@ -358,6 +361,35 @@ pub struct NeedleVelocity {
     /// side of a jump an uncertain sample lies on; 0 leaves it to the
     /// encoder (a model drawn over data, not yet fitted to it).
     pub force_sd_n: f64,
+}
+
+impl NeedleVelocity {
+    /// Along [`Trial::thinned`]`(step)`: every `step`-th velocity (as
+    /// estimated at the full rate), the uncertain samples that are kept,
+    /// and each jump before the first kept sample after it.
+    pub fn thinned(&self, step: usize) -> NeedleVelocity {
+        let step = step.max(1);
+        let n = self.v_mps.len().div_ceil(step);
+        NeedleVelocity {
+            v_mps: crate::trial::every(&self.v_mps, step),
+            uncertain: self
+                .uncertain
+                .iter()
+                .filter(|u| u.0 % step == 0)
+                .map(|&(i, v, p)| (i / step, v, p))
+                .collect(),
+            jumps: self
+                .jumps
+                .iter()
+                .map(|j| jumps::Jump {
+                    index: j.index.div_ceil(step),
+                    ..*j
+                })
+                .filter(|j| (1..n).contains(&j.index))
+                .collect(),
+            ..*self
+        }
+    }
 }
 
 /// The encoder's resolution as the data show it: the least gap between

@@ -321,11 +321,21 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let mut track = Vec::new(); // (x, v, f) moving inside the cut track
     let mut advancing = Vec::new(); // (x, v, f) cutting new tissue
     let mut rests = Vec::new(); // (index) at rest
+                                // A sample counts as cutting only if the needle goes on advancing
+                                // within 10 ms: the first sample of a stop reads no cutting, yet a
+                                // velocity window across the stop still calls it advancing, and one
+                                // such sample tilts the insertion line (a slope of −110 N/m at 100 Hz).
+    let ahead = ((0.01 * rate).ceil() as usize).max(1);
+    let advances_after = |i: usize| {
+        x[i + 1..(i + 1 + ahead).min(trial.len())]
+            .iter()
+            .any(|&xj| xj > x[i])
+    };
     for i in start..trial.len() {
         let new_tissue = x[i] >= deepest;
         deepest = deepest.max(x[i]);
         if v[i].abs() >= SLIDING_MPS {
-            if new_tissue && v[i] > 0.0 {
+            if new_tissue && v[i] > 0.0 && advances_after(i) {
                 advancing.push((x[i], v[i], f[i]));
             } else {
                 track.push((x[i], v[i], f[i]));
