@@ -22,6 +22,11 @@ impl<const N: usize> Default for Lsq<N> {
 }
 
 impl<const N: usize> Lsq<N> {
+    /// From sums already made: ΦᵀΦ, Φᵀy, yᵀy.
+    pub fn from_sums(ata: [[f64; N]; N], aty: [f64; N], yy: f64) -> Self {
+        Self { ata, aty, yy }
+    }
+
     pub fn add(&mut self, phi: [f64; N], y: f64) {
         for i in 0..N {
             for j in 0..N {

@@ -92,6 +92,11 @@ pub fn predict_parts_at(
         other_side: Vec::new(),
         friction_basis: vec![[0.0; 4]; n],
     };
+    // The samples next to a jump, in order, met by a cursor (a search of
+    // the whole list at every sample was a tenth of the model's time).
+    let mut uncertain = v.uncertain.clone();
+    uncertain.sort_by_key(|u| u.0);
+    let mut next_uncertain = 0;
     #[allow(clippy::needless_range_loop)] // six parallel per-sample arrays
     for i in 0..n {
         let x = trial.x_m[i];
@@ -151,7 +156,10 @@ pub fn predict_parts_at(
         // Next to a jump placed to within a fraction of a sample, the
         // sample may be on its other side: the force law there is the
         // expected one over both.
-        if let Some(&(_, v_other, prior)) = v.uncertain.iter().find(|u| u.0 == i) {
+        while uncertain.get(next_uncertain).is_some_and(|u| u.0 < i) {
+            next_uncertain += 1;
+        }
+        if let Some(&(_, v_other, prior)) = uncertain.get(next_uncertain).filter(|u| u.0 == i) {
             let other = Sliding::at(params, v_other, l, last_sliding, last_basis);
             let other_cutting_n = cut(v_other, cutting);
             let w = other_side_odds(
