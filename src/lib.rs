@@ -19,6 +19,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod ads1220;
 pub mod assist;
 pub mod calibration;
 pub mod config;

@@ -1,0 +1,258 @@
+//! TI ADS1220: 24-bit delta-sigma ADC on SPI, the load cell's converter on
+//! the real board, as the core's [`LoadCellAdc`].
+//!
+//! Written here rather than taken from `embedded-ads1220` 0.1, which sets
+//! the wrong data-rate bits, sign-extends positive codes and returns
+//! `Ok(0)` on a timeout (DESIGN.md §5). Generic over
+//! [`embedded_hal::spi::SpiDevice`] (SPI mode 1, up to 6.6 MHz; the device
+//! owns chip select) and the data-ready pin ([`InputPin`], low while a
+//! conversion waits to be read), so it runs on any HAL and is tested on the
+//! host against `embedded-hal-mock` transactions (`tests/ads1220.rs`).
+//!
+//! Register bits (datasheet SBAS501, §8.6):
+//! - reg 0: MUX\[7:4\], GAIN\[3:1\], PGA_BYPASS\[0\]
+//! - reg 1: DR\[7:5\], MODE\[4:3\] (00 normal, 10 turbo), CM\[2\] (1 continuous),
+//!   TS\[1\], BCS\[0\]
+//! - reg 2: VREF\[7:6\] (01 REFP0/REFN0), FIR\[5:4\], PSW\[3\], IDAC\[2:0\]
+//! - reg 3: I1MUX\[7:5\], I2MUX\[4:2\], DRDYM\[1\], reserved 0
+
+use embedded_hal::delay::DelayNs;
+use embedded_hal::digital::InputPin;
+use embedded_hal::spi::{Operation, SpiDevice};
+
+use crate::hal::{AdcSample, LoadCellAdc};
+
+/// SPI commands.
+pub mod command {
+    /// Reset the device (registers to their defaults).
+    pub const RESET: u8 = 0x06;
+    /// Start or restart conversions.
+    pub const START_SYNC: u8 = 0x08;
+    /// Enter power-down.
+    pub const POWERDOWN: u8 = 0x02;
+    /// Read the latest conversion.
+    pub const RDATA: u8 = 0x10;
+    /// `0010 rrnn`: read nn + 1 registers from rr.
+    pub const RREG: u8 = 0x20;
+    /// `0100 rrnn`: write nn + 1 registers from rr.
+    pub const WREG: u8 = 0x40;
+}
+
+/// Largest code: a conversion there is at (or beyond) positive full
+/// scale, and the force it stands for is unknown.
+pub const FULL_SCALE_POSITIVE: i32 = 0x7F_FFFF;
+/// Smallest code: negative full scale, likewise.
+pub const FULL_SCALE_NEGATIVE: i32 = -0x80_0000;
+
+/// Wait after RESET before the next command: 50 µs + 32 clocks of the
+/// 4.096 MHz oscillator (58 µs), with margin.
+const RESET_WAIT_US: u32 = 100;
+
+/// PGA gain.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[allow(missing_docs)] // the variant is the gain
+pub enum Gain {
+    X1 = 0,
+    X2 = 1,
+    X4 = 2,
+    X8 = 3,
+    X16 = 4,
+    X32 = 5,
+    X64 = 6,
+    X128 = 7,
+}
+
+/// Output data rate: (DR bits, MODE bits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DataRate {
+    /// Normal mode, 1000 SPS (the board averages pairs for 500 Hz).
+    Sps1000,
+    /// Turbo mode, 2000 SPS (twice the modulator clock, more noise).
+    Turbo2000,
+    /// Normal mode, 20 SPS with 50/60 Hz rejection available (bench work).
+    Sps20,
+}
+
+impl DataRate {
+    fn bits(self) -> (u8, u8) {
+        match self {
+            DataRate::Sps1000 => (0b110, 0b00),
+            DataRate::Turbo2000 => (0b110, 0b10),
+            DataRate::Sps20 => (0b000, 0b00),
+        }
+    }
+
+    /// Conversions per second.
+    pub fn sps(self) -> u32 {
+        match self {
+            DataRate::Sps1000 => 1000,
+            DataRate::Turbo2000 => 2000,
+            DataRate::Sps20 => 20,
+        }
+    }
+}
+
+/// Voltage reference.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reference {
+    /// Internal 2.048 V.
+    Internal = 0b00,
+    /// REFP0/REFN0: the bridge's own excitation, so the reading is
+    /// ratiometric and excitation drift cancels.
+    External0 = 0b01,
+    /// AVDD − AVSS.
+    Supply = 0b11,
+}
+
+/// Input pair (MUX).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Inputs {
+    /// AIN1 positive, AIN2 negative (the datasheet's bridge example).
+    Ain1Ain2 = 0b0011,
+    /// AIN0 positive, AIN1 negative.
+    Ain0Ain1 = 0b0000,
+}
+
+/// What the converter is set up to do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Config {
+    /// Input pair.
+    pub inputs: Inputs,
+    /// PGA gain.
+    pub gain: Gain,
+    /// Conversions per second and mode.
+    pub rate: DataRate,
+    /// Voltage reference.
+    pub reference: Reference,
+}
+
+impl Config {
+    /// A load cell's bridge: AIN1/AIN2 at gain 128, ratiometric on
+    /// REFP0/REFN0, continuous conversion at `rate`.
+    pub const fn bridge(rate: DataRate) -> Self {
+        Config {
+            inputs: Inputs::Ain1Ain2,
+            gain: Gain::X128,
+            rate,
+            reference: Reference::External0,
+        }
+    }
+
+    /// The four configuration registers.
+    pub fn registers(&self) -> [u8; 4] {
+        let (dr, mode) = self.rate.bits();
+        [
+            ((self.inputs as u8) << 4) | ((self.gain as u8) << 1),
+            (dr << 5) | (mode << 3) | (1 << 2),
+            (self.reference as u8) << 6,
+            0,
+        ]
+    }
+}
+
+/// What can go wrong talking to the converter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Error<E> {
+    /// The SPI bus failed.
+    Spi(E),
+    /// The data-ready pin could not be read.
+    Pin,
+    /// Asked for a conversion while data-ready was high: none waits (the
+    /// interrupt was spurious or the converter stopped).
+    NotReady,
+    /// The registers read back differ from those written: the converter
+    /// is absent, unpowered or miswired (MISO stuck reads all ones or zeros).
+    Readback {
+        /// Written.
+        wrote: [u8; 4],
+        /// Read back.
+        read: [u8; 4],
+    },
+}
+
+/// The converter on its SPI device, with its data-ready pin.
+pub struct Ads1220<SPI, DRDY> {
+    spi: SPI,
+    drdy: DRDY,
+}
+
+impl<SPI: SpiDevice, DRDY: InputPin> Ads1220<SPI, DRDY> {
+    /// The converter on `spi` (mode 1), data-ready on `drdy`; nothing is
+    /// sent until [`Self::start`].
+    pub fn new(spi: SPI, drdy: DRDY) -> Self {
+        Self { spi, drdy }
+    }
+
+    /// Reset, write `config`, check it reads back, and start continuous
+    /// conversions (data-ready falls at the configured rate from here on).
+    pub fn start(
+        &mut self,
+        config: &Config,
+        delay: &mut impl DelayNs,
+    ) -> Result<(), Error<SPI::Error>> {
+        self.spi.write(&[command::RESET]).map_err(Error::Spi)?;
+        delay.delay_us(RESET_WAIT_US);
+        let wrote = config.registers();
+        let [a, b, c, d] = wrote;
+        self.spi
+            .write(&[command::WREG | 0b11, a, b, c, d])
+            .map_err(Error::Spi)?;
+        let mut read = [0; 4];
+        self.spi
+            .transaction(&mut [
+                Operation::Write(&[command::RREG | 0b11]),
+                Operation::Read(&mut read),
+            ])
+            .map_err(Error::Spi)?;
+        if read != wrote {
+            return Err(Error::Readback { wrote, read });
+        }
+        self.spi.write(&[command::START_SYNC]).map_err(Error::Spi)
+    }
+
+    /// Data-ready is low: a conversion waits to be read.
+    pub fn ready(&mut self) -> Result<bool, Error<SPI::Error>> {
+        self.drdy.is_low().map_err(|_| Error::Pin)
+    }
+
+    /// The conversion waiting, by RDATA (a command, not bare clocks: bytes
+    /// on DIN during a bare read could be taken for one).
+    pub fn read_counts(&mut self) -> Result<i32, Error<SPI::Error>> {
+        if !self.ready()? {
+            return Err(Error::NotReady);
+        }
+        let mut data = [0; 3];
+        self.spi
+            .transaction(&mut [
+                Operation::Write(&[command::RDATA]),
+                Operation::Read(&mut data),
+            ])
+            .map_err(Error::Spi)?;
+        Ok(sign_extend_24(data))
+    }
+
+    /// Give back the bus and the pin.
+    pub fn release(self) -> (SPI, DRDY) {
+        (self.spi, self.drdy)
+    }
+}
+
+/// A 24-bit two's-complement code, MSB first, as an i32.
+pub fn sign_extend_24([hi, mid, lo]: [u8; 3]) -> i32 {
+    i32::from_be_bytes([hi, mid, lo, 0]) >> 8
+}
+
+impl<SPI: SpiDevice, DRDY: InputPin> LoadCellAdc for Ads1220<SPI, DRDY> {
+    type Error = Error<SPI::Error>;
+
+    /// The chip has no overrun flag: the board raises `sample_overrun`
+    /// when data-ready falls while the previous sample is in hand.
+    fn read(&mut self) -> Result<AdcSample, Self::Error> {
+        let counts = self.read_counts()?;
+        Ok(AdcSample {
+            counts,
+            saturated: counts >= FULL_SCALE_POSITIVE || counts <= FULL_SCALE_NEGATIVE,
+            overrun: false,
+        })
+    }
+}
