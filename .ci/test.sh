@@ -31,11 +31,13 @@ step "lints (host, and firmware for each board)"
 cargo clippy --workspace --all-targets -- -D warnings
 cargo clippy --target thumbv7m-none-eabi --lib --bins -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf --features board-mps2 --lib --bins -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf --features board-f411 --lib --bins --target-dir target/f411 -- -D warnings
 
 step "firmware builds"
 cargo fw-m0
 cargo fw-m3
 cargo fw-m4
+cargo fw-f411 --target-dir target/f411
 
 step "tests (host, QEMU, twin comparison)"
 log=$(mktemp)

@@ -231,6 +231,11 @@ impl<SPI: SpiDevice, DRDY: InputPin> Ads1220<SPI, DRDY> {
         Ok(sign_extend_24(data))
     }
 
+    /// The data-ready pin, for the board to clear its interrupt.
+    pub fn data_ready_pin(&mut self) -> &mut DRDY {
+        &mut self.drdy
+    }
+
     /// Give back the bus and the pin.
     pub fn release(self) -> (SPI, DRDY) {
         (self.spi, self.drdy)

@@ -41,6 +41,64 @@ impl LoadCell {
     }
 }
 
+/// The load cell's zero found at boot: the mean of the first
+/// [`BootTare::SAMPLES`] readings with the needle at rest and unloaded.
+/// A mean further from the converter's zero than `max_offset_counts` is a
+/// load on the needle (or a broken bridge), not an offset to tare away.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BootTare {
+    sum: i64,
+    taken: u32,
+    /// Largest plausible offset of an unloaded bridge, counts.
+    pub max_offset_counts: i32,
+}
+
+/// What a finished [`BootTare`] found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TareResult {
+    /// Still collecting.
+    Collecting,
+    /// The zero, in counts.
+    Zero(i32),
+    /// A load at boot: the mean reading, in counts.
+    Loaded(i32),
+}
+
+impl BootTare {
+    /// Readings averaged (a quarter of a second at 1 kSPS; the mean's noise
+    /// is a sixteenth of one reading's).
+    pub const SAMPLES: u32 = 256;
+
+    /// Start collecting.
+    pub const fn new(max_offset_counts: i32) -> Self {
+        Self {
+            sum: 0,
+            taken: 0,
+            max_offset_counts,
+        }
+    }
+
+    /// Add one reading; the result once [`Self::SAMPLES`] are in.
+    pub fn add(&mut self, counts: i32) -> TareResult {
+        if self.taken < Self::SAMPLES {
+            self.sum += i64::from(counts);
+            self.taken += 1;
+        }
+        if self.taken < Self::SAMPLES {
+            return TareResult::Collecting;
+        }
+        // |sum| ≤ 256 · 2^31, and the mean (rounded to nearest) is within
+        // i32 but for the top half-count, which saturates.
+        let n = i64::from(Self::SAMPLES);
+        let mean = saturate_i32((self.sum + n / 2).div_euclid(n));
+        if mean.unsigned_abs() > self.max_offset_counts.unsigned_abs() {
+            TareResult::Loaded(mean)
+        } else {
+            TareResult::Zero(mean)
+        }
+    }
+}
+
 /// Encoder scale: nanometres of needle travel per count.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Encoder {
@@ -94,5 +152,25 @@ mod tests {
             max_counts_per_sample: 1,
         };
         assert_eq!(enc.position(i32::MIN), Nanometres::MIN);
+    }
+
+    #[test]
+    fn boot_tare_zeroes_an_offset_and_refuses_a_load() {
+        // An unloaded bridge 1500 counts off zero, ±3 counts of noise.
+        let mut tare = BootTare::new(50_000);
+        let mut result = TareResult::Collecting;
+        for k in 0..BootTare::SAMPLES {
+            assert_eq!(result, TareResult::Collecting);
+            result = tare.add(1500 + (k % 7) as i32 - 3);
+        }
+        assert_eq!(result, TareResult::Zero(1500));
+        // Half a newton on the needle at boot (10 N full scale on 2^23).
+        let mut tare = BootTare::new(50_000);
+        let loaded = (0..BootTare::SAMPLES).map(|_| tare.add(-419_430)).last();
+        assert_eq!(loaded, Some(TareResult::Loaded(-419_430)));
+        // Saturated readings do not overflow the mean.
+        let mut tare = BootTare::new(50_000);
+        let full = (0..BootTare::SAMPLES).map(|_| tare.add(i32::MIN)).last();
+        assert_eq!(full, Some(TareResult::Loaded(i32::MIN)));
     }
 }

@@ -30,9 +30,15 @@ impl Faults {
     pub const FORCE_WITHOUT_CONTACT: Self = Self(1 << 7);
     /// Force rose while loading the capsule with the encoder standing still.
     pub const ENCODER_STUCK: Self = Self(1 << 8);
+    /// The converter's data-ready never came (unplugged, unpowered, or
+    /// stopped): no sample for longer than the board's timeout.
+    pub const ADC_TIMEOUT: Self = Self(1 << 9);
+    /// The load cell read beyond a plausible offset at boot: a load on the
+    /// needle, which a tare would silently take for zero.
+    pub const LOAD_AT_BOOT: Self = Self(1 << 10);
 
     /// Names of the bits, lowest first, for host-side display.
-    pub const NAMES: [(Self, &'static str); 9] = [
+    pub const NAMES: [(Self, &'static str); 11] = [
         (Self::ADC_SATURATED, "adc_saturated"),
         (Self::ADC_ERROR, "adc_error"),
         (Self::ENCODER_JUMP, "encoder_jump"),
@@ -42,6 +48,8 @@ impl Faults {
         (Self::HALT_OUTPUT, "halt_output"),
         (Self::FORCE_WITHOUT_CONTACT, "force_without_contact"),
         (Self::ENCODER_STUCK, "encoder_stuck"),
+        (Self::ADC_TIMEOUT, "adc_timeout"),
+        (Self::LOAD_AT_BOOT, "load_at_boot"),
     ];
 
     /// Union of two sets.

@@ -11,7 +11,9 @@
 #[cfg(target_os = "none")]
 mod hardware;
 
-#[cfg(target_os = "none")]
+// The real board's entry point is its RTIC application
+// (`hardware/nucleo_f411re/app.rs`); the QEMU boards' is this loop.
+#[cfg(all(target_os = "none", not(feature = "board-f411")))]
 #[cortex_m_rt::entry]
 fn main() -> ! {
     use needle_holder::{config::DeviceConfig, replay};

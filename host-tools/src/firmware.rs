@@ -58,10 +58,27 @@ pub fn repo_root() -> PathBuf {
 /// Build the firmware image for `board`; returns the ELF path. Installs the
 /// board's Rust target first when the toolchain lacks it.
 pub fn build(board: Board) -> Result<PathBuf> {
+    build_image(board.target(), board.features(), None)
+}
+
+/// The real board's image (Nucleo-F411RE, feature `board-f411`, what
+/// `cargo fw-f411` builds), in its own target directory (`target/f411`) so
+/// it never overwrites the mps2 image of the same target while a test
+/// runs that one.
+pub fn build_nucleo_f411re() -> Result<PathBuf> {
+    build_image(
+        "thumbv7em-none-eabihf",
+        &["--features", "board-f411"],
+        Some("target/f411"),
+    )
+}
+
+fn build_image(target: &str, features: &[&str], target_dir: Option<&str>) -> Result<PathBuf> {
     let root = repo_root();
-    ensure_target(&root, board.target())?;
+    ensure_target(&root, target)?;
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
+    let mut command = Command::new(cargo);
+    command
         .current_dir(&root)
         .args([
             "build",
@@ -70,17 +87,21 @@ pub fn build(board: Board) -> Result<PathBuf> {
             "--bin",
             "needle-holder",
             "--target",
-            board.target(),
+            target,
         ])
-        .args(board.features())
+        .args(features);
+    if let Some(dir) = target_dir {
+        command.args(["--target-dir", dir]);
+    }
+    let status = command
         .status()
         .context("cannot run cargo to build the firmware")?;
     if !status.success() {
-        bail!("firmware build for {} failed ({status})", board.target());
+        bail!("firmware build for {target} {features:?} failed ({status})");
     }
     let elf = root
-        .join("target")
-        .join(board.target())
+        .join(target_dir.unwrap_or("target"))
+        .join(target)
         .join("firmware")
         .join("needle-holder");
     if !elf.exists() {

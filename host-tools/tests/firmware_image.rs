@@ -95,3 +95,60 @@ fn the_instruction_counter_sees_every_sample() {
         &counts.per_region[..5]
     );
 }
+
+/// The STM32F411RE's memory (RM0383 §2.3): 512 KiB flash, 128 KiB SRAM.
+const F411_FLASH: std::ops::Range<u64> = 0x0800_0000..0x0808_0000;
+const F411_RAM: std::ops::Range<u64> = 0x2000_0000..0x2002_0000;
+
+#[test]
+fn the_real_boards_image_sits_where_the_f411_has_memory() {
+    use object::{ObjectSection, SectionFlags};
+    let data = std::fs::read(firmware::build_nucleo_f411re().expect("f411 build")).unwrap();
+    let file = object::File::parse(&*data).unwrap();
+    // The vector table first in flash: the initial stack pointer at the top
+    // of RAM, the reset handler a Thumb address in flash.
+    let vectors = file
+        .section_by_name(".vector_table")
+        .expect(".vector_table");
+    assert_eq!(vectors.address(), F411_FLASH.start);
+    let words = vectors.data().unwrap();
+    let word = |k: usize| {
+        u64::from(u32::from_le_bytes(
+            words[4 * k..4 * k + 4].try_into().unwrap(),
+        ))
+    };
+    assert_eq!(word(0), F411_RAM.end, "initial stack pointer");
+    assert!(
+        F411_FLASH.contains(&word(1)) && word(1) & 1 == 1,
+        "reset vector {:#x}",
+        word(1)
+    );
+    // Every section loaded onto the chip lies in its flash or its RAM.
+    let mut flash_bytes = 0;
+    for section in file.sections() {
+        let SectionFlags::Elf { sh_flags } = section.flags() else {
+            panic!("not an ELF section");
+        };
+        const SHF_ALLOC: u64 = 0x2;
+        if sh_flags & SHF_ALLOC == 0 || section.size() == 0 {
+            continue;
+        }
+        let (start, end) = (section.address(), section.address() + section.size());
+        let name = section.name().unwrap_or("?");
+        let in_flash = F411_FLASH.contains(&start) && end <= F411_FLASH.end;
+        let in_ram = F411_RAM.contains(&start) && end <= F411_RAM.end;
+        assert!(in_flash || in_ram, "{name} at {start:#x}..{end:#x}");
+        if in_flash {
+            flash_bytes += section.size();
+        }
+    }
+    assert!(
+        flash_bytes > 8 * 1024,
+        "implausibly small: {flash_bytes} bytes"
+    );
+    // The RTIC tasks' interrupts and the halt handlers are linked in.
+    let names: Vec<&str> = file.symbols().filter_map(|s| s.name().ok()).collect();
+    for handler in ["EXTI15_10", "TIM5", "USART2", "HardFault"] {
+        assert!(names.contains(&handler), "{handler} missing");
+    }
+}

@@ -1,57 +1,20 @@
 //! Board support: the only place with registers, semihosting and `unsafe`.
 //!
-//! Two QEMU boards, chosen at build time:
-//! - `lm3s6965evb` (Cortex-M3; the CI board, also runs the thumbv6m image),
-//! - `mps2-an386` (Cortex-M4F, feature `board-mps2`).
+//! Boards, chosen at build time:
+//! - `lm3s6965evb` (QEMU, Cortex-M3; the CI board, also runs the thumbv6m
+//!   image),
+//! - `mps2-an386` (QEMU, Cortex-M4F, feature `board-mps2`),
+//! - the real board, ST Nucleo-F411RE (feature `board-f411`,
+//!   [`nucleo_f411re`]): ADS1220, encoder timer, RTIC.
 //!
 //! In QEMU the ADC and encoder are a replay file read over semihosting
 //! ([`ReplayFile`]); frames leave through UART0; defmt logs go out over
 //! semihosting to QEMU's stdout. A panic or HardFault exits QEMU non-zero.
 
-// Linked for their side effects: the critical-section implementation and the
-// defmt global logger.
-use cortex_m as _;
-use defmt_semihosting as _;
+#[cfg(feature = "board-f411")]
+pub mod nucleo_f411re;
 
-mod bench;
-mod replay_file;
-pub use bench::BenchMarkers;
-pub use replay_file::ReplayFile;
-
-#[cfg(not(feature = "board-mps2"))]
-mod lm3s6965;
-#[cfg(not(feature = "board-mps2"))]
-pub use lm3s6965::{take_peripherals, BOARD};
-
-#[cfg(feature = "board-mps2")]
-mod mps2_an386;
-#[cfg(feature = "board-mps2")]
-pub use mps2_an386::{take_peripherals, BOARD};
-
-/// Exit codes seen by whoever started QEMU.
-pub mod exit_code {
-    /// The replay file could not be opened or named.
-    pub const NO_REPLAY: i32 = 2;
-    /// HardFault.
-    pub const HARD_FAULT: i32 = 3;
-    /// Panic (the firmware is built never to panic; this is the backstop).
-    pub const PANIC: i32 = 101;
-}
-
-/// Leave QEMU with `code`.
-pub fn exit(code: i32) -> ! {
-    semihosting::process::exit(code)
-}
-
-#[panic_handler]
-fn panic(_info: &core::panic::PanicInfo) -> ! {
-    // Formatting PanicInfo costs ~13 KB of flash; the location is in the ELF.
-    defmt::error!("panic");
-    exit(exit_code::PANIC)
-}
-
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    defmt::error!("HardFault at pc {=u32:#010x}", frame.pc());
-    exit(exit_code::HARD_FAULT)
-}
+#[cfg(not(feature = "board-f411"))]
+mod qemu;
+#[cfg(not(feature = "board-f411"))]
+pub use qemu::*;

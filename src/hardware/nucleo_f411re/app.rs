@@ -1,0 +1,197 @@
+//! The RTIC application: three interrupt tasks, highest priority first.
+//!
+//! - `sample` (EXTI10, the ADS1220's data-ready falling): read the
+//!   conversion and the encoder, run the core's pipeline, queue the frame
+//!   bytes, pend the drain. The converter's clock is the sample clock, so
+//!   sampling never drifts against it. The first [`BootTare::SAMPLES`]
+//!   conversions set the load cell's zero before the device is armed.
+//! - `watchdog` (TIM5 at 25 Hz): no sample over two periods is an
+//!   `adc_timeout` fault and a halt — a converter unplugged never hangs.
+//! - `drain` (USART2 transmit-empty, lowest): frame bytes to the wire.
+
+#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
+mod app {
+    use heapless::spsc::{Consumer, Queue};
+    use needle_holder::calibration::{BootTare, TareResult};
+    use needle_holder::config::DeviceConfig;
+    use needle_holder::device::Device;
+    use needle_holder::faults::Faults;
+    use stm32f4xx_hal::gpio::ExtiPin;
+    use stm32f4xx_hal::pac::{self, TIM5, USART2};
+    use stm32f4xx_hal::serial::Tx;
+    use stm32f4xx_hal::timer::CounterHz;
+    use stm32f4xx_hal::ClearFlags;
+
+    use super::super::adc::{Acquisition, Broken, Conversion, Ready};
+    use super::super::encoder::Encoder;
+    use super::super::halt::HaltLine;
+    use super::super::link::{drain, QueueWriter, QUEUE_BYTES};
+    use super::super::setup::setup;
+
+    type Dev = Device<QueueWriter, HaltLine>;
+
+    /// Largest plausible offset of an unloaded bridge at boot: 5 % of the
+    /// converter's full scale (0.5 N on the 10 N default); beyond it the
+    /// needle is loaded and taring would hide the load.
+    const MAX_BOOT_OFFSET_COUNTS: i32 = (1 << 23) / 20;
+
+    #[shared]
+    struct Shared {
+        /// The device once armed (after the boot tare, or at a fault).
+        device: Option<Dev>,
+        /// Its sink and halt line until then.
+        unarmed: Option<(QueueWriter, HaltLine)>,
+        /// Samples taken, for the watchdog.
+        seen: u32,
+        config: DeviceConfig,
+    }
+
+    #[local]
+    struct Local {
+        acquisition: Acquisition,
+        encoder: Encoder,
+        tare: BootTare,
+        tx: Tx<USART2>,
+        outgoing: Consumer<'static, u8, QUEUE_BYTES>,
+        watchdog: CounterHz<TIM5>,
+    }
+
+    #[init(local = [queue: Queue<u8, QUEUE_BYTES> = Queue::new()])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let config = DeviceConfig::default();
+        let parts = setup(cx.device, cx.core, config.velocity.sample_rate_hz);
+        defmt::info!(
+            "needle-holder {} on {} at {=u16} Hz",
+            env!("CARGO_PKG_VERSION"),
+            super::super::BOARD,
+            config.velocity.sample_rate_hz
+        );
+        let (producer, outgoing) = cx.local.queue.split();
+        let mut shared = Shared {
+            device: None,
+            unarmed: Some((QueueWriter(producer), parts.halt)),
+            seen: 0,
+            config,
+        };
+        if let Err(e) = parts.converter_started {
+            defmt::error!("ADS1220 did not start: {}", defmt::Debug2Format(&e));
+            let device = arm(&mut shared.device, &mut shared.unarmed, &config);
+            if let Some(device) = device {
+                device.raise(Faults::ADC_ERROR);
+            }
+        }
+        (
+            shared,
+            Local {
+                acquisition: parts.acquisition,
+                encoder: parts.encoder,
+                tare: BootTare::new(MAX_BOOT_OFFSET_COUNTS),
+                tx: parts.tx,
+                outgoing,
+                watchdog: parts.watchdog,
+            },
+        )
+    }
+
+    /// The device, armed now with `config` if it was not yet.
+    fn arm<'a>(
+        device: &'a mut Option<Dev>,
+        unarmed: &mut Option<(QueueWriter, HaltLine)>,
+        config: &DeviceConfig,
+    ) -> Option<&'a mut Dev> {
+        if device.is_none() {
+            if let Some((sink, halt)) = unarmed.take() {
+                *device = Some(Device::new(*config, sink, halt));
+            }
+        }
+        device.as_mut()
+    }
+
+    #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config], local = [acquisition, encoder, tare])]
+    fn sample(cx: sample::Context) {
+        let acquisition = cx.local.acquisition;
+        acquisition
+            .converter
+            .data_ready_pin()
+            .clear_interrupt_pending_bit();
+        let conversion = acquisition.convert();
+        let mut shared = (
+            cx.shared.device,
+            cx.shared.unarmed,
+            cx.shared.seen,
+            cx.shared.config,
+        );
+        let (encoder, tare) = (cx.local.encoder, cx.local.tare);
+        shared.lock(|device, unarmed, seen, config| {
+            *seen = seen.wrapping_add(1);
+            match conversion {
+                Conversion::Partial => {}
+                Conversion::Failed(e) => {
+                    defmt::error!("ADS1220: {}", defmt::Debug2Format(&e));
+                    if let Some(d) = arm(device, unarmed, config) {
+                        d.tick(&mut Broken, encoder);
+                    }
+                }
+                Conversion::Sample(sample) => {
+                    if device.is_none() {
+                        match tare.add(sample.counts) {
+                            TareResult::Collecting => {}
+                            TareResult::Zero(zero) => {
+                                config.load_cell.tare_counts = zero;
+                                defmt::info!("tare {=i32} counts: armed", zero);
+                                arm(device, unarmed, config);
+                            }
+                            TareResult::Loaded(mean) => {
+                                defmt::error!("load at boot: {=i32} counts", mean);
+                                if let Some(d) = arm(device, unarmed, config) {
+                                    d.raise(Faults::LOAD_AT_BOOT);
+                                }
+                            }
+                        }
+                    } else if let Some(d) = device.as_mut() {
+                        d.tick(&mut Ready(sample), encoder);
+                    }
+                }
+            }
+        });
+        // Data-ready fell again while this sample was in hand: the next
+        // one is late.
+        if acquisition.converter.data_ready_pin().check_interrupt() {
+            acquisition.overrun = true;
+        }
+        rtic::pend(pac::Interrupt::USART2);
+    }
+
+    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0])]
+    fn watchdog(mut cx: watchdog::Context) {
+        cx.local.watchdog.clear_all_flags();
+        let seen = cx.shared.seen.lock(|s| *s);
+        if seen != *cx.local.last_seen {
+            (*cx.local.last_seen, *cx.local.quiet) = (seen, 0);
+            return;
+        }
+        *cx.local.quiet = cx.local.quiet.saturating_add(1);
+        if *cx.local.quiet == 2 {
+            defmt::error!("no data-ready: adc_timeout");
+            let mut shared = (cx.shared.device, cx.shared.unarmed, cx.shared.config);
+            shared.lock(|device, unarmed, config| {
+                if let Some(d) = arm(device, unarmed, config) {
+                    d.raise(Faults::ADC_TIMEOUT);
+                }
+            });
+            rtic::pend(pac::Interrupt::USART2);
+        }
+    }
+
+    #[task(binds = USART2, priority = 1, local = [tx, outgoing])]
+    fn drain_link(cx: drain_link::Context) {
+        drain(cx.local.tx, cx.local.outgoing);
+    }
+
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+}
