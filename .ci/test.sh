@@ -32,6 +32,7 @@ cargo clippy --workspace --all-targets -- -D warnings
 cargo clippy --target thumbv7m-none-eabi --lib --bins -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf --features board-mps2 --lib --bins -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf --features board-f411 --lib --bins --target-dir target/f411 -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf --features f411-replay --lib --bins --target-dir target/f411-replay -- -D warnings
 
 step "firmware builds"
 cargo fw-m0

@@ -71,7 +71,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let listener = TcpListener::bind("127.0.0.1:0").context("cannot listen on loopback")?;
     let addr = listener.local_addr()?;
     println!(
-        "running QEMU {:?}; UART0 → tcp {addr}, frames decoded as they arrive:",
+        "running QEMU {:?}; frames UART → tcp {addr}, decoded as they arrive:",
         args.board
     );
     let cmd = firmware::qemu_command(args.board, &elf, &replay_path, Serial::Tcp(addr), &[]);

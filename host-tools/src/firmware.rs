@@ -19,6 +19,10 @@ pub enum Board {
     Lm3s6965M0,
     /// mps2-an386, Cortex-M4F image (thumbv7em-none-eabihf).
     Mps2An386,
+    /// The real board's image (Nucleo-F411RE) with the replay source in
+    /// place of the ADS1220 and encoder (feature `f411-replay`), on QEMU's
+    /// netduinoplus2 (an STM32F405: same USART2, TIM2 and memory map).
+    NucleoF411re,
 }
 
 impl Board {
@@ -26,14 +30,24 @@ impl Board {
         match self {
             Board::Lm3s6965 => "thumbv7m-none-eabi",
             Board::Lm3s6965M0 => "thumbv6m-none-eabi",
-            Board::Mps2An386 => "thumbv7em-none-eabihf",
+            Board::Mps2An386 | Board::NucleoF411re => "thumbv7em-none-eabihf",
         }
     }
 
     fn features(self) -> &'static [&'static str] {
         match self {
             Board::Mps2An386 => &["--features", "board-mps2"],
+            Board::NucleoF411re => &["--features", "f411-replay"],
             _ => &[],
+        }
+    }
+
+    /// Its own target directory where it shares a target with another
+    /// board, so that building one never overwrites the other's image.
+    fn target_dir(self) -> Option<&'static str> {
+        match self {
+            Board::NucleoF411re => Some("target/f411-replay"),
+            _ => None,
         }
     }
 
@@ -43,6 +57,18 @@ impl Board {
                 &["-machine", "lm3s6965evb", "-cpu", "cortex-m3"]
             }
             Board::Mps2An386 => &["-machine", "mps2-an386"],
+            // USART2 is the second serial port (the first, USART1, goes
+            // nowhere). Virtual time by instruction count, skipping ahead
+            // while the core sleeps between TIM2's samples: a replay runs
+            // in seconds instead of its own length.
+            Board::NucleoF411re => &[
+                "-machine",
+                "netduinoplus2",
+                "-icount",
+                "shift=0,sleep=off",
+                "-serial",
+                "null",
+            ],
         }
     }
 }
@@ -58,7 +84,7 @@ pub fn repo_root() -> PathBuf {
 /// Build the firmware image for `board`; returns the ELF path. Installs the
 /// board's Rust target first when the toolchain lacks it.
 pub fn build(board: Board) -> Result<PathBuf> {
-    build_image(board.target(), board.features(), None)
+    build_image(board.target(), board.features(), board.target_dir())
 }
 
 /// The real board's image (Nucleo-F411RE, feature `board-f411`, what

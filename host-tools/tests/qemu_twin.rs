@@ -160,6 +160,14 @@ fn cortex_m4f_on_mps2_matches_the_host_twin() {
     assert_twin(Board::Mps2An386, &liver_replay(0.005, 9), "liver1-m4");
 }
 
+#[test]
+fn the_real_boards_image_on_netduinoplus2_matches_the_host_twin() {
+    // The Nucleo-F411RE's board code (RTIC, the frame queue, USART2) with
+    // the replay in place of its sensors, clocked by TIM2.
+    let (qemu, _) = assert_twin(Board::NucleoF411re, &liver_replay(0.005, 10), "liver1-f411");
+    assert_eq!(last_status(&qemu.frames).frames_dropped, 0);
+}
+
 fn replay_of(records: impl IntoIterator<Item = Record>) -> Vec<u8> {
     let mut bytes = ReplayHeader {
         sample_rate_hz: 500,

@@ -18,3 +18,31 @@ pub mod nucleo_f411re;
 mod qemu;
 #[cfg(not(feature = "board-f411"))]
 pub use qemu::*;
+
+/// The replay source, read over semihosting: the QEMU boards' and the
+/// real board's replay image's.
+#[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
+mod replay_file;
+
+/// Markers around each sample for `needle bench`'s instruction count.
+#[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
+mod bench;
+
+/// Exit codes seen by whoever started QEMU.
+#[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
+pub mod exit_code {
+    /// The replay file could not be opened or named.
+    pub const NO_REPLAY: i32 = 2;
+    /// HardFault.
+    #[cfg_attr(feature = "board-f411", allow(dead_code))] // halt.rs says 3
+    pub const HARD_FAULT: i32 = 3;
+    /// Panic (the firmware is built never to panic; this is the backstop).
+    #[cfg_attr(feature = "board-f411", allow(dead_code))] // halt.rs says 101
+    pub const PANIC: i32 = 101;
+}
+
+/// Leave QEMU with `code`.
+#[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
+pub fn exit(code: i32) -> ! {
+    semihosting::process::exit(code)
+}

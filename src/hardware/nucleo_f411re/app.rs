@@ -58,6 +58,7 @@ mod app {
 
     #[init(local = [queue: Queue<u8, QUEUE_BYTES> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
+        super::super::stack::paint();
         let config = DeviceConfig::default();
         let parts = setup(cx.device, cx.core, config.velocity.sample_rate_hz);
         defmt::info!(
@@ -162,9 +163,21 @@ mod app {
         rtic::pend(pac::Interrupt::USART2);
     }
 
-    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0])]
+    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0, ticks: u32 = 0])]
     fn watchdog(mut cx: watchdog::Context) {
         cx.local.watchdog.clear_all_flags();
+        // Every 10 s, how deep the stack has been.
+        *cx.local.ticks = cx.local.ticks.wrapping_add(1);
+        if cx
+            .local
+            .ticks
+            .is_multiple_of(10 * super::super::setup::WATCHDOG_HZ)
+        {
+            defmt::info!(
+                "stack high-water mark {=usize} bytes",
+                super::super::stack::high_water_bytes()
+            );
+        }
         let seen = cx.shared.seen.lock(|s| *s);
         if seen != *cx.local.last_seen {
             (*cx.local.last_seen, *cx.local.quiet) = (seen, 0);

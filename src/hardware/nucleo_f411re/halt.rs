@@ -17,20 +17,27 @@ fn assert_halt_raw() {
     unsafe { (*pac::GPIOA::ptr()).bsrr().write(|w| w.bs8().set_bit()) };
 }
 
+/// Stay here with the halt asserted (on the board), or leave QEMU with
+/// `code` (the replay image, so a test sees it).
+fn stop(_code: i32) -> ! {
+    #[cfg(feature = "f411-replay")]
+    crate::hardware::exit(_code);
+    #[cfg(not(feature = "f411-replay"))]
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
 #[panic_handler]
 fn panic(_info: &core::panic::PanicInfo) -> ! {
     assert_halt_raw();
     defmt::error!("panic: halt asserted");
-    loop {
-        cortex_m::asm::wfi();
-    }
+    stop(101) // exit_code::PANIC
 }
 
 #[cortex_m_rt::exception]
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     assert_halt_raw();
     defmt::error!("HardFault at pc {=u32:#010x}: halt asserted", frame.pc());
-    loop {
-        cortex_m::asm::wfi();
-    }
+    stop(3)
 }

@@ -7,7 +7,9 @@
 use heapless::spsc::{Consumer, Producer};
 use stm32f4xx_hal::pac::USART2;
 use stm32f4xx_hal::prelude::*;
-use stm32f4xx_hal::serial::{Tx, TxListen};
+use stm32f4xx_hal::serial::Tx;
+#[cfg(not(feature = "f411-replay"))]
+use stm32f4xx_hal::serial::TxListen;
 
 /// Bytes the queue holds: about 40 ms of a 2 kHz stream, so a stall of
 /// the drain that long loses nothing.
@@ -50,15 +52,21 @@ impl embedded_io::Write for QueueWriter {
     }
 }
 
-/// Send what the transmitter takes now; listen for transmit-empty while
-/// bytes wait, stop listening once the queue is empty.
-pub fn drain(tx: &mut Tx<USART2>, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {
+/// Send what the transmitter takes now, without waiting.
+pub fn send_waiting(tx: &mut Tx<USART2>, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {
     while let Some(&byte) = queue.peek() {
         if tx.write(byte).is_err() {
             break;
         }
         queue.dequeue();
     }
+}
+
+/// [`send_waiting`], then listen for transmit-empty while bytes wait and
+/// stop listening once the queue is empty.
+#[cfg(not(feature = "f411-replay"))]
+pub fn drain(tx: &mut Tx<USART2>, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {
+    send_waiting(tx, queue);
     if queue.ready() {
         tx.listen();
     } else {

@@ -17,16 +17,32 @@
 //! [`halt`] the line and what a panic does to it; [`app`] is the RTIC
 //! application that schedules them (the converter's data-ready is the
 //! sample clock).
+//!
+//! With feature `f411-replay` the same board code runs [`replay_app`]
+//! instead: the replay file (over semihosting) in place of the converter
+//! and the encoder, TIM2 at the replay's rate as the sample clock, on HSI
+//! (QEMU `netduinoplus2` models neither the HSE nor the PLL's ready bits).
 
+#[cfg(not(feature = "f411-replay"))]
 pub mod adc;
+#[cfg(not(feature = "f411-replay"))]
 mod app;
+#[cfg(not(feature = "f411-replay"))]
 pub mod encoder;
 pub mod halt;
 pub mod link;
+#[cfg(feature = "f411-replay")]
+mod replay_app;
+#[cfg(not(feature = "f411-replay"))]
 pub mod setup;
+pub mod stack;
 
-// defmt over RTT (probe-rs reads it).
+// defmt over RTT on the board (probe-rs reads it); over semihosting in
+// QEMU, where the replay image runs.
+#[cfg(not(feature = "f411-replay"))]
 use defmt_rtt as _;
+#[cfg(feature = "f411-replay")]
+use defmt_semihosting as _;
 
 /// Board name for logs.
 pub const BOARD: &str = "nucleo-f411re";

@@ -5,10 +5,9 @@
 use cortex_m as _;
 use defmt_semihosting as _;
 
-mod bench;
-mod replay_file;
-pub use bench::BenchMarkers;
-pub use replay_file::ReplayFile;
+pub use super::bench::BenchMarkers;
+pub use super::replay_file::ReplayFile;
+pub use super::{exit, exit_code};
 
 #[cfg(not(feature = "board-mps2"))]
 mod lm3s6965;
@@ -19,21 +18,6 @@ pub use lm3s6965::{take_peripherals, BOARD};
 mod mps2_an386;
 #[cfg(feature = "board-mps2")]
 pub use mps2_an386::{take_peripherals, BOARD};
-
-/// Exit codes seen by whoever started QEMU.
-pub mod exit_code {
-    /// The replay file could not be opened or named.
-    pub const NO_REPLAY: i32 = 2;
-    /// HardFault.
-    pub const HARD_FAULT: i32 = 3;
-    /// Panic (the firmware is built never to panic; this is the backstop).
-    pub const PANIC: i32 = 101;
-}
-
-/// Leave QEMU with `code`.
-pub fn exit(code: i32) -> ! {
-    semihosting::process::exit(code)
-}
 
 #[panic_handler]
 fn panic(_info: &core::panic::PanicInfo) -> ! {
