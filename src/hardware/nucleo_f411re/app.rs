@@ -56,10 +56,20 @@ mod app {
         watchdog: CounterHz<TIM5>,
     }
 
+    /// The sample rate, chosen at build time (features `rate-1khz`,
+    /// `rate-2khz`; 500 Hz, the paper's, otherwise).
+    const SAMPLE_RATE_HZ: u16 = if cfg!(feature = "rate-2khz") {
+        2000
+    } else if cfg!(feature = "rate-1khz") {
+        1000
+    } else {
+        500
+    };
+
     #[init(local = [queue: Queue<u8, QUEUE_BYTES> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         super::super::stack::paint();
-        let config = DeviceConfig::default();
+        let config = DeviceConfig::default().with_sample_rate(SAMPLE_RATE_HZ);
         let parts = setup(cx.device, cx.core, config.velocity.sample_rate_hz);
         defmt::info!(
             "needle-holder {} on {} at {=u16} Hz",
