@@ -33,7 +33,50 @@ pub struct DecodeArgs {
     pub rate_hz: Option<u16>,
 }
 
+/// How long to read the port for: a finite, positive number of seconds
+/// that a `Duration` holds (`inf` panicked converting; `-1`, `NaN` and `0`
+/// read nothing and exited 0).
+fn read_for(seconds: Option<f64>) -> Result<Option<Duration>> {
+    let Some(s) = seconds else { return Ok(None) };
+    if !(s.is_finite() && s > 0.0) {
+        bail!("--seconds {s}: must be a number of seconds above 0 (leave it out to read until the port closes)");
+    }
+    Duration::try_from_secs_f64(s)
+        .map(Some)
+        .map_err(|_| anyhow::anyhow!("--seconds {s}: too long to wait for"))
+}
+
+/// Whether `a` and `b` name one file (the same path, a link, or the same
+/// inode); a path that does not exist is no file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) if x == y => true,
+        #[cfg(unix)]
+        (Ok(x), Ok(y)) => {
+            use std::os::unix::fs::MetadataExt;
+            match (std::fs::metadata(x), std::fs::metadata(y)) {
+                (Ok(m), Ok(n)) => m.dev() == n.dev() && m.ino() == n.ino(),
+                _ => false,
+            }
+        }
+        _ => false,
+    }
+}
+
 pub fn run(args: &DecodeArgs) -> Result<()> {
+    let read_for = read_for(args.seconds)?;
+    if args.rate_hz == Some(0) {
+        bail!("--rate-hz 0: the sample rate must be at least 1 Hz");
+    }
+    // Opening the CSV truncates it: it must not be the capture being read.
+    if let (Some(input), Some(csv)) = (&args.file, &args.csv) {
+        if same_file(input, csv) {
+            bail!(
+                "{}: --csv names the capture being decoded; writing it would empty it first",
+                csv.display()
+            );
+        }
+    }
     let mut out = Output::new(args.csv.as_deref(), args.rate_hz)?;
     let mut decoder = StreamDecoder::new();
     let feed = |bytes: &[u8], decoder: &mut StreamDecoder, out: &mut Output| -> Result<()> {
@@ -50,9 +93,7 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
             .timeout(Duration::from_millis(100))
             .open()
             .with_context(|| format!("{port}: cannot open serial port"))?;
-        let deadline = args
-            .seconds
-            .map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
+        let deadline = read_for.and_then(|d| Instant::now().checked_add(d));
         let mut buf = [0u8; 4096];
         while deadline.is_none_or(|d| Instant::now() < d) {
             match serial.read(&mut buf) {

@@ -112,8 +112,10 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
     if args.trials == 0 {
         bail!("--trials must be at least 1");
     }
-    println!("| rate | noise | structures | contact latency mean | puncture | structure | exit |");
-    println!("|---|---|---|---|---|---|---|");
+    crate::stdout::write(
+        "| rate | noise | structures | contact latency mean | puncture | structure | exit |\n\
+         |---|---|---|---|---|---|---|\n",
+    )?;
     let mut cells = Vec::new();
     for &rate in &args.rates_hz {
         for &noise in &args.noise_n {
@@ -127,15 +129,15 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
                     args.seed,
                 )?;
                 let contact = kind(&c, "contact");
-                println!(
-                    "| {rate:.0} Hz | {:.0} mN | {} | {:.0} ms | {} | {} | {} |",
+                crate::stdout::write(&format!(
+                    "| {rate:.0} Hz | {:.0} mN | {} | {:.0} ms | {} | {} | {} |\n",
                     noise * 1e3,
                     if structures { "yes" } else { "no" },
                     contact["latency_ms_mean"].as_f64().unwrap_or(0.0),
                     summary(&c, "puncture"),
                     summary(&c, "structure"),
                     summary(&c, "exit"),
-                );
+                ))?;
                 cells.push(c);
             }
         }

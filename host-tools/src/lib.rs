@@ -12,6 +12,7 @@ pub mod fit;
 pub mod frames;
 pub mod plot;
 pub mod sim;
+pub mod stdout;
 pub mod tissue;
 pub mod trial;
 pub mod twin;

@@ -22,3 +22,113 @@ fn diagnose_rejects_an_unknown_tissue() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("nope"), "{err}");
 }
+
+#[test]
+fn decode_rejects_seconds_that_are_not_a_duration() {
+    // Row 1: `--seconds inf` (or 1e30) panicked converting to a Duration;
+    // -1, NaN and 0 read nothing and exited 0. Checked before the port is
+    // opened, so /dev/null stands in for one.
+    for bad in ["inf", "1e30", "-1", "NaN", "0"] {
+        let seconds = format!("--seconds={bad}");
+        let out = needle(&["decode", "--port", "/dev/null", &seconds]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "--seconds {bad} accepted");
+        assert!(err.contains("--seconds"), "--seconds {bad}: {err}");
+        assert!(!err.contains("panicked"), "--seconds {bad}: {err}");
+    }
+}
+
+#[test]
+fn decode_never_writes_over_the_capture_it_reads() {
+    // Row 4: `needle decode same.bin --csv same.bin` emptied the capture
+    // before reading it, printed 0 frames and exited 0.
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("same.bin");
+    std::fs::write(&capture, b"\x01\x02\x00some bytes\x00").unwrap();
+    let before = std::fs::read(&capture).unwrap();
+    let path = capture.to_str().unwrap();
+    let link = dir.path().join("link.bin");
+    std::os::unix::fs::symlink(&capture, &link).unwrap();
+    for csv in [path, link.to_str().unwrap()] {
+        let out = needle(&["decode", path, "--csv", csv]);
+        assert!(!out.status.success(), "--csv {csv} accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("capture"), "{err}");
+        assert_eq!(
+            std::fs::read(&capture).unwrap(),
+            before,
+            "the capture changed"
+        );
+    }
+}
+
+#[test]
+fn decode_rejects_a_zero_sample_rate() {
+    // Row 5: `--rate-hz 0` wrote `inf` for every t_s and exited 0.
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("cap.bin");
+    std::fs::write(&capture, b"").unwrap();
+    let csv = dir.path().join("o.csv");
+    let out = needle(&[
+        "decode",
+        capture.to_str().unwrap(),
+        "--rate-hz",
+        "0",
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--rate-hz"));
+    assert!(!csv.exists(), "no CSV is written for a refused command");
+}
+
+#[test]
+fn a_full_disk_on_stdout_is_an_error_and_a_closed_pipe_a_quiet_end() {
+    // Row 2: `needle fit DIR > /dev/full` panicked "failed printing to
+    // stdout" (exit 101), and so did `needle evaluate … | head -1`.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    assert!(
+        needle(&["simulate", "--out", d, "--trials", "2", "--seed", "1"])
+            .status
+            .success()
+    );
+    for args in [vec!["fit", d], vec!["detect", d]] {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_needle"))
+            .args(&args)
+            .stdout(full)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains("standard output"), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+    // The reader goes after the table's header line.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args([
+            "evaluate",
+            "--trials",
+            "1",
+            "--rates-hz",
+            "500",
+            "--noise-n",
+            "0.002",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdout = child.stdout.take().unwrap();
+    let mut first = [0u8; 8];
+    std::io::Read::read_exact(&mut stdout, &mut first).unwrap();
+    drop(stdout);
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

@@ -1074,9 +1074,6 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         Some(path) => {
             std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
         }
-        None => {
-            print!("{text}");
-            Ok(())
-        }
+        None => crate::stdout::write(&text),
     }
 }

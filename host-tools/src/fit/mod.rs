@@ -400,7 +400,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     match &args.json {
         Some(path) => std::fs::write(path, text + "\n")
             .with_context(|| format!("{}: cannot write", path.display()))?,
-        None => println!("{text}"),
+        None => crate::stdout::write(&(text + "\n"))?,
     }
     let toml = to_toml(&fit);
     if let Some(path) = &args.toml {
