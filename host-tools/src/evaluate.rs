@@ -112,6 +112,14 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
     if args.trials == 0 {
         bail!("--trials must be at least 1");
     }
+    // Every value up front: a bad one in the middle of a run named a temp
+    // file, and 1e9 Hz grew to 24 GB before anything said no.
+    for &rate in &args.rates_hz {
+        crate::sim::check_rate_hz("--rates-hz", rate)?;
+    }
+    for &noise in &args.noise_n {
+        crate::sim::check_noise_n("--noise-n", noise)?;
+    }
     crate::stdout::write(
         "| rate | noise | structures | contact latency mean | puncture | structure | exit |\n\
          |---|---|---|---|---|---|---|\n",

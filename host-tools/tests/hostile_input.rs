@@ -132,3 +132,66 @@ fn a_full_disk_on_stdout_is_an_error_and_a_closed_pipe_a_quiet_end() {
     assert!(out.status.success(), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn evaluate_rejects_rates_and_noises_it_cannot_simulate() {
+    // Rows 3, 7, 8: --rates-hz 1e9 grew to 24 GB; -500, 10 and 99.5 were
+    // accepted (99.5 silently as 100 Hz); 0 failed naming a temp file;
+    // --noise-n -1 and NaN labelled tables "-1000 mN" and "NaN mN".
+    for (flag, bad) in [
+        ("--rates-hz", "1e9"),
+        ("--rates-hz", "-500"),
+        ("--rates-hz", "10"),
+        ("--rates-hz", "99.5"),
+        ("--rates-hz", "0"),
+        ("--noise-n", "-1"),
+        ("--noise-n", "NaN"),
+    ] {
+        let arg = format!("{flag}={bad}");
+        let out = needle(&["evaluate", "--trials", "1", &arg]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{arg} accepted");
+        assert!(err.contains(flag), "{arg}: {err}");
+        assert!(out.stdout.is_empty(), "{arg}: a table was started");
+    }
+    // simulate holds the same line.
+    let dir = tempfile::tempdir().unwrap();
+    let out = needle(&[
+        "simulate",
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--rate-hz",
+        "99.5",
+    ]);
+    assert!(!out.status.success());
+}
+
+#[test]
+fn a_second_simulation_replaces_the_first_and_never_deletes_real_trials() {
+    // Row 10: five trials, then two at another seed into the same
+    // directory: the three stale ones stayed and `fit` mixed two seeds.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    assert!(needle(&["simulate", "--out", d, "--trials", "5"])
+        .status
+        .success());
+    assert!(
+        needle(&["simulate", "--out", d, "--trials", "2", "--seed", "9"])
+            .status
+            .success()
+    );
+    let mut csvs: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".csv"))
+        .collect();
+    csvs.sort();
+    assert_eq!(csvs, ["trial_000.csv", "trial_001.csv"]);
+    // A directory of someone's recordings is refused, and left as it was.
+    let real = tempfile::tempdir().unwrap();
+    std::fs::write(real.path().join("rig_07.csv"), "t_s,x_m,f_n\n0,0,0\n").unwrap();
+    let out = needle(&["simulate", "--out", real.path().to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("rig_07.csv"));
+    assert_eq!(std::fs::read_dir(real.path()).unwrap().count(), 1);
+}

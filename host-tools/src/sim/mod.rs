@@ -8,7 +8,7 @@
 pub mod effects;
 pub mod motion;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::calibration::{Encoder, LoadCell};
@@ -835,15 +835,67 @@ struct TruthTrial<'a> {
     truth: &'a TrialTruth,
 }
 
+/// Make `dir` ready for a new simulation: an earlier one's files (its
+/// `truth.json`, `trial_*.csv`, `trial_*.replay`) go, so no stale trial
+/// from another seed or count stays beside the new ones (a second run with
+/// fewer trials left the rest, and `fit` mixed two seeds). Trials that are
+/// not a simulation's (CSVs with no `truth.json`) are never deleted: the
+/// directory is refused.
+fn clear_previous(dir: &Path) -> Result<()> {
+    let entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot list", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    let name = |p: &Path| {
+        p.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let ours = |p: &Path| {
+        let n = name(p);
+        n == "truth.json"
+            || (n.starts_with("trial_") && (n.ends_with(".csv") || n.ends_with(".replay")))
+    };
+    let simulated = entries.iter().any(|p| name(p) == "truth.json");
+    let foreign_csv = entries
+        .iter()
+        .find(|p| p.extension().is_some_and(|e| e == "csv") && !(simulated && ours(p)));
+    if let Some(csv) = foreign_csv {
+        bail!(
+            "{}: holds trials that are not a simulation's ({}); simulate into another directory",
+            dir.display(),
+            csv.display()
+        );
+    }
+    for path in entries.iter().filter(|p| simulated && ours(p)) {
+        std::fs::remove_file(path).with_context(|| format!("{}: cannot remove", path.display()))?;
+    }
+    Ok(())
+}
+
+/// A sample rate a simulation can be made at: 50 Hz (the slowest rigs the
+/// analysis commands take, DESIGN.md §1) to 65 535 Hz (the replay header's
+/// u16), in whole hertz (the replay's header holds whole hertz: 99.5 was
+/// written as 100). `flag` names the argument in the message.
+pub fn check_rate_hz(flag: &str, rate_hz: f64) -> Result<()> {
+    if !((50.0..=65_535.0).contains(&rate_hz) && rate_hz.fract() == 0.0) {
+        bail!("{flag} {rate_hz}: a sample rate must be a whole number of Hz within 50..=65535");
+    }
+    Ok(())
+}
+
+/// A force noise a simulation can be made with: finite and ≥ 0 N.
+pub fn check_noise_n(flag: &str, noise_n: f64) -> Result<()> {
+    if !(noise_n.is_finite() && noise_n >= 0.0) {
+        bail!("{flag} {noise_n}: the noise must be a finite number of newtons ≥ 0");
+    }
+    Ok(())
+}
+
 /// Run `needle simulate`.
 pub fn run(args: &SimulateArgs) -> Result<()> {
-    // 50 Hz: the slowest rigs the analysis commands take (DESIGN.md §1).
-    if !(args.rate_hz >= 50.0 && args.rate_hz <= 65_535.0) {
-        bail!("--rate-hz must be within 50..=65535");
-    }
-    if !(args.noise_n.is_finite() && args.noise_n >= 0.0) {
-        bail!("--noise-n must be a finite number ≥ 0");
-    }
+    check_rate_hz("--rate-hz", args.rate_hz)?;
+    check_noise_n("--noise-n", args.noise_n)?;
     if !(args.tare_n.is_finite() && args.tare_n >= 0.0) {
         bail!("--tare-n must be a finite number ≥ 0");
     }
@@ -936,6 +988,7 @@ impl Dataset<'_> {
         } = *self;
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
+        clear_previous(dir)?;
         let config = needle_holder::config::DeviceConfig::default();
         let mut truths = Vec::new();
         for k in 0..trials {
