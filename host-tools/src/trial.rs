@@ -67,12 +67,24 @@ pub fn every(values: &[f64], step: usize) -> Vec<f64> {
 }
 
 /// Read a trial, checking columns, numbers and time order.
-pub fn read(path: &Path) -> Result<Trial> {
+/// A CSV reader on `path`, which must be a regular file: a `.csv` link to
+/// `/dev/zero` made the reader allocate 4 GiB for a header that never
+/// ends, and aborted.
+fn open_csv(path: &Path) -> Result<csv::Reader<std::fs::File>> {
     let shown = path.display();
-    let mut reader = csv::ReaderBuilder::new()
+    let meta = std::fs::metadata(path).with_context(|| format!("{shown}: cannot open"))?;
+    if !meta.is_file() {
+        anyhow::bail!("{shown}: not a regular file (a device, directory or pipe is no trial)");
+    }
+    csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_path(path)
-        .with_context(|| format!("{shown}: cannot open"))?;
+        .with_context(|| format!("{shown}: cannot open"))
+}
+
+pub fn read(path: &Path) -> Result<Trial> {
+    let shown = path.display();
+    let mut reader = open_csv(path)?;
     let headers = reader
         .headers()
         .with_context(|| format!("{shown}:1: cannot read the header"))?;
@@ -115,10 +127,7 @@ pub fn read(path: &Path) -> Result<Trial> {
 /// decode --csv`), with the same checks as [`read`].
 pub fn read_column(path: &Path, name: &str) -> Result<Vec<f64>> {
     let shown = path.display();
-    let mut reader = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .from_path(path)
-        .with_context(|| format!("{shown}: cannot open"))?;
+    let mut reader = open_csv(path)?;
     let at = reader
         .headers()
         .with_context(|| format!("{shown}:1: cannot read the header"))?

@@ -195,3 +195,20 @@ fn a_second_simulation_replaces_the_first_and_never_deletes_real_trials() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("rig_07.csv"));
     assert_eq!(std::fs::read_dir(real.path()).unwrap().count(), 1);
 }
+
+#[test]
+fn a_csv_that_is_a_device_is_refused_not_read() {
+    // Row 14: a `.csv` symlink to /dev/zero aborted allocating 4 GiB while
+    // reading its header.
+    let dir = tempfile::tempdir().unwrap();
+    std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.csv")).unwrap();
+    for command in ["fit", "detect", "diagnose"] {
+        let out = needle(&[command, dir.path().to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{command}: {err}");
+        assert!(
+            err.contains("zero.csv") && err.contains("not a regular file"),
+            "{command}: {err}"
+        );
+    }
+}

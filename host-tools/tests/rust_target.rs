@@ -9,6 +9,15 @@ use std::path::{Path, PathBuf};
 
 use host_tools::firmware::{ensure_target_using, target_action, TargetAction};
 
+/// One test at a time writes and runs its script: a script written by one
+/// thread while another forks a child is open for writing in that child
+/// until it execs, and running the script then fails with "text file
+/// busy" (seen once on a fresh machine).
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// A shell script standing in for rustup: lists `installed` for
 /// `target list --installed`, appends every call to `log`, and fails
 /// `target add` when `add_fails`.
@@ -58,6 +67,7 @@ fn decision_reads_rustups_list() {
 
 #[test]
 fn missing_target_is_added() {
+    let _one = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let (rustup, log) = fake_rustup(dir.path(), &["x86_64-unknown-linux-gnu"], false);
     ensure_target_using(&rustup, dir.path(), "thumbv7m-none-eabi").unwrap();
@@ -69,6 +79,7 @@ fn missing_target_is_added() {
 
 #[test]
 fn present_target_is_left_alone() {
+    let _one = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let (rustup, log) = fake_rustup(
         dir.path(),
@@ -81,6 +92,7 @@ fn present_target_is_left_alone() {
 
 #[test]
 fn failed_install_names_the_command() {
+    let _one = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let (rustup, _) = fake_rustup(dir.path(), &[], true);
     let err = ensure_target_using(&rustup, dir.path(), "thumbv6m-none-eabi").unwrap_err();
