@@ -196,8 +196,18 @@ impl Output {
             format!("{:.6}", s.model.as_n()),
             format!("{:.6}", s.residual.as_n()),
             phase_name(s.phase).to_string(),
-        ])?;
+        ])
+        .with_context(|| self.csv_context())?;
         Ok(())
+    }
+
+    /// What a failed CSV write says: the file's name.
+    fn csv_context(&self) -> String {
+        let name = self
+            .csv_path
+            .as_deref()
+            .map_or_else(|| "the CSV".into(), |p| p.display().to_string());
+        format!("{name}: cannot write")
     }
 
     fn finish(mut self, stats: &StreamStats) -> Result<()> {
@@ -209,7 +219,7 @@ impl Output {
             );
         }
         if let Some(mut w) = self.csv.take() {
-            w.flush()?;
+            w.flush().with_context(|| self.csv_context())?;
             if let Some(path) = &self.csv_path {
                 eprintln!("wrote {} samples to {}", stats.samples, path.display());
             }

@@ -212,3 +212,21 @@ fn a_csv_that_is_a_device_is_refused_not_read() {
         );
     }
 }
+
+#[test]
+fn a_csv_that_cannot_be_written_is_named() {
+    // Row 12 (in part): `needle decode cap.bin --csv /dev/full` failed
+    // without saying which file.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    assert!(needle(&["simulate", "--out", d, "--trials", "1"])
+        .status
+        .success());
+    let replay = std::fs::read(dir.path().join("trial_000.replay")).unwrap();
+    let capture = dir.path().join("cap.bin");
+    std::fs::write(&capture, host_tools::twin::run(&replay).frames).unwrap();
+    let out = needle(&["decode", capture.to_str().unwrap(), "--csv", "/dev/full"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("/dev/full"), "{err}");
+}
