@@ -202,42 +202,86 @@ pub fn run<R: Read, W: Write, H: OutputPin>(
 
 /// [`run`], calling `probe` around every sample.
 pub fn run_probed<R: Read, W: Write, H: OutputPin, P: TickProbe>(
-    mut reader: R,
+    reader: R,
     config: DeviceConfig,
     sink: W,
     halt: H,
     probe: &mut P,
 ) -> Summary {
-    let header = read_header(&mut reader);
-    let rate = match header {
-        Ok(Some(h)) => h.sample_rate_hz,
-        _ => config.velocity.sample_rate_hz,
-    };
-    let mut device = Device::new(config.with_sample_rate(rate), sink, halt);
-    if !matches!(header, Ok(Some(_))) {
-        device.raise(Faults::REPLAY_BAD_HEADER);
-        return device.finish();
+    match Replayer::start(reader, config, sink, halt) {
+        Err(summary) => summary,
+        Ok(mut replay) => {
+            while replay.step(probe) {}
+            replay.finish()
+        }
     }
-    let mut adc = ReplayAdc {
-        counts: 0,
-        full_scale_counts: config.load_cell.full_scale_counts,
-    };
-    let mut encoder = ReplayEncoder::default();
-    loop {
-        match read_record(&mut reader) {
+}
+
+/// A replay in progress, a record at a time: [`run`] loops over it (the
+/// QEMU boards, the host twin); the real board's replay image steps it
+/// from its sample timer. One piece of code, so both feed the device alike.
+pub struct Replayer<R: Read, W: Write, H: OutputPin> {
+    reader: R,
+    device: Device<W, H>,
+    adc: ReplayAdc,
+    encoder: ReplayEncoder,
+    sample_rate_hz: u16,
+}
+
+impl<R: Read, W: Write, H: OutputPin> Replayer<R, W, H> {
+    /// Read the header and build the device from `config` at the replay's
+    /// rate. A bad header raises `REPLAY_BAD_HEADER` (at `config`'s rate)
+    /// and leaves nothing to replay: its final summary is the `Err`.
+    pub fn start(mut reader: R, config: DeviceConfig, sink: W, halt: H) -> Result<Self, Summary> {
+        let header = read_header(&mut reader);
+        let sample_rate_hz = match header {
+            Ok(Some(h)) => h.sample_rate_hz,
+            _ => config.velocity.sample_rate_hz,
+        };
+        let mut device = Device::new(config.with_sample_rate(sample_rate_hz), sink, halt);
+        if !matches!(header, Ok(Some(_))) {
+            device.raise(Faults::REPLAY_BAD_HEADER);
+            return Err(device.finish());
+        }
+        Ok(Self {
+            reader,
+            device,
+            adc: ReplayAdc {
+                counts: 0,
+                full_scale_counts: config.load_cell.full_scale_counts,
+            },
+            encoder: ReplayEncoder::default(),
+            sample_rate_hz,
+        })
+    }
+
+    /// The replay's sample rate, Hz.
+    pub fn sample_rate_hz(&self) -> u16 {
+        self.sample_rate_hz
+    }
+
+    /// Feed the next record to the device, `probe` around it; `false` once
+    /// the replay has ended (a record cut short raises `REPLAY_TRUNCATED`).
+    pub fn step<P: TickProbe>(&mut self, probe: &mut P) -> bool {
+        match read_record(&mut self.reader) {
             Ok(Some(record)) => {
-                adc.counts = record.adc_counts;
-                encoder.count = record.encoder_count;
+                self.adc.counts = record.adc_counts;
+                self.encoder.count = record.encoder_count;
                 probe.before_tick();
-                device.tick(&mut adc, &mut encoder);
+                self.device.tick(&mut self.adc, &mut self.encoder);
                 probe.after_tick();
+                true
             }
-            Ok(None) => break,
+            Ok(None) => false,
             Err(_) => {
-                device.raise(Faults::REPLAY_TRUNCATED);
-                break;
+                self.device.raise(Faults::REPLAY_TRUNCATED);
+                false
             }
         }
     }
-    device.finish()
+
+    /// Send the final status and return the counters.
+    pub fn finish(&mut self) -> Summary {
+        self.device.finish()
+    }
 }

@@ -1,8 +1,8 @@
 //! The real board's image with a replay in place of its sensors, for QEMU
 //! `netduinoplus2`: TIM2's update interrupt at the replay's rate reads the
-//! next record and runs the core's pipeline exactly as the host twin's
-//! [`needle_holder::replay::run`] does (same header handling, same device
-//! configuration), frames through the same queue as on the board, drained
+//! next record and runs the core's pipeline through the same
+//! [`needle_holder::replay::Replayer`] the host twin's `replay::run`
+//! loops over, frames through the same queue as on the board, drained
 //! by `idle` onto USART2 (QEMU's second serial port). At the end of the
 //! replay the device's final status goes out, the queue drains, and QEMU
 //! exits 0.
@@ -11,9 +11,7 @@
 mod app {
     use heapless::spsc::{Consumer, Queue};
     use needle_holder::config::DeviceConfig;
-    use needle_holder::device::Device;
-    use needle_holder::faults::Faults;
-    use needle_holder::replay::{read_header, read_record, ReplayAdc, ReplayEncoder};
+    use needle_holder::replay::Replayer;
     use stm32f4xx_hal::gpio::PinState;
     use stm32f4xx_hal::pac::{TIM2, USART2};
     use stm32f4xx_hal::prelude::*;
@@ -25,7 +23,7 @@ mod app {
     use super::super::halt::HaltLine;
     use super::super::link::{QueueWriter, QUEUE_BYTES};
     use super::super::BOARD;
-    use crate::hardware::bench::{needle_bench_begin, needle_bench_end, BenchMarkers};
+    use crate::hardware::bench::BenchMarkers;
     use crate::hardware::exit;
     use crate::hardware::replay_file::ReplayFile;
 
@@ -41,10 +39,9 @@ mod app {
 
     #[local]
     struct Local {
-        device: Device<QueueWriter, HaltLine>,
-        source: ReplayFile,
-        adc: ReplayAdc,
-        encoder: ReplayEncoder,
+        /// The replay, until it has ended.
+        replay: Option<Replayer<ReplayFile, QueueWriter, HaltLine>>,
+        markers: BenchMarkers,
         clock: CounterHz<TIM2>,
         tx: Tx<USART2>,
         outgoing: Consumer<'static, u8, QUEUE_BYTES>,
@@ -53,8 +50,6 @@ mod app {
     #[init(local = [queue: Queue<u8, QUEUE_BYTES> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         super::super::stack::paint();
-        // The markers' own cost, once, for `needle bench` to subtract.
-        let _ = BenchMarkers::calibrated();
         let dp = cx.device;
         let mut rcc = dp.RCC.freeze(Config::hsi());
         let gpioa = dp.GPIOA.split(&mut rcc);
@@ -69,36 +64,26 @@ mod app {
             env!("CARGO_PKG_VERSION"),
             BOARD
         );
-        let mut source = ReplayFile::open_from_args();
-        // As `replay::run`: the replay's rate, or the default's and a
-        // bad-header fault.
-        let config = DeviceConfig::default();
-        let header = read_header(&mut source);
-        let rate = match header {
-            Ok(Some(h)) => h.sample_rate_hz,
-            _ => config.velocity.sample_rate_hz,
-        };
-        let mut device = Device::new(config.with_sample_rate(rate), QueueWriter(producer), halt);
+        let source = ReplayFile::open_from_args();
         let mut clock = dp.TIM2.counter_hz(&mut rcc);
-        let done = !matches!(header, Ok(Some(_)));
-        if done {
-            device.raise(Faults::REPLAY_BAD_HEADER);
-            device.finish();
-        } else {
-            // A rate the timer takes from 16 MHz (every u16 rate does).
-            let _ = clock.start(u32::from(rate).Hz());
-            clock.listen(Event::Update);
-        }
+        let replay =
+            match Replayer::start(source, DeviceConfig::default(), QueueWriter(producer), halt) {
+                Ok(replay) => {
+                    // A rate the timer takes from 16 MHz (every u16 rate does).
+                    let _ = clock.start(u32::from(replay.sample_rate_hz()).Hz());
+                    clock.listen(Event::Update);
+                    Some(replay)
+                }
+                // A bad header: its fault and final status are queued already.
+                Err(_) => None,
+            };
         (
-            Shared { done },
+            Shared {
+                done: replay.is_none(),
+            },
             Local {
-                device,
-                source,
-                adc: ReplayAdc {
-                    counts: 0,
-                    full_scale_counts: config.load_cell.full_scale_counts,
-                },
-                encoder: ReplayEncoder::default(),
+                replay,
+                markers: BenchMarkers::calibrated(),
                 clock,
                 tx,
                 outgoing,
@@ -106,39 +91,29 @@ mod app {
         )
     }
 
-    #[task(binds = TIM2, priority = 2, shared = [done], local = [device, source, adc, encoder, clock, ended: bool = false])]
+    #[task(binds = TIM2, priority = 2, shared = [done], local = [replay, markers, clock])]
     fn sample(mut cx: sample::Context) {
         let l = cx.local;
         l.clock.clear_all_flags();
-        // An update already pending when the timer was stopped.
-        if *l.ended {
+        // None once ended: an update already pending when the timer
+        // stopped finds nothing to do.
+        let Some(replay) = l.replay.as_mut() else {
+            return;
+        };
+        if replay.step(l.markers) {
             return;
         }
-        match read_record(l.source) {
-            Ok(Some(record)) => {
-                l.adc.counts = record.adc_counts;
-                l.encoder.count = record.encoder_count;
-                needle_bench_begin();
-                l.device.tick(l.adc, l.encoder);
-                needle_bench_end();
-            }
-            end => {
-                if end.is_err() {
-                    l.device.raise(Faults::REPLAY_TRUNCATED);
-                }
-                let summary = l.device.finish();
-                defmt::info!(
-                    "replay done: {=u32} samples, {=u32} frames dropped, faults {=u16:#06x}, stack high-water mark {=usize} bytes",
-                    summary.samples,
-                    summary.frames_dropped,
-                    summary.faults.0,
-                    super::super::stack::high_water_bytes()
-                );
-                l.clock.unlisten(Event::Update);
-                *l.ended = true;
-                cx.shared.done.lock(|d| *d = true);
-            }
-        }
+        let summary = replay.finish();
+        defmt::info!(
+            "replay done: {=u32} samples, {=u32} frames dropped, faults {=u16:#06x}, stack high-water mark {=usize} bytes",
+            summary.samples,
+            summary.frames_dropped,
+            summary.faults.0,
+            super::super::stack::high_water_bytes()
+        );
+        l.clock.unlisten(Event::Update);
+        *l.replay = None;
+        cx.shared.done.lock(|d| *d = true);
     }
 
     /// The link's drain, at the lowest priority: bytes to USART2 while
