@@ -66,7 +66,6 @@ pub fn every(values: &[f64], step: usize) -> Vec<f64> {
     values.iter().step_by(step.max(1)).copied().collect()
 }
 
-/// Read a trial, checking columns, numbers and time order.
 /// A CSV reader on `path`, which must be a regular file: a `.csv` link to
 /// `/dev/zero` made the reader allocate 4 GiB for a header that never
 /// ends, and aborted.
@@ -82,6 +81,7 @@ fn open_csv(path: &Path) -> Result<csv::Reader<std::fs::File>> {
         .with_context(|| format!("{shown}: cannot open"))
 }
 
+/// Read a trial, checking columns, numbers and time order.
 pub fn read(path: &Path) -> Result<Trial> {
     let shown = path.display();
     let mut reader = open_csv(path)?;

@@ -386,7 +386,7 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let best = (0..MOTION_PHASES)
         .map(|k| {
             let shift = sine(k);
-            let cols = moved_nominal(&coarse, &|i| shift.at_harmonics(harmonics[i]));
+            let cols = moved_nominal(coarse, &|i| shift.at_harmonics(harmonics[i]));
             let sse: f64 = (0..coarse.trial.len())
                 .filter(|&i| coarse.phase[i] != LOADING)
                 .map(|i| (coarse.residual_n[i] - cols[0][i]).powi(2))

@@ -615,7 +615,7 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
     // The displacement is fitted at the search rate, applied at the full
     // one. (Finding the nominal at the search rate too, and only the last
     // round at the full one, left 0.56 N of a 0.15 N gap at 100 Hz.)
-    let searched: Vec<Prepared> = data.iter().map(Prepared::for_search).collect();
+    let searched: Vec<Prepared> = data.iter().map(|p| p.for_search().clone()).collect();
     for _ in 0..TISSUE_FRAME_ROUNDS {
         let found = motion::fit_shifts(&searched, &params, k, shifts.as_deref());
         let prepared = moved_into(data, &found, refit_params)?;

@@ -95,6 +95,9 @@ pub struct Prepared {
     /// peak position, wall force = fall of the force there).
     pub structures: Vec<(usize, f64, f64)>,
     pub noise_n: f64,
+    /// [`Self::for_search`]'s trial, made on first use: the searches ask
+    /// for it once per grid value.
+    search: std::sync::OnceLock<Box<Prepared>>,
 }
 
 impl Prepared {
@@ -118,14 +121,22 @@ impl Prepared {
     /// This trial as a rig at [`SEARCH_RATE_HZ`] or slower would have
     /// recorded it, prepared against the same nominal (itself when it is
     /// that slow already).
-    pub fn for_search(&self) -> Prepared {
+    pub fn for_search(&self) -> &Prepared {
         let step = self.trial.thinning_step(SEARCH_RATE_HZ);
         if step == 1 {
-            return self.clone();
+            return self;
         }
-        let (trial, geometry, velocity) =
-            thinned(&self.trial, &self.geometry, &self.velocity, step);
-        prepare(self.file.clone(), trial, geometry, &self.params, velocity)
+        self.search.get_or_init(|| {
+            let (trial, geometry, velocity) =
+                thinned(&self.trial, &self.geometry, &self.velocity, step);
+            Box::new(prepare(
+                self.file.clone(),
+                trial,
+                geometry,
+                &self.params,
+                velocity,
+            ))
+        })
     }
 
     /// The needle touches tissue at sample `i` (loading or after puncture,
@@ -192,6 +203,7 @@ pub fn prepare(
             .collect(),
         structures,
         trial,
+        search: Default::default(),
     }
 }
 

@@ -321,10 +321,11 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let mut track = Vec::new(); // (x, v, f) moving inside the cut track
     let mut advancing = Vec::new(); // (x, v, f) cutting new tissue
     let mut rests = Vec::new(); // (index) at rest
-                                // A sample counts as cutting only if the needle goes on advancing
-                                // within 10 ms: the first sample of a stop reads no cutting, yet a
-                                // velocity window across the stop still calls it advancing, and one
-                                // such sample tilts the insertion line (a slope of −110 N/m at 100 Hz).
+
+    // A sample counts as cutting only if the needle goes on advancing
+    // within 10 ms: the first sample of a stop reads no cutting, yet a
+    // velocity window across the stop still calls it advancing, and one
+    // such sample tilts the insertion line (a slope of −110 N/m at 100 Hz).
     let ahead = ((0.01 * rate).ceil() as usize).max(1);
     let advances_after = |i: usize| {
         x[i + 1..(i + 1 + ahead).min(trial.len())]
