@@ -68,7 +68,7 @@ impl AssistModes {
 }
 
 /// Assist configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct AssistConfig {
     /// Modes in force.
     pub modes: AssistModes,

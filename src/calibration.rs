@@ -1,13 +1,14 @@
 //! Raw counts to physical units: load-cell tare and gain, encoder scale.
 
 use crate::units::{saturate_i32, MicroNewtons, Nanometres};
+use serde::{Deserialize, Serialize};
 
 /// Load-cell calibration: `force = (counts − tare) · gain`.
 ///
 /// `gain_q16` is the gain in µN per ADC count in Q16.16 (resolution
 /// 1/65536 µN per count, range up to 32767 µN per count). The product is
 /// formed in `i64` and saturates at the [`MicroNewtons`] range.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct LoadCell {
     /// ADC counts at zero force.
     pub tare_counts: i32,
@@ -99,8 +100,36 @@ impl BootTare {
     }
 }
 
+/// The load cell's recent zero for a tare on command: an exponential
+/// average of the raw counts with a time constant of 128 samples (a
+/// quarter second at 500 Hz), in Q4 counts (counts are clamped to ±2^26,
+/// beyond any 24-bit converter, so the average fits `i32`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ZeroTracker {
+    mean_q4: i32,
+    primed: bool,
+}
+
+impl ZeroTracker {
+    /// Fold in one reading.
+    #[inline]
+    pub fn add(&mut self, counts: i32) {
+        let c_q4 = counts.clamp(-(1 << 26), 1 << 26) << 4;
+        if !self.primed {
+            self.mean_q4 = c_q4;
+            self.primed = true;
+        }
+        self.mean_q4 += (c_q4 - self.mean_q4) >> 7;
+    }
+
+    /// The average, counts (rounded); `None` before any reading.
+    pub fn mean_counts(&self) -> Option<i32> {
+        self.primed.then_some((self.mean_q4 + 8) >> 4)
+    }
+}
+
 /// Encoder scale: nanometres of needle travel per count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Encoder {
     /// Travel per count, nm (1000 for a 1 µm linear scale).
     pub nm_per_count: i32,

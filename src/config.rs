@@ -6,9 +6,10 @@ use crate::detect::DetectConfig;
 use crate::kinematics::VelocityConfig;
 use crate::model::params::{ParamError, TissueParams, LIVER1};
 use crate::model::ModelConfig;
+use serde::{Deserialize, Serialize};
 
 /// Configuration of the whole per-sample pipeline.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DeviceConfig {
     /// Load-cell calibration.
     pub load_cell: LoadCell,
@@ -51,6 +52,9 @@ pub const FIRMWARE_ASSIST: AssistModes = {
 /// The fastest the needle drive moves, nm/s (100 mm/s).
 const MAX_DRIVE_NM_PER_S: i64 = 100_000_000;
 
+/// The library name of the firmware's default tissue.
+pub const DEFAULT_TISSUE: &str = "liver1";
+
 /// The firmware's default: liver 1 of the paper, converted at compile time.
 pub const DEFAULT: DeviceConfig = match DeviceConfig::for_tissue(&LIVER1) {
     Ok(config) => config,
@@ -82,6 +86,21 @@ impl DeviceConfig {
             detect: DetectConfig::for_tissue(tissue),
             assist: AssistConfig::for_tissue(tissue, FIRMWARE_ASSIST),
         })
+    }
+
+    /// This configuration (calibration, rate, velocity window, assist
+    /// modes and target depth) with `tissue`'s model and detectors.
+    pub fn with_tissue(&self, tissue: &TissueParams) -> Result<Self, ParamError> {
+        let mut next = Self {
+            load_cell: self.load_cell,
+            encoder: self.encoder,
+            velocity: self.velocity,
+            ..Self::for_tissue(tissue)?
+        }
+        .with_sample_rate(self.velocity.sample_rate_hz);
+        next.assist.modes = self.assist.modes;
+        next.assist.target_depth = self.assist.target_depth;
+        Ok(next)
     }
 
     /// The same configuration with other assist modes.

@@ -1,33 +1,57 @@
 //! The device: reads the sensors through the HAL traits, runs the pipeline,
-//! sends frames and drives the halt line. Generic over the HAL, so the
-//! firmware and the host twin run exactly this code.
+//! sends frames, drives the halt line and takes commands. Generic over the
+//! HAL, so the firmware and the host twin run exactly this code.
 
 use embedded_hal::digital::OutputPin;
 use embedded_io::Write;
 
-use crate::config::DeviceConfig;
+use crate::assist::AssistModes;
+use crate::calibration::ZeroTracker;
+use crate::config::{DeviceConfig, DEFAULT_TISSUE};
 use crate::faults::Faults;
 use crate::hal::{EncoderCounter, LoadCellAdc};
+use crate::model::params::LIBRARY;
 use crate::pipeline::{PipelineState, RawSample};
+use crate::protocol::batch::{samples_per_batch, BatchCheck, BatchWriter};
+use crate::protocol::command::{self, CommandReader};
 use crate::protocol::{
-    Event, EventKind, Frame, FrameEncoder, Halt, HaltReason, Header, Status, PROTOCOL_VERSION,
+    Command, CommandError, CommandFrame, ConfigFrame, Event, EventKind, Frame, FrameEncoder, Halt,
+    HaltReason, Header, Phase, Reply, Sample, Snapshot, Status, TissueSource, PROTOCOL_VERSION,
     STATUS_PERIOD_SAMPLES,
 };
 use crate::units::{MicroNewtons, Nanometres};
+
+/// Samples between two config frames sent unasked, for a host that
+/// joined mid-stream: every eighth status (4 s at 500 Hz).
+const CONFIG_PERIOD_SAMPLES: u32 = 8 * STATUS_PERIOD_SAMPLES;
+
+/// Deepest target depth a command may set.
+const MAX_TARGET_DEPTH: Nanometres = Nanometres::from_m(0.1);
+/// Shallowest target depth a command may set.
+const MIN_TARGET_DEPTH: Nanometres = Nanometres::from_m(0.0001);
 
 /// The halt line is active high: `set_high` asserts it (robot must stop).
 /// Wire it through an inverting stage if the robot's input must fail safe
 /// when the device loses power.
 pub struct Device<W: Write, H: OutputPin> {
     config: DeviceConfig,
+    tissue: TissueSource,
     state: PipelineState,
     sink: W,
     encoder: FrameEncoder,
+    batch: BatchWriter,
+    streaming: bool,
     halt: H,
     halt_asserted: bool,
     faults: Faults,
     samples: u32,
     frames_dropped: u32,
+    /// The last sample and the faults it raised: what a re-arm checks.
+    last: Option<(Sample, Faults)>,
+    zero: ZeroTracker,
+    commands: CommandReader,
+    /// The last command taken: its sequence number, check and reply.
+    last_command: (u32, u16, Result<(), CommandError>),
 }
 
 /// Counters and flags at the end of a run.
@@ -44,19 +68,33 @@ pub struct Summary {
     pub halt: bool,
 }
 
+/// The library position of the default tissue.
+fn default_tissue() -> TissueSource {
+    let at = LIBRARY.iter().position(|(name, _)| *name == DEFAULT_TISSUE);
+    at.map_or(TissueSource::Uploaded, |i| TissueSource::Library(i as u8))
+}
+
 impl<W: Write, H: OutputPin> Device<W, H> {
-    /// Start the device: halt released, header sent.
+    /// Start the device: halt released; header, configuration and state
+    /// sent.
     pub fn new(config: DeviceConfig, sink: W, halt: H) -> Self {
         let mut device = Self {
             config,
+            tissue: default_tissue(),
             state: PipelineState::default(),
             sink,
             encoder: FrameEncoder::default(),
+            batch: BatchWriter::new(samples_per_batch(config.velocity.sample_rate_hz)),
+            streaming: true,
             halt,
             halt_asserted: false,
             faults: Faults::NONE,
             samples: 0,
             frames_dropped: 0,
+            last: None,
+            zero: ZeroTracker::default(),
+            commands: CommandReader::default(),
+            last_command: (0, 0, Ok(())),
         };
         if device.halt.set_low().is_err() {
             device.faults = device.faults.union(Faults::HALT_OUTPUT);
@@ -65,6 +103,8 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             protocol_version: PROTOCOL_VERSION,
             sample_rate_hz: config.velocity.sample_rate_hz,
         }));
+        device.send_config();
+        device.send_snapshot();
         device
     }
 
@@ -76,7 +116,13 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         };
         let out = self.config.step(&mut self.state, raw);
         self.samples = self.samples.saturating_add(1);
-        self.send(&Frame::Sample(out.sample));
+        if let Some(adc) = raw.adc {
+            self.zero.add(adc.counts);
+        }
+        self.last = Some((out.sample, out.faults));
+        if self.streaming && self.batch.push(raw, &out.sample) {
+            self.flush_batch();
+        }
         if let Some(event) = out.event {
             self.send(&Frame::Event(event));
         }
@@ -85,6 +131,10 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         }
         let at = (out.sample.index, out.sample.x, out.sample.force);
         if !self.raise_at(out.faults, at) && self.samples.is_multiple_of(STATUS_PERIOD_SAMPLES) {
+            if self.samples.is_multiple_of(CONFIG_PERIOD_SAMPLES) {
+                self.send_config();
+            }
+            self.send_snapshot();
             self.send_status();
         }
     }
@@ -94,7 +144,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         self.raise_at(faults, (self.samples, Nanometres::ZERO, MicroNewtons::ZERO));
     }
 
-    /// Send a final status and return the counters.
+    /// Send what is in hand and a final status; return the counters.
     pub fn finish(&mut self) -> Summary {
         self.send_status();
         let _ = self.sink.flush();
@@ -109,6 +159,161 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             faults: self.faults,
             halt: self.halt_asserted,
         }
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &DeviceConfig {
+        &self.config
+    }
+
+    /// Take bytes from the host: every command they complete is carried
+    /// out (or refused) and answered. Call between samples.
+    pub fn receive(&mut self, bytes: &[u8]) {
+        for &byte in bytes {
+            if let Some(frame) = self.commands.push(byte) {
+                self.answer(frame);
+            }
+        }
+    }
+
+    fn answer(&mut self, frame: Result<(CommandFrame, u16), CommandError>) {
+        let (seq, result) = match frame {
+            Err(e) => (0, Err(e)),
+            Ok((frame, check)) => {
+                let (last_seq, last_check, ref last_result) = self.last_command;
+                if frame.seq == last_seq && check == last_check {
+                    (frame.seq, last_result.clone())
+                } else if frame.seq <= last_seq {
+                    let next_seq = last_seq.saturating_add(1);
+                    (frame.seq, Err(CommandError::Stale { next_seq }))
+                } else {
+                    let result = self.carry_out(frame.command);
+                    self.last_command = (frame.seq, check, result.clone());
+                    (frame.seq, result)
+                }
+            }
+        };
+        self.send(&Frame::Reply(Reply { seq, result }));
+    }
+
+    /// Do what `command` asks, or say why not (changing nothing).
+    fn carry_out(&mut self, command: Command) -> Result<(), CommandError> {
+        match command {
+            Command::Tare => self.tare(),
+            Command::SelectTissue(i) => {
+                let library_len = LIBRARY.len() as u8;
+                let (_, params) = LIBRARY
+                    .get(usize::from(i))
+                    .ok_or(CommandError::NoSuchTissue { library_len })?;
+                self.change_tissue(params, TissueSource::Library(i))
+            }
+            Command::UploadTissue(params) => self.change_tissue(&params, TissueSource::Uploaded),
+            Command::SetAssist {
+                modes,
+                target_depth,
+            } => {
+                let known = AssistModes::NAMES.iter().fold(0, |m, (mode, _)| m | mode.0);
+                if modes.0 & !known != 0 {
+                    return Err(CommandError::out_of_range("modes"));
+                }
+                if !(MIN_TARGET_DEPTH..=MAX_TARGET_DEPTH).contains(&target_depth) {
+                    return Err(CommandError::out_of_range("target_depth"));
+                }
+                self.config.assist.modes = modes;
+                self.config.assist.target_depth = target_depth;
+                self.send_config();
+                Ok(())
+            }
+            Command::Rearm => self.rearm(),
+            Command::Stream(on) => {
+                // Starting (again) describes the stream afresh: a host that
+                // asks for it can decode from the next batch on.
+                if on {
+                    self.streaming = true;
+                    self.send_config();
+                    self.send_snapshot();
+                } else {
+                    self.flush_batch();
+                    self.streaming = false;
+                }
+                self.send_status();
+                Ok(())
+            }
+            Command::ReadConfig => {
+                self.send_config();
+                Ok(())
+            }
+        }
+    }
+
+    fn tare(&mut self) -> Result<(), CommandError> {
+        if self.state.phase().phase != Phase::Out {
+            return Err(CommandError::NeedleInTissue);
+        }
+        let Some(zero) = self.zero.mean_counts() else {
+            return Err(CommandError::out_of_range("no reading yet"));
+        };
+        let limit = self.config.load_cell.full_scale_counts.unsigned_abs() / 20;
+        if zero.unsigned_abs() > limit {
+            let at_zero = crate::calibration::LoadCell {
+                tare_counts: 0,
+                ..self.config.load_cell
+            };
+            return Err(CommandError::LoadOnNeedle {
+                force: at_zero.force(zero),
+            });
+        }
+        self.config.load_cell.tare_counts = zero;
+        self.send_config();
+        Ok(())
+    }
+
+    fn change_tissue(
+        &mut self,
+        params: &crate::model::params::TissueParams,
+        source: TissueSource,
+    ) -> Result<(), CommandError> {
+        let next = self
+            .config
+            .with_tissue(params)
+            .map_err(|e| CommandError::InvalidTissue {
+                field: command::text(e.field),
+                problem: command::text(e.problem),
+            })?;
+        self.config = next;
+        self.tissue = source;
+        self.send_config();
+        Ok(())
+    }
+
+    /// Release the halt line unless the last sample would raise it again.
+    fn rearm(&mut self) -> Result<(), CommandError> {
+        if !self.halt_asserted {
+            return Ok(());
+        }
+        if let Some((sample, faults)) = self.last {
+            if !faults.is_empty() {
+                return Err(CommandError::HaltCausePersists {
+                    reason: HaltReason::Fault,
+                });
+            }
+            if let Some(halt) = self.config.assist.check(self.state.phase(), &sample, None) {
+                return Err(CommandError::HaltCausePersists {
+                    reason: halt.reason,
+                });
+            }
+        }
+        if self.halt.set_low().is_err() {
+            return Err(CommandError::HaltCausePersists {
+                reason: HaltReason::Fault,
+            });
+        }
+        self.halt_asserted = false;
+        self.faults = Faults::NONE;
+        self.state.rearm();
+        self.send_snapshot();
+        self.send_status();
+        Ok(())
     }
 
     /// Latch new faults, send a fault event, assert halt, send a status.
@@ -157,11 +362,53 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             frames_dropped: self.frames_dropped,
             faults: self.faults,
             halt: self.halt_asserted,
+            streaming: self.streaming,
+            next_command_seq: self.last_command.0.saturating_add(1),
         };
         self.send(&Frame::Status(status));
     }
 
-    fn send(&mut self, frame: &Frame) {
+    /// Send the configuration; batches from here on are checked with it.
+    fn send_config(&mut self) {
+        self.flush_batch();
+        self.batch.set_seed(BatchCheck::seed(&self.config));
+        let frame = ConfigFrame {
+            from_index: self.samples,
+            tissue: self.tissue,
+            config: self.config,
+        };
+        self.send(&Frame::Config(frame));
+    }
+
+    /// The pipeline's state, for a host to continue from (only while
+    /// streaming: without samples it has nothing to continue).
+    fn send_snapshot(&mut self) {
+        if !self.streaming {
+            return;
+        }
+        let snapshot = Snapshot {
+            next_index: self.samples,
+            state: self.state.clone(),
+        };
+        self.send(&Frame::Snapshot(snapshot));
+    }
+
+    /// Send the batch in hand, if any.
+    fn flush_batch(&mut self) {
+        if self.batch.is_empty() {
+            return;
+        }
+        let bytes = self.encoder.encode(&Frame::Batch(self.batch.frame()));
+        if bytes.is_empty() || self.sink.write_all(bytes).is_err() {
+            self.frames_dropped = self.frames_dropped.saturating_add(1);
+        }
+        self.batch.clear();
+    }
+
+    /// Send one frame, after the batch in hand (so frames stay in sample
+    /// order).
+    fn send(&mut self, frame: &Frame<'_>) {
+        self.flush_batch();
         let bytes = self.encoder.encode(frame);
         if bytes.is_empty() || self.sink.write_all(bytes).is_err() {
             self.frames_dropped = self.frames_dropped.saturating_add(1);

@@ -20,6 +20,7 @@
 //! configuration ([`VelocityConfig`]), the history is state.
 
 use heapless::Deque;
+use serde::{Deserialize, Serialize};
 
 use crate::units::{saturate_i32, Nanometres, NanometresPerSecond};
 
@@ -27,7 +28,7 @@ use crate::units::{saturate_i32, Nanometres, NanometresPerSecond};
 pub const MAX_VELOCITY_WINDOW: usize = 32;
 
 /// Unwraps the wrapping encoder count into an `i32` count.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct EncoderTracker {
     last_raw: Option<u16>,
     total_counts: i32,
@@ -66,7 +67,7 @@ impl EncoderTracker {
 }
 
 /// Velocity estimator configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct VelocityConfig {
     /// Sample rate, Hz.
     pub sample_rate_hz: u16,
@@ -81,7 +82,7 @@ impl VelocityConfig {
 }
 
 /// Velocity estimator state: the last N+1 positions.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct VelocityState {
     history: Deque<i32, { MAX_VELOCITY_WINDOW + 1 }>,
 }

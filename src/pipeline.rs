@@ -10,6 +10,7 @@ use crate::model::phase::PhaseState;
 use crate::model::ModelState;
 use crate::protocol::{Event, Halt, Sample};
 use crate::units::MicroNewtons;
+use serde::{Deserialize, Serialize};
 
 /// What the sensors gave for one sample period.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -21,7 +22,7 @@ pub struct RawSample {
 }
 
 /// Per-sample state of the pipeline.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct PipelineState {
     index: u32,
     encoder: EncoderTracker,
@@ -52,6 +53,16 @@ impl PipelineState {
     /// Every fault raised so far.
     pub fn faults_seen(&self) -> Faults {
         self.faults_seen
+    }
+
+    /// The phase machine's state.
+    pub fn phase(&self) -> &PhaseState {
+        &self.phase
+    }
+
+    /// After a re-arm: the detectors run again (a fault stopped them).
+    pub fn rearm(&mut self) {
+        self.faults_seen = Faults::NONE;
     }
 }
 

@@ -280,6 +280,11 @@ impl<R: Read, W: Write, H: OutputPin> Replayer<R, W, H> {
         }
     }
 
+    /// Commands from the host, between samples (see [`Device::receive`]).
+    pub fn receive(&mut self, bytes: &[u8]) {
+        self.device.receive(bytes);
+    }
+
     /// Send the final status and return the counters.
     pub fn finish(&mut self) -> Summary {
         self.device.finish()

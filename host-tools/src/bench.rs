@@ -79,7 +79,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         trial.len()
     );
 
+    let capture = dir.join("liver1.frames");
     let mut means = Vec::new();
+    let mut bytes_per_sample = 0.0;
     for (board, core) in [
         (Board::Lm3s6965, "cortex-m3"),
         (Board::Lm3s6965M0, "cortex-m0"),
@@ -87,7 +89,20 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     ] {
         let elf = firmware::build(board)?;
         let started = Instant::now();
-        let counts = count_instructions(board, &elf, &replay_path)?;
+        let counts = count_instructions(board, &elf, &replay_path, &capture)?;
+        if board == Board::Lm3s6965 {
+            // Everything the CI board sent for the insertion (header,
+            // configuration, snapshots, batches, events, status) over its
+            // samples: what the link must carry.
+            let sent = std::fs::metadata(&capture)?.len();
+            bytes_per_sample = sent as f64 / counts.per_region.len().max(1) as f64;
+            println!(
+                "stream: {sent} bytes for {} samples = {bytes_per_sample:.2} bytes per sample ({:.0} Bd at 500 Hz, {:.0} Bd at 2 kHz, 10 bits a byte)",
+                counts.per_region.len(),
+                bytes_per_sample * 500.0 * 10.0,
+                bytes_per_sample * 2000.0 * 10.0
+            );
+        }
         println!(
             "{core:>9} ({}): {:.1} instructions per sample (max {}, marker overhead {} subtracted), {} samples, counted in {:.0} s",
             board.target(),
@@ -122,6 +137,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if args.json {
         let json = serde_json::json!({
             "instructions_per_sample": means.iter().map(|(k, v)| (k.to_string(), serde_json::Value::from(*v))).collect::<serde_json::Map<_, _>>(),
+            "bytes_per_sample": (bytes_per_sample * 100.0).round() / 100.0,
             "flash_bytes": size.flash_bytes,
             "ram_bytes": size.ram_bytes,
             "nucleo_f411re_cpu_load_at_2khz_percent": load_percent,
@@ -170,21 +186,20 @@ pub fn image_size(elf: &Path) -> Result<ImageSize> {
 }
 
 /// Run `elf` on `replay` under QEMU's instruction log and count the
-/// instructions of every begin/end region.
-pub fn count_instructions(board: Board, elf: &Path, replay: &Path) -> Result<InstructionCounts> {
+/// instructions of every begin/end region; the frames go to `capture`.
+pub fn count_instructions(
+    board: Board,
+    elf: &Path,
+    replay: &Path,
+    capture: &Path,
+) -> Result<InstructionCounts> {
     let data = std::fs::read(elf).with_context(|| format!("{}: cannot read", elf.display()))?;
     let file = object::File::parse(&*data)?;
     let begin = symbol_address(&file, "needle_bench_begin")?;
     let end = symbol_address(&file, "needle_bench_end")?;
 
     let extra = ["-singlestep", "-d", "exec,nochain", "-D", "/dev/stderr"];
-    let mut cmd = firmware::qemu_command(
-        board,
-        elf,
-        replay,
-        Serial::File(Path::new("/dev/null")),
-        &extra,
-    );
+    let mut cmd = firmware::qemu_command(board, elf, replay, Serial::File(capture), &extra);
     let mut child = firmware::spawn_qemu(&mut cmd)?;
     let mut stdout = child.stdout.take().context("no QEMU stdout")?;
     let drain = std::thread::spawn(move || std::io::copy(&mut stdout, &mut std::io::sink()));

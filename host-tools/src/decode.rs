@@ -7,9 +7,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::faults::Faults;
-use needle_holder::protocol::{EventKind, Frame, HaltReason, Phase, Sample};
+use needle_holder::protocol::{CommandError, EventKind, HaltReason, Phase, Sample, TissueSource};
 
-use crate::frames::{Item, StreamDecoder, StreamStats};
+use crate::frames::{Item, Message, Missing, StreamDecoder, StreamStats};
 
 #[derive(Debug, clap::Args)]
 pub struct DecodeArgs {
@@ -126,15 +126,7 @@ impl Output {
             Some(path) => {
                 let mut w = csv::Writer::from_path(path)
                     .with_context(|| format!("{}: cannot create", path.display()))?;
-                w.write_record([
-                    "t_s",
-                    "x_m",
-                    "f_n",
-                    "v_mps",
-                    "model_n",
-                    "residual_n",
-                    "phase",
-                ])?;
+                w.write_record(CSV_HEADER)?;
                 Some(w)
             }
             None => None,
@@ -151,12 +143,15 @@ impl Output {
 
     fn item(&mut self, item: Item) -> Result<()> {
         match item {
-            Item::Frame(Frame::Sample(s)) if self.csv.is_some() => self.sample_to_csv(s)?,
+            Item::Sample(s) if self.csv.is_some() => self.sample_to_csv(s)?,
+            Item::Sample(s) => writeln!(self.text, "{}", describe_sample(&s, self.rate_hz))?,
+            // Snapshots are for the decoder; a status line says the same.
+            Item::Frame(Message::Snapshot(_)) => {}
             Item::Frame(frame) => {
-                if let Frame::Header(h) = frame {
+                if let Message::Header(h) = &frame {
                     self.learn_rate(h.sample_rate_hz)?;
                 }
-                if let Frame::Status(s) = frame {
+                if let Message::Status(s) = &frame {
                     self.learn_rate(s.sample_rate_hz)?;
                 }
                 writeln!(self.text, "{}", describe(&frame, self.rate_hz))?;
@@ -164,9 +159,10 @@ impl Output {
             Item::Skipped { bytes, reason } => {
                 writeln!(self.text, "skipped {bytes} bytes ({reason})")?
             }
-            Item::Gap { first, last } => writeln!(
+            Item::Gap { first, last, why } => writeln!(
                 self.text,
-                "gap     samples {first}..={last} lost ({})",
+                "gap     samples {first}..={last} {} ({})",
+                missing_name(why),
                 last - first + 1
             )?,
         }
@@ -188,16 +184,8 @@ impl Output {
             self.pending.push(s);
             return Ok(());
         };
-        w.write_record([
-            format!("{:.6}", f64::from(s.index) / f64::from(rate)),
-            format!("{:.9}", s.x.as_m()),
-            format!("{:.6}", s.force.as_n()),
-            format!("{:.9}", s.v.as_mps()),
-            format!("{:.6}", s.model.as_n()),
-            format!("{:.6}", s.residual.as_n()),
-            phase_name(s.phase).to_string(),
-        ])
-        .with_context(|| self.csv_context())?;
+        w.write_record(csv_row(&s, 0, rate))
+            .with_context(|| self.csv_context())?;
         Ok(())
     }
 
@@ -229,11 +217,45 @@ impl Output {
     }
 }
 
+/// The trial CSV's columns (DESIGN.md §4), then the device's own.
+pub const CSV_HEADER: [&str; 7] = [
+    "t_s",
+    "x_m",
+    "f_n",
+    "v_mps",
+    "model_n",
+    "residual_n",
+    "phase",
+];
+
+/// One sample as a trial CSV row, its time from sample `first_index`.
+pub fn csv_row(s: &Sample, first_index: u32, rate_hz: u16) -> [String; 7] {
+    [
+        format!(
+            "{:.6}",
+            f64::from(s.index.wrapping_sub(first_index)) / f64::from(rate_hz)
+        ),
+        format!("{:.9}", s.x.as_m()),
+        format!("{:.6}", s.force.as_n()),
+        format!("{:.9}", s.v.as_mps()),
+        format!("{:.6}", s.model.as_n()),
+        format!("{:.6}", s.residual.as_n()),
+        phase_name(s.phase).to_string(),
+    ]
+}
+
 /// One-line account of a stream.
 pub fn summary_line(s: &StreamStats) -> String {
     format!(
-        "{} frames ({} samples, {} events), {} gaps ({} samples lost), {} bytes skipped in {} runs",
-        s.frames, s.samples, s.events, s.gaps, s.lost_samples, s.skipped_bytes, s.skipped_runs
+        "{} frames ({} samples, {} events), {} gaps ({} samples lost, {} withheld), {} bytes skipped in {} runs",
+        s.frames,
+        s.samples,
+        s.events,
+        s.gaps,
+        s.lost_samples,
+        s.withheld_samples,
+        s.skipped_bytes,
+        s.skipped_runs
     )
 }
 
@@ -266,27 +288,103 @@ pub fn fault_names(faults: Faults) -> String {
     faults.names().collect::<Vec<_>>().join(",")
 }
 
-/// A frame as one line of text.
-pub fn describe(frame: &Frame, rate_hz: Option<u16>) -> String {
-    let t = |index: u32| match rate_hz {
+/// Why samples are missing, as decode says it.
+pub fn missing_name(why: Missing) -> &'static str {
+    use needle_holder::stream::Withheld;
+    match why {
+        Missing::Lost => "lost",
+        Missing::Withheld(Withheld::OutOfStep) => "withheld (arrived while out of step, until the next snapshot)",
+        Missing::Withheld(Withheld::Malformed) => "withheld (malformed batch)",
+        Missing::Withheld(Withheld::CheckMismatch) => {
+            "withheld (the device's check disagrees: this needle's core or configuration is not the device's)"
+        }
+    }
+}
+
+fn time_of(index: u32, rate_hz: Option<u16>) -> String {
+    match rate_hz {
         Some(r) => format!("{:9.3} s", f64::from(index) / f64::from(r)),
         None => format!("#{index:>9}"),
-    };
+    }
+}
+
+/// A sample as one line of text.
+pub fn describe_sample(s: &Sample, rate_hz: Option<u16>) -> String {
+    format!(
+        "sample  {}  x {:8.3} mm  v {:7.3} mm/s  f {:7.3} N  model {:7.3} N  residual {:7.3} N  {}",
+        time_of(s.index, rate_hz),
+        s.x.as_m() * 1e3,
+        s.v.as_mps() * 1e3,
+        s.force.as_n(),
+        s.model.as_n(),
+        s.residual.as_n(),
+        phase_name(s.phase)
+    )
+}
+
+/// The name of a tissue source: the library entry's, or `uploaded`.
+pub fn tissue_name(source: TissueSource) -> String {
+    match source {
+        TissueSource::Library(i) => needle_holder::model::params::LIBRARY
+            .get(usize::from(i))
+            .map_or_else(
+                || format!("library entry {i}"),
+                |(name, _)| (*name).to_string(),
+            ),
+        TissueSource::Uploaded => "uploaded".into(),
+    }
+}
+
+/// Why the device refused a command, in words.
+pub fn command_error(e: &CommandError) -> String {
+    match e {
+        CommandError::Corrupted => {
+            "the command arrived corrupted (bad CRC or framing, or another protocol version)".into()
+        }
+        CommandError::Unknown => {
+            "the device knows no such command (another protocol version?)".into()
+        }
+        CommandError::Stale { next_seq } => {
+            format!("sequence number already used (the device takes {next_seq} next)")
+        }
+        CommandError::NoSuchTissue { library_len } => {
+            format!("no such tissue: the library has {library_len} entries")
+        }
+        CommandError::InvalidTissue { field, problem } => {
+            format!("tissue rejected: `{field}` {problem}")
+        }
+        CommandError::OutOfRange { field } => format!("{field} is out of range"),
+        CommandError::NeedleInTissue => "the needle is in tissue: withdraw it before taring".into(),
+        CommandError::LoadOnNeedle { force } => format!(
+            "{:.3} N on the load cell is a load, not an offset (over 5 % of full scale)",
+            force.as_n()
+        ),
+        CommandError::HaltCausePersists { reason } => format!(
+            "the halt's cause ({}) is still there",
+            halt_reason_name(*reason)
+        ),
+    }
+}
+
+/// A frame as one line of text.
+pub fn describe(frame: &Message, rate_hz: Option<u16>) -> String {
+    let t = |index: u32| time_of(index, rate_hz);
     match frame {
-        Frame::Header(h) => {
+        Message::Header(h) => {
             format!("header  protocol {}, {} Hz", h.protocol_version, h.sample_rate_hz)
         }
-        Frame::Sample(s) => format!(
-            "sample  {}  x {:8.3} mm  v {:7.3} mm/s  f {:7.3} N  model {:7.3} N  residual {:7.3} N  {}",
-            t(s.index),
-            s.x.as_m() * 1e3,
-            s.v.as_mps() * 1e3,
-            s.force.as_n(),
-            s.model.as_n(),
-            s.residual.as_n(),
-            phase_name(s.phase)
+        Message::Config(c) => format!(
+            "config  from {}  tissue {}, tare {} counts, gain {:.4} uN/count, {} nm/count, assist {:#04x}, target depth {:.1} mm",
+            t(c.from_index),
+            tissue_name(c.tissue),
+            c.config.load_cell.tare_counts,
+            f64::from(c.config.load_cell.gain_q16) / 65536.0,
+            c.config.encoder.nm_per_count,
+            c.config.assist.modes.0,
+            c.config.assist.target_depth.as_m() * 1e3,
         ),
-        Frame::Event(e) => format!(
+        Message::Snapshot(s) => format!("snapshot {}", t(s.next_index)),
+        Message::Event(e) => format!(
             "event   {}  {:<9} x {:8.3} mm  f {:7.3} N  confidence {:.1} %",
             t(e.index),
             event_name(e.kind),
@@ -294,20 +392,25 @@ pub fn describe(frame: &Frame, rate_hz: Option<u16>) -> String {
             e.force.as_n(),
             f64::from(e.confidence_permille) / 10.0
         ),
-        Frame::Status(s) => format!(
-            "status  {} samples, {} frames dropped, faults {}, halt {}",
+        Message::Status(s) => format!(
+            "status  {} samples, {} frames dropped, faults {}, halt {}{}",
             s.samples,
             s.frames_dropped,
             fault_names(s.faults),
-            if s.halt { "ASSERTED" } else { "released" }
+            if s.halt { "ASSERTED" } else { "released" },
+            if s.streaming { "" } else { ", stream stopped" }
         ),
-        Frame::Halt(h) => format!(
+        Message::Halt(h) => format!(
             "HALT    {}  {:<12} x {:8.3} mm  hold at {:8.3} mm",
             t(h.index),
             halt_reason_name(h.reason),
             h.x.as_m() * 1e3,
             h.hold_x.as_m() * 1e3
         ),
+        Message::Reply(r) => match &r.result {
+            Ok(()) => format!("reply   command {} done", r.seq),
+            Err(e) => format!("reply   command {} refused: {}", r.seq, command_error(e)),
+        },
     }
 }
 

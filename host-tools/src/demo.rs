@@ -10,11 +10,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::config::DeviceConfig;
-use needle_holder::protocol::{Event, EventKind, Frame, Sample};
+use needle_holder::protocol::{Event, EventKind, Sample};
 
 use crate::decode::{describe, summary_line};
 use crate::firmware::{self, Board, Serial};
-use crate::frames::{Item, StreamDecoder};
+use crate::frames::{Item, Message, StreamDecoder};
 use crate::sim::{self, Plan};
 use needle_holder::model::params::LIVER1;
 
@@ -165,21 +165,25 @@ struct Seen {
 impl Seen {
     fn item(&mut self, item: Item) {
         match item {
-            Item::Frame(Frame::Sample(s)) => {
+            Item::Sample(s) => {
                 self.deepest_m = self.deepest_m.max(s.x.as_m());
                 self.last = Some(s);
             }
             Item::Frame(frame) => {
-                match frame {
-                    Frame::Header(h) => self.rate_hz = Some(h.sample_rate_hz),
-                    Frame::Event(e) if e.kind == EventKind::Contact => self.contact = Some(e),
-                    Frame::Event(e) if e.kind == EventKind::Puncture => self.puncture = Some(e),
-                    Frame::Event(_) => self.faults += 1,
-                    Frame::Status(s) if !s.faults.is_empty() => self.faults += 1,
+                match &frame {
+                    Message::Header(h) => self.rate_hz = Some(h.sample_rate_hz),
+                    Message::Event(e) if e.kind == EventKind::Contact => self.contact = Some(*e),
+                    Message::Event(e) if e.kind == EventKind::Puncture => self.puncture = Some(*e),
+                    Message::Event(_) => self.faults += 1,
+                    Message::Status(s) if !s.faults.is_empty() => self.faults += 1,
                     _ => {}
                 }
-                if !matches!(frame, Frame::Status(s) if s.faults.is_empty() && s.samples % 2500 != 0)
-                {
+                let quiet = match &frame {
+                    Message::Status(s) => s.faults.is_empty() && s.samples % 2500 != 0,
+                    Message::Snapshot(_) | Message::Config(_) => true,
+                    _ => false,
+                };
+                if !quiet {
                     println!("  {}", describe(&frame, self.rate_hz));
                 }
             }

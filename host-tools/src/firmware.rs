@@ -249,6 +249,9 @@ pub enum Serial<'a> {
     File(&'a Path),
     /// QEMU connects to a TCP listener on this loopback address.
     Tcp(std::net::SocketAddr),
+    /// A pseudo-terminal QEMU makes; it names it on stderr
+    /// ([`QemuLive`] reads the name).
+    Pty,
 }
 
 /// The QEMU command line for `elf` on `board`, replaying `replay`.
@@ -262,6 +265,7 @@ pub fn qemu_command(
     let serial_arg = match serial {
         Serial::File(path) => format!("file:{}", path.display()),
         Serial::Tcp(addr) => format!("tcp:{addr}"),
+        Serial::Pty => "pty".into(),
     };
     // Commas in semihosting args must be doubled.
     let replay_arg = replay.display().to_string().replace(',', ",,");
@@ -305,6 +309,87 @@ pub fn spawn_qemu(cmd: &mut Command) -> Result<std::process::Child> {
         .stderr(Stdio::piped())
         .spawn()
         .context("cannot start qemu-system-arm")
+}
+
+/// The firmware in QEMU as a device on a serial port: a live replay
+/// (`--live`: it waits for the host's first command, then samples in real
+/// time at the replay's rate) with its UART on a pseudo-terminal that the
+/// `serialport` crate opens like `/dev/ttyACM0`. Killed when dropped.
+pub struct QemuLive {
+    pub child: std::process::Child,
+    /// The pseudo-terminal, e.g. `/dev/pts/3`.
+    pub port: String,
+    /// The defmt bytes QEMU printed (semihosting), once it has exited.
+    defmt: std::thread::JoinHandle<Vec<u8>>,
+}
+
+impl QemuLive {
+    /// Start `elf` (a QEMU board) replaying `replay` live.
+    pub fn start(board: Board, elf: &Path, replay: &Path) -> Result<Self> {
+        let cmd = qemu_command(board, elf, replay, Serial::Pty, &[]);
+        // `--live` goes before the replay's path on the command line.
+        let args: Vec<std::ffi::OsString> = cmd
+            .get_args()
+            .map(|a| {
+                let text = a.to_string_lossy();
+                if text.starts_with("enable=on,target=native,arg=needle-holder,") {
+                    text.replacen("arg=needle-holder,", "arg=needle-holder,arg=--live,", 1)
+                        .into()
+                } else {
+                    a.to_owned()
+                }
+            })
+            .collect();
+        let mut cmd = {
+            let mut live = Command::new(cmd.get_program());
+            live.args(args);
+            live
+        };
+        let mut child = spawn_qemu(&mut cmd)?;
+        let stdout = child.stdout.take().context("no QEMU stdout")?;
+        // QEMU names the terminal on stdout, "char device redirected to
+        // /dev/pts/3 (label serial0)", before the guest's semihosting
+        // output (defmt) begins.
+        let (named, name) = std::sync::mpsc::channel();
+        let defmt = std::thread::spawn(move || {
+            let mut reader = std::io::BufReader::new(stdout);
+            let mut line = Vec::new();
+            let _ = std::io::BufRead::read_until(&mut reader, b'\n', &mut line);
+            let text = String::from_utf8_lossy(&line);
+            let port = text
+                .split_once("redirected to ")
+                .and_then(|(_, rest)| rest.split_whitespace().next())
+                .map(str::to_string);
+            let _ = named.send(port);
+            let mut buf = Vec::new();
+            let _ = reader.read_to_end(&mut buf);
+            buf
+        });
+        let stderr = child.stderr.take().context("no QEMU stderr")?;
+        std::thread::spawn(move || std::io::copy(&mut { stderr }, &mut std::io::sink()));
+        let port = name.recv_timeout(Duration::from_secs(10)).ok().flatten();
+        let Some(port) = port else {
+            let _ = child.kill();
+            bail!("QEMU did not say which pseudo-terminal it made");
+        };
+        Ok(Self { child, port, defmt })
+    }
+
+    /// Wait for QEMU to exit (the replay's end); its defmt bytes.
+    pub fn wait(mut self, timeout: Duration) -> Result<(ExitStatus, Vec<u8>)> {
+        let Some(status) = self.child.wait_timeout(timeout)? else {
+            bail!("QEMU did not finish within {} s", timeout.as_secs());
+        };
+        let defmt = std::mem::replace(&mut self.defmt, std::thread::spawn(Vec::new));
+        Ok((status, defmt.join().unwrap_or_default()))
+    }
+}
+
+impl Drop for QemuLive {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }
 
 /// Run a prepared QEMU command to completion, killing it after `timeout`.

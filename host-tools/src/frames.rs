@@ -1,23 +1,90 @@
-//! Frame stream decoding on the host: split at `0x00`, check and decode each
-//! frame with the core's [`protocol::decode`] (COBS, CRC, exactly one
-//! frame), track sample-index gaps, and refuse a mismatched protocol version.
+//! Frame stream decoding on the host: split at `0x00`, check and decode
+//! each frame (COBS, CRC, exactly one frame), turn protocol-3 batches back
+//! into samples with the core's [`Reconstructor`], track sample-index
+//! gaps, and refuse protocol versions other than 2 and 3.
+//!
+//! Both versions are read: a frame passes the CRC of exactly one of them
+//! (version 3's covers an implied version byte, see
+//! `needle_holder::protocol::wire`), so a capture of either decodes.
 //!
 //! Written here rather than with postcard's `CobsAccumulator` because that
 //! knows no CRC and does not say how many bytes it threw away; this decoder
 //! counts every skipped byte.
 
-use needle_holder::protocol::{self, DecodeError, Frame, MAX_ENCODED_FRAME, PROTOCOL_VERSION};
+use needle_holder::protocol::wire::{self, DecodeError, FRAME_CRC};
+use needle_holder::protocol::{
+    self, ConfigFrame, Event, Frame, Halt, Header, Reply, Sample, Snapshot, Status,
+    MAX_ENCODED_FRAME, PROTOCOL_VERSION,
+};
+use needle_holder::stream::{Reconstructor, Withheld};
+
+/// Frames of protocol version 2 (23-byte samples, one frame each): the
+/// types as they were, so old captures still decode.
+mod v2 {
+    use needle_holder::faults::Faults;
+    use needle_holder::protocol::{Event, Halt, Sample};
+    use serde::{Deserialize, Serialize};
+
+    #[derive(Serialize, Deserialize)]
+    pub struct Header {
+        pub protocol_version: u16,
+        pub sample_rate_hz: u16,
+    }
+
+    #[derive(Serialize, Deserialize)]
+    pub struct Status {
+        pub protocol_version: u16,
+        pub sample_rate_hz: u16,
+        pub samples: u32,
+        pub frames_dropped: u32,
+        pub faults: Faults,
+        pub halt: bool,
+    }
+
+    #[derive(Serialize, Deserialize)]
+    pub enum Frame {
+        Header(Header),
+        Sample(Sample),
+        Event(Event),
+        Status(Status),
+        Halt(Halt),
+    }
+}
+
+/// A frame other than a batch (batches become [`Item::Sample`]s).
+#[derive(Clone, Debug)]
+pub enum Message {
+    Header(Header),
+    Config(Box<ConfigFrame>),
+    /// Boxed: a pipeline's state is large beside the other frames.
+    Snapshot(Box<Snapshot>),
+    Event(Event),
+    Status(Status),
+    Halt(Halt),
+    Reply(Reply),
+}
+
+/// Why samples are missing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Missing {
+    /// Their frames never arrived.
+    Lost,
+    /// They arrived but could not be given: see [`Withheld`].
+    Withheld(Withheld),
+}
 
 /// One thing found in the stream.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub enum Item {
+    /// A sample, as the device computed it.
+    Sample(Sample),
     /// A frame that decoded cleanly.
-    Frame(Frame),
+    Frame(Message),
     /// Bytes that did not form a frame (noise, a partial frame at the start
     /// or end, a corrupted frame), with why.
     Skipped { bytes: usize, reason: &'static str },
-    /// Sample indices `first..=last` never arrived.
-    Gap { first: u32, last: u32 },
+    /// Samples `first..=last` are missing.
+    Gap { first: u32, last: u32, why: Missing },
 }
 
 /// Counters over a whole stream.
@@ -30,9 +97,14 @@ pub struct StreamStats {
     pub skipped_runs: u64,
     pub gaps: u64,
     pub lost_samples: u64,
+    /// Samples that arrived but were withheld (out of step, or failing
+    /// the device's check).
+    pub withheld_samples: u64,
+    /// Bytes of the stream, delimiters included.
+    pub bytes: u64,
 }
 
-/// The stream speaks another protocol version.
+/// The stream speaks a protocol version this needle cannot read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VersionMismatch {
     pub found: u16,
@@ -42,7 +114,7 @@ impl std::fmt::Display for VersionMismatch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "the device speaks protocol version {}, this needle speaks {}: rebuild one to match the other",
+            "the device speaks protocol version {}, this needle reads versions 2 and {}: rebuild one to match the other",
             self.found, PROTOCOL_VERSION
         )
     }
@@ -57,6 +129,7 @@ pub struct StreamDecoder {
     /// Bytes thrown away since the pending buffer overflowed.
     overflow: usize,
     next_index: Option<u32>,
+    reconstructor: Reconstructor,
     stats: StreamStats,
 }
 
@@ -69,12 +142,18 @@ impl StreamDecoder {
         self.stats
     }
 
+    /// The device's configuration, once a config frame has arrived.
+    pub fn config(&self) -> Option<&needle_holder::config::DeviceConfig> {
+        self.reconstructor.config()
+    }
+
     /// Decode what `bytes` completes; call `on_item` for each item.
     pub fn feed(
         &mut self,
         bytes: &[u8],
         mut on_item: impl FnMut(Item),
     ) -> Result<(), VersionMismatch> {
+        self.stats.bytes += bytes.len() as u64;
         for &byte in bytes {
             if byte != 0 {
                 if self.pending.len() < MAX_ENCODED_FRAME {
@@ -97,13 +176,39 @@ impl StreamDecoder {
             if chunk.is_empty() {
                 continue;
             }
-            match protocol::decode(&chunk) {
-                Ok(frame) => self.accept(frame, &mut on_item)?,
-                Err(DecodeError::Crc) => self.skip(chunk.len() + 1, "CRC mismatch", &mut on_item),
-                Err(_) => self.skip(chunk.len() + 1, "undecodable frame", &mut on_item),
-            }
+            self.chunk(&chunk, &mut on_item)?;
         }
         Ok(())
+    }
+
+    fn chunk(
+        &mut self,
+        chunk: &[u8],
+        on_item: &mut impl FnMut(Item),
+    ) -> Result<(), VersionMismatch> {
+        let mut buffer = [0u8; MAX_ENCODED_FRAME];
+        match protocol::decode(chunk, &mut buffer) {
+            Ok(frame) => return self.accept(frame, on_item),
+            Err(DecodeError::Crc) => {}
+            Err(_) => {
+                self.skip(chunk.len() + 1, "undecodable frame", on_item);
+                return Ok(());
+            }
+        }
+        let mut buffer = [0u8; MAX_ENCODED_FRAME];
+        match wire::unframe(chunk, &mut buffer, |b| FRAME_CRC.checksum(b)) {
+            Ok(body) => match wire::parse::<v2::Frame>(body) {
+                Ok(frame) => self.accept_v2(frame, on_item),
+                Err(_) => {
+                    self.skip(chunk.len() + 1, "undecodable frame", on_item);
+                    Ok(())
+                }
+            },
+            Err(_) => {
+                self.skip(chunk.len() + 1, "CRC mismatch", on_item);
+                Ok(())
+            }
+        }
     }
 
     /// End of stream: whatever is pending is an incomplete frame.
@@ -121,44 +226,146 @@ impl StreamDecoder {
         on_item(Item::Skipped { bytes, reason });
     }
 
-    fn accept(
-        &mut self,
-        frame: Frame,
-        on_item: &mut impl FnMut(Item),
-    ) -> Result<(), VersionMismatch> {
-        match frame {
-            Frame::Header(h) if h.protocol_version != PROTOCOL_VERSION => {
-                return Err(VersionMismatch {
-                    found: h.protocol_version,
-                })
+    /// Samples up to `index` (exclusive) that should have come and did not.
+    fn missing_before(&mut self, index: u32, why: Missing, on_item: &mut impl FnMut(Item)) {
+        if let Some(expected) = self.next_index {
+            if index > expected {
+                self.gap(expected, index - 1, why, on_item);
             }
-            Frame::Status(s) if s.protocol_version != PROTOCOL_VERSION => {
-                return Err(VersionMismatch {
-                    found: s.protocol_version,
-                })
-            }
-            // A header means the device (re)started: indices begin again.
-            Frame::Header(_) => self.next_index = None,
-            Frame::Sample(s) => {
-                if let Some(expected) = self.next_index {
-                    if s.index > expected {
-                        self.stats.gaps += 1;
-                        self.stats.lost_samples += u64::from(s.index - expected);
-                        on_item(Item::Gap {
-                            first: expected,
-                            last: s.index - 1,
-                        });
-                    }
-                }
-                self.next_index = Some(s.index.wrapping_add(1));
-                self.stats.samples += 1;
-            }
-            Frame::Event(_) => self.stats.events += 1,
-            Frame::Status(_) | Frame::Halt(_) => {}
+        }
+    }
+
+    fn gap(&mut self, first: u32, last: u32, why: Missing, on_item: &mut impl FnMut(Item)) {
+        let n = u64::from(last - first) + 1;
+        self.stats.gaps += 1;
+        match why {
+            Missing::Lost => self.stats.lost_samples += n,
+            Missing::Withheld(_) => self.stats.withheld_samples += n,
+        }
+        on_item(Item::Gap { first, last, why });
+    }
+
+    fn sample(&mut self, s: Sample, on_item: &mut impl FnMut(Item)) {
+        self.missing_before(s.index, Missing::Lost, on_item);
+        self.next_index = Some(s.index.wrapping_add(1));
+        self.stats.samples += 1;
+        on_item(Item::Sample(s));
+    }
+
+    fn message(&mut self, message: Message, on_item: &mut impl FnMut(Item)) {
+        if matches!(message, Message::Event(_)) {
+            self.stats.events += 1;
         }
         self.stats.frames += 1;
-        on_item(Item::Frame(frame));
+        on_item(Item::Frame(message));
+    }
+
+    fn accept(
+        &mut self,
+        frame: Frame<'_>,
+        on_item: &mut impl FnMut(Item),
+    ) -> Result<(), VersionMismatch> {
+        let message = match frame {
+            Frame::Header(h) => {
+                check_version(h.protocol_version, PROTOCOL_VERSION)?;
+                // The device (re)started: indices begin again.
+                self.next_index = None;
+                self.reconstructor.restart();
+                Message::Header(h)
+            }
+            Frame::Status(s) => {
+                check_version(s.protocol_version, PROTOCOL_VERSION)?;
+                if !s.streaming {
+                    // Paused on request: what does not come is not lost.
+                    self.next_index = None;
+                }
+                Message::Status(s)
+            }
+            Frame::Config(c) => {
+                self.reconstructor.config_frame(&c);
+                Message::Config(Box::new(c))
+            }
+            Frame::Snapshot(snapshot) => {
+                self.missing_before(snapshot.next_index, Missing::Lost, on_item);
+                self.next_index = Some(snapshot.next_index);
+                self.reconstructor.snapshot(snapshot.clone());
+                Message::Snapshot(Box::new(snapshot))
+            }
+            Frame::Batch(batch) => {
+                self.stats.frames += 1;
+                self.batch(&batch, on_item);
+                return Ok(());
+            }
+            Frame::Event(e) => Message::Event(e),
+            Frame::Halt(h) => Message::Halt(h),
+            Frame::Reply(r) => Message::Reply(r),
+        };
+        self.message(message, on_item);
         Ok(())
+    }
+
+    fn batch(&mut self, batch: &protocol::Batch<'_>, on_item: &mut impl FnMut(Item)) {
+        if self.next_index.is_some_and(|e| batch.first_index > e) {
+            self.missing_before(batch.first_index, Missing::Lost, on_item);
+            self.reconstructor.lose_step();
+        }
+        let mut samples = Vec::with_capacity(usize::from(batch.samples));
+        match self.reconstructor.batch(batch, |s| samples.push(s)) {
+            Ok(()) => samples.into_iter().for_each(|s| self.sample(s, on_item)),
+            Err(why) if batch.samples > 0 => {
+                let last = batch.first_index.wrapping_add(u32::from(batch.samples) - 1);
+                self.gap(batch.first_index, last, Missing::Withheld(why), on_item);
+                self.next_index = Some(last.wrapping_add(1));
+            }
+            Err(_) => {}
+        }
+    }
+
+    fn accept_v2(
+        &mut self,
+        frame: v2::Frame,
+        on_item: &mut impl FnMut(Item),
+    ) -> Result<(), VersionMismatch> {
+        let message = match frame {
+            v2::Frame::Header(h) => {
+                check_version(h.protocol_version, 2)?;
+                self.next_index = None;
+                Message::Header(Header {
+                    protocol_version: h.protocol_version,
+                    sample_rate_hz: h.sample_rate_hz,
+                })
+            }
+            v2::Frame::Status(s) => {
+                check_version(s.protocol_version, 2)?;
+                Message::Status(Status {
+                    protocol_version: s.protocol_version,
+                    sample_rate_hz: s.sample_rate_hz,
+                    samples: s.samples,
+                    frames_dropped: s.frames_dropped,
+                    faults: s.faults,
+                    halt: s.halt,
+                    streaming: true,
+                    next_command_seq: 0,
+                })
+            }
+            v2::Frame::Sample(s) => {
+                self.stats.frames += 1;
+                self.sample(s, on_item);
+                return Ok(());
+            }
+            v2::Frame::Event(e) => Message::Event(e),
+            v2::Frame::Halt(h) => Message::Halt(h),
+        };
+        self.message(message, on_item);
+        Ok(())
+    }
+}
+
+fn check_version(found: u16, expected: u16) -> Result<(), VersionMismatch> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(VersionMismatch { found })
     }
 }
 
@@ -171,18 +378,204 @@ pub fn decode_all(bytes: &[u8]) -> Result<(Vec<Item>, StreamStats), VersionMisma
     Ok((items, stats))
 }
 
+/// The samples of a stream, in order.
+pub fn samples(items: &[Item]) -> Vec<Sample> {
+    items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Sample(s) => Some(*s),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The frames of a stream other than samples, in order.
+pub fn messages(items: &[Item]) -> Vec<Message> {
+    items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Frame(m) => Some(m.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use needle_holder::protocol::{FrameEncoder, Header, Phase, Sample};
+    use needle_holder::config::DeviceConfig;
+    use needle_holder::device::Device;
+    use needle_holder::protocol::{FrameEncoder, Phase};
+    use needle_holder::replay::{ReplayAdc, ReplayEncoder};
     use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
-    fn bytes_of(frame: Frame) -> Vec<u8> {
-        FrameEncoder::default().encode(&frame).to_vec()
+    /// A device run over `n` samples of a slow approach with noise: its
+    /// bytes, and the samples the device computed.
+    fn device_stream(config: DeviceConfig, n: u32) -> (Vec<u8>, Vec<Sample>) {
+        let mut sink = Vec::new();
+        let mut device = Device::new(config, &mut sink, crate::twin::RecordingPin::default());
+        let mut adc = ReplayAdc {
+            counts: 0,
+            full_scale_counts: config.load_cell.full_scale_counts,
+        };
+        let mut encoder = ReplayEncoder::default();
+        let mut state = needle_holder::pipeline::PipelineState::default();
+        let mut expected = Vec::new();
+        for i in 0..n {
+            adc.counts = ((i * 7919) % 20_000) as i32 - 10_000;
+            encoder.count = (i * 6) as u16;
+            let raw = needle_holder::pipeline::RawSample {
+                adc: Some(needle_holder::hal::LoadCellAdc::read(&mut adc).unwrap()),
+                encoder_count: encoder.count,
+            };
+            expected.push(config.step(&mut state, raw).sample);
+            device.tick(&mut adc, &mut encoder);
+        }
+        device.finish();
+        (sink, expected)
     }
 
-    fn sample(index: u32) -> Frame {
-        Frame::Sample(Sample {
+    fn split(stream: &[u8]) -> Vec<Vec<u8>> {
+        stream
+            .split_inclusive(|&b| b == 0)
+            .map(<[u8]>::to_vec)
+            .collect()
+    }
+
+    fn is_batch(frame: &[u8]) -> bool {
+        let mut buf = [0u8; MAX_ENCODED_FRAME];
+        matches!(
+            protocol::decode(&frame[..frame.len() - 1], &mut buf),
+            Ok(Frame::Batch(_))
+        )
+    }
+
+    #[test]
+    fn a_version_3_stream_gives_the_devices_samples_bit_for_bit() {
+        let (stream, expected) = device_stream(DeviceConfig::default(), 1000);
+        let (items, stats) = decode_all(&stream).unwrap();
+        assert_eq!(samples(&items), expected);
+        assert_eq!(
+            (stats.gaps, stats.skipped_bytes, stats.withheld_samples),
+            (0, 0, 0)
+        );
+        let per_sample = stream.len() as f64 / 1000.0;
+        assert!(per_sample < 6.0, "{per_sample} bytes a sample");
+    }
+
+    #[test]
+    fn a_lost_batch_is_a_gap_and_samples_resume_at_the_next_snapshot() {
+        let (stream, expected) = device_stream(DeviceConfig::default(), 1000);
+        let frames = split(&stream);
+        let lost = frames.iter().position(|f| is_batch(f)).unwrap() + 1; // the second batch
+        assert!(is_batch(&frames[lost]));
+        let cut: Vec<u8> = frames
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != lost)
+            .flat_map(|(_, f)| f.clone())
+            .collect();
+        let (items, stats) = decode_all(&cut).unwrap();
+        let got = samples(&items);
+        // 25 samples lost; the rest of the status period withheld; from
+        // the snapshot at 250 on, every sample again.
+        assert!(got[..25] == expected[..25]);
+        assert!(got[25..] == expected[250..]);
+        assert_eq!(stats.lost_samples, 25);
+        assert_eq!(stats.withheld_samples, 200);
+        assert!(items.iter().any(|i| matches!(
+            i,
+            Item::Gap {
+                first: 50,
+                last: 74,
+                why: Missing::Withheld(Withheld::OutOfStep)
+            }
+        )));
+    }
+
+    #[test]
+    fn a_host_with_another_configuration_withholds_every_sample() {
+        let liver2 = needle_holder::model::params::LIVER2;
+        let device_config = DeviceConfig::default().with_tissue(&liver2).unwrap();
+        let (stream, _) = device_stream(device_config, 300);
+        // Swap the config frame for the default's: the host now computes
+        // with parameters the device does not use.
+        let mut encoder = FrameEncoder::default();
+        let doctored: Vec<u8> = split(&stream)
+            .into_iter()
+            .flat_map(|f| {
+                let mut buf = [0u8; MAX_ENCODED_FRAME];
+                match protocol::decode(&f[..f.len() - 1], &mut buf) {
+                    Ok(Frame::Config(mut c)) => {
+                        c.config = DeviceConfig::default();
+                        encoder.encode(&Frame::Config(c)).to_vec()
+                    }
+                    _ => f,
+                }
+            })
+            .collect();
+        let (items, stats) = decode_all(&doctored).unwrap();
+        // Out of tissue the model is zero for either tissue; the detectors'
+        // thresholds differ, and the check catches it all the same.
+        assert!(
+            samples(&items).is_empty(),
+            "samples computed with the wrong tissue were given"
+        );
+        assert_eq!(stats.withheld_samples, 300);
+        assert!(items.iter().any(|i| matches!(
+            i,
+            Item::Gap {
+                why: Missing::Withheld(Withheld::CheckMismatch),
+                ..
+            }
+        )));
+    }
+
+    #[test]
+    fn resynchronises_after_noise_and_counts_every_skipped_byte() {
+        let (stream, expected) = device_stream(DeviceConfig::default(), 100);
+        let frames = split(&stream);
+        let mut noisy = vec![0x13, 0x37, 0x42, 0x00]; // tail of a frame we joined late
+        let mut corrupted_len = 0;
+        for (i, f) in frames.iter().enumerate() {
+            let mut f = f.clone();
+            if i == 5 {
+                f[3] ^= 0x01;
+                corrupted_len = f.len();
+            }
+            noisy.extend(f);
+        }
+        noisy.extend([7, 7]); // a frame cut short at the end
+        let (items, stats) = decode_all(&noisy).unwrap();
+        assert_eq!(stats.skipped_bytes, 4 + corrupted_len as u64 + 2);
+        assert!(samples(&items).len() < expected.len());
+        assert!(stats.lost_samples > 0);
+    }
+
+    #[test]
+    fn a_run_longer_than_any_frame_is_skipped_once_then_decoding_resumes() {
+        let (stream, _) = device_stream(DeviceConfig::default(), 10);
+        let mut noisy = vec![0x55; 3 * MAX_ENCODED_FRAME];
+        noisy.push(0);
+        noisy.extend(stream);
+        let (items, stats) = decode_all(&noisy).unwrap();
+        assert!(
+            matches!(items[0], Item::Skipped { bytes, reason: "longer than any frame" } if bytes == 3 * MAX_ENCODED_FRAME + 1)
+        );
+        assert_eq!(stats.skipped_runs, 1);
+        assert_eq!(stats.samples, 10);
+    }
+
+    fn v2_bytes(frame: &v2::Frame) -> Vec<u8> {
+        let mut raw = postcard::to_stdvec(frame).unwrap();
+        raw.extend(FRAME_CRC.checksum(&raw).to_le_bytes());
+        let mut out = cobs::encode_vec(&raw);
+        out.push(0);
+        out
+    }
+
+    fn v2_sample(index: u32) -> v2::Frame {
+        v2::Frame::Sample(Sample {
             index,
             x: Nanometres(index as i32 * 6000),
             v: NanometresPerSecond(3_000_000),
@@ -193,89 +586,48 @@ mod tests {
         })
     }
 
-    fn header(version: u16) -> Frame {
-        Frame::Header(Header {
-            protocol_version: version,
-            sample_rate_hz: 500,
-        })
-    }
-
     #[test]
-    fn gaps_are_reported_with_the_lost_indices() {
-        let mut stream = bytes_of(header(PROTOCOL_VERSION));
+    fn a_version_2_capture_still_decodes_with_its_gaps() {
+        let mut stream = v2_bytes(&v2::Frame::Header(v2::Header {
+            protocol_version: 2,
+            sample_rate_hz: 500,
+        }));
         for i in [0, 1, 2, 5, 6, 10] {
-            stream.extend(bytes_of(sample(i)));
+            stream.extend(v2_bytes(&v2_sample(i)));
         }
         let (items, stats) = decode_all(&stream).unwrap();
         let gaps: Vec<_> = items
             .iter()
-            .filter(|i| matches!(i, Item::Gap { .. }))
+            .filter_map(|i| match i {
+                Item::Gap { first, last, .. } => Some((*first, *last)),
+                _ => None,
+            })
             .collect();
-        assert_eq!(
-            gaps,
-            [
-                &Item::Gap { first: 3, last: 4 },
-                &Item::Gap { first: 7, last: 9 }
-            ]
-        );
+        assert_eq!(gaps, [(3, 4), (7, 9)]);
         assert_eq!((stats.samples, stats.gaps, stats.lost_samples), (6, 2, 5));
-    }
-
-    #[test]
-    fn resynchronises_after_noise_and_counts_every_skipped_byte() {
-        let mut stream = vec![0x13, 0x37, 0x42, 0x00]; // tail of a frame we joined late
-        stream.extend(bytes_of(sample(0)));
-        let mut corrupted = bytes_of(sample(1));
-        corrupted[3] ^= 0x01; // x changes by a few nm: only the CRC can tell
-        let corrupted_len = corrupted.len();
-        stream.extend(corrupted);
-        stream.extend(bytes_of(sample(2)));
-        stream.extend([7, 7]); // a frame cut short at the end
-        let (items, stats) = decode_all(&stream).unwrap();
-        let frames = items.iter().filter(|i| matches!(i, Item::Frame(_))).count();
-        assert_eq!(frames, 2, "{items:?}");
-        assert_eq!(stats.skipped_bytes, 4 + corrupted_len as u64 + 2);
-        // The corrupted frame also shows up as a lost sample.
-        assert_eq!(stats.lost_samples, 1);
-    }
-
-    #[test]
-    fn a_run_longer_than_any_frame_is_skipped_once_then_decoding_resumes() {
-        let mut stream = vec![0x55; 3 * MAX_ENCODED_FRAME];
-        stream.push(0);
-        stream.extend(bytes_of(sample(0)));
-        let (items, stats) = decode_all(&stream).unwrap();
-        assert_eq!(
-            items[0],
-            Item::Skipped {
-                bytes: 3 * MAX_ENCODED_FRAME + 1,
-                reason: "longer than any frame"
-            }
-        );
-        assert_eq!((stats.skipped_runs, stats.frames), (1, 1));
-    }
-
-    #[test]
-    fn a_frame_with_trailing_bytes_is_not_accepted() {
-        let mut raw = postcard::to_stdvec(&sample(0)).unwrap();
-        raw.push(0x01);
-        raw.extend(protocol::FRAME_CRC.checksum(&raw).to_le_bytes());
-        let mut stream = cobs::encode_vec(&raw);
-        stream.push(0);
-        let (items, stats) = decode_all(&stream).unwrap();
-        assert_eq!(stats.frames, 0);
         assert!(matches!(
             items[0],
-            Item::Skipped {
-                reason: "undecodable frame",
-                ..
-            }
+            Item::Frame(Message::Header(Header {
+                protocol_version: 2,
+                sample_rate_hz: 500
+            }))
         ));
     }
 
     #[test]
     fn another_protocol_version_is_refused() {
-        let err = decode_all(&bytes_of(header(PROTOCOL_VERSION + 1))).unwrap_err();
-        assert_eq!(err.found, PROTOCOL_VERSION + 1);
+        let header = |v| {
+            Frame::Header(Header {
+                protocol_version: v,
+                sample_rate_hz: 500,
+            })
+        };
+        let err = decode_all(FrameEncoder::default().encode(&header(4))).unwrap_err();
+        assert_eq!(err.found, 4);
+        let v1 = v2_bytes(&v2::Frame::Header(v2::Header {
+            protocol_version: 1,
+            sample_rate_hz: 500,
+        }));
+        assert_eq!(decode_all(&v1).unwrap_err().found, 1);
     }
 }

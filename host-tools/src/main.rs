@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{bench, decode, demo, detect, diagnose, evaluate, fit, sim};
+use host_tools::{bench, decode, demo, detect, device, diagnose, evaluate, fit, record, sim};
 
 #[derive(Parser)]
 #[command(
@@ -21,6 +21,10 @@ struct Cli {
 enum Command {
     /// Decode device frames from a capture file or a serial port.
     Decode(decode::DecodeArgs),
+    /// Send a command to a device on a serial port (tare, tissue, assist, rearm, stream, config).
+    Device(device::DeviceArgs),
+    /// Record insertions from a device to trial CSVs, one per insertion.
+    Record(record::RecordArgs),
     /// Build the firmware, replay one liver insertion in QEMU, decode it live.
     Demo(demo::DemoArgs),
     /// Count instructions per sample under QEMU; measure flash and RAM.
@@ -43,6 +47,8 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Decode(args) => decode::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::Device(args) => device::run(args),
+        Command::Record(args) => record::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Simulate(args) => sim::run(args),
         Command::Fit(args) => fit::run(args),

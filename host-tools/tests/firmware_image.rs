@@ -84,10 +84,12 @@ fn the_instruction_counter_sees_every_sample() {
         sim::to_replay(&trial, 500, &config.load_cell, &config.encoder),
     )
     .unwrap();
-    let counts = count_instructions(Board::Lm3s6965, &elf(Board::Lm3s6965), &replay).unwrap();
+    let capture = dir.path().join("short.frames");
+    let counts =
+        count_instructions(Board::Lm3s6965, &elf(Board::Lm3s6965), &replay, &capture).unwrap();
     assert_eq!(counts.per_region.len(), trial.len());
     // The markers themselves cost a handful of instructions, a sample at
-    // least the frame it sends (tens of bytes).
+    // least the pipeline and its readings' coding.
     assert!(counts.overhead < 20, "{}", counts.overhead);
     assert!(
         counts.per_region.iter().all(|&n| n > 100),

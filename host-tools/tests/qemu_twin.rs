@@ -9,12 +9,13 @@ use std::time::Duration;
 
 use host_tools::firmware::{self, Board, Serial};
 use host_tools::frames::decode_all;
+use host_tools::frames::Message as Frame;
 use host_tools::sim::{self, Plan};
 use host_tools::twin;
 use needle_holder::config::DeviceConfig;
 use needle_holder::faults::Faults;
 use needle_holder::model::params::LIVER1;
-use needle_holder::protocol::{EventKind, Frame, HaltReason, Status};
+use needle_holder::protocol::{EventKind, HaltReason, Status};
 use needle_holder::replay::{Record, ReplayHeader, OVERRUN_MARK};
 use needle_holder::units::MicroNewtons;
 

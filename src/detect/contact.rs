@@ -16,6 +16,7 @@
 use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::faults::Faults;
 use crate::protocol::{Event, EventKind};
+use serde::{Deserialize, Serialize};
 
 /// Samples the force must stay above the threshold, advancing, for contact.
 pub const CONTACT_CONFIRM_SAMPLES: u16 = 3;
@@ -23,7 +24,7 @@ pub const CONTACT_CONFIRM_SAMPLES: u16 = 3;
 pub const NO_CONTACT_FAULT_SAMPLES: u16 = 32;
 
 /// Contact detector state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ContactState {
     touching_samples: u16,
     unexplained_samples: u16,

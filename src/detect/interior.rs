@@ -30,6 +30,7 @@
 use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::protocol::{Event, EventKind};
 use crate::units::{MicroNewtons, Nanometres};
+use serde::{Deserialize, Serialize};
 
 /// Samples over which a fall must come.
 pub const SHARP_SAMPLES: usize = 3;
@@ -37,7 +38,7 @@ pub const SHARP_SAMPLES: usize = 3;
 pub const STRUCTURE_RISE_SAMPLES: u32 = 10;
 
 /// A fall waiting for the encoder to move on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 struct Pending {
     event: Event,
     /// Position at the fall.
@@ -47,7 +48,7 @@ struct Pending {
 }
 
 /// Interior detector state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct InteriorState {
     baseline: MicroNewtons,
     baseline_index: u32,

@@ -10,6 +10,8 @@
 //! Every event carries a confidence figure: 500 ‰ when the evidence just
 //! meets its threshold, rising linearly to 1000 ‰ at twice the threshold.
 
+use serde::{Deserialize, Serialize};
+
 pub mod contact;
 pub mod interior;
 pub mod puncture;
@@ -21,7 +23,7 @@ use crate::protocol::{Event, EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// Detector thresholds, derived from a tissue's parameters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DetectConfig {
     /// Force above which the tip is taken to touch the surface.
     pub contact_force: MicroNewtons,
@@ -110,7 +112,7 @@ impl DetectConfig {
 }
 
 /// Detector state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DetectState {
     /// Positions of the last two samples, newest first.
     previous_x: [Nanometres; 2],

@@ -12,9 +12,10 @@ use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::faults::Faults;
 use crate::protocol::{Event, EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres};
+use serde::{Deserialize, Serialize};
 
 /// Puncture detector state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct PunctureState {
     peak_force: MicroNewtons,
     peak_x: Nanometres,

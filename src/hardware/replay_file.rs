@@ -58,6 +58,14 @@ impl ReplayFile {
     }
 }
 
+/// Whether the semihosting command line holds `flag` (before the path).
+pub fn flag_given(flag: &str) -> bool {
+    let Ok(argv) = args::<MAX_PATH>() else {
+        return false;
+    };
+    (&argv).into_iter().any(|a| a.is_ok_and(|a| a == flag))
+}
+
 impl embedded_io::ErrorType for ReplayFile {
     type Error = embedded_io::ErrorKind;
 }

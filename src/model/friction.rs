@@ -19,9 +19,10 @@
 use super::fixed::{affine_times, PerLength2Q48, PerLengthQ26};
 use super::params::TissueParams;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
+use serde::{Deserialize, Serialize};
 
 /// Karnopp coefficients in fixed point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Friction {
     /// C_p, µN/nm Q26.
     pub cp: PerLengthQ26,
@@ -40,7 +41,7 @@ pub struct Friction {
 }
 
 /// Friction state: the last sliding force.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct FrictionState {
     last_sliding: MicroNewtons,
 }

@@ -11,6 +11,8 @@
 //! The `f64` twin in [`reference`] is the test oracle; the fixed-point
 //! error against it is bounded by the property tests in `tests/model.rs`.
 
+use serde::{Deserialize, Serialize};
+
 pub mod fixed;
 pub mod friction;
 pub mod params;
@@ -27,7 +29,7 @@ use crate::protocol::Phase;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// The model's parameters in fixed point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ModelConfig {
     /// Capsule stiffness.
     pub stiffness: Stiffness,
@@ -40,7 +42,7 @@ pub struct ModelConfig {
 }
 
 /// Model state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ModelState {
     /// Karnopp memory.
     pub friction: FrictionState,

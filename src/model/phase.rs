@@ -21,9 +21,10 @@
 use super::fixed::FractionQ16;
 use crate::protocol::{EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
+use serde::{Deserialize, Serialize};
 
 /// Phase machine configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct PhaseConfig {
     /// Surface relaxation ρ.
     pub relaxation: FractionQ16,
@@ -35,7 +36,7 @@ pub struct PhaseConfig {
 }
 
 /// Phase and the surface positions found so far.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct PhaseState {
     /// Current phase.
     pub phase: Phase,

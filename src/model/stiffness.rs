@@ -4,9 +4,10 @@
 use super::fixed::{affine_times, round_i64, PerLength2Q48, PerLengthQ26};
 use super::params::{StiffnessLaw, TissueParams};
 use crate::units::{saturate_i32, MicroNewtons, Nanometres};
+use serde::{Deserialize, Serialize};
 
 /// Stiffness law in fixed point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Stiffness {
     /// f = a1·d + a2·d², computed as (a1 + a2·d)·d.
     Polynomial {

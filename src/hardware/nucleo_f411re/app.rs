@@ -80,7 +80,7 @@ mod app {
         let (producer, outgoing) = cx.local.queue.split();
         let mut shared = Shared {
             device: None,
-            unarmed: Some((QueueWriter(producer), parts.halt)),
+            unarmed: Some((needle_holder::link::QueueWriter(producer), parts.halt)),
             seen: 0,
             config,
         };

@@ -4,7 +4,7 @@
 //! byte per transmit-empty ([`drain`]). A frame that does not fit in the
 //! queue is dropped whole, and the core counts it in its status frames.
 
-use heapless::spsc::{Consumer, Producer};
+use heapless::spsc::Consumer;
 use stm32f4xx_hal::pac::USART2;
 use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::serial::Tx;
@@ -15,42 +15,9 @@ use stm32f4xx_hal::serial::TxListen;
 /// the drain that long loses nothing.
 pub const QUEUE_BYTES: usize = 4096;
 
-/// The sample task's end of the queue.
-pub struct QueueWriter(pub Producer<'static, u8, QUEUE_BYTES>);
-
-/// The queue has no room for the whole frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct QueueFull;
-
-impl embedded_io::Error for QueueFull {
-    fn kind(&self) -> embedded_io::ErrorKind {
-        embedded_io::ErrorKind::OutOfMemory
-    }
-}
-
-impl embedded_io::ErrorType for QueueWriter {
-    type Error = QueueFull;
-}
-
-impl embedded_io::Write for QueueWriter {
-    /// All of `buf` or nothing: a frame cut short would be garbage on the
-    /// wire (COBS resynchronises, but the bytes would be wasted).
-    fn write(&mut self, buf: &[u8]) -> Result<usize, QueueFull> {
-        let free = self.0.capacity() - self.0.len();
-        if buf.len() > free {
-            return Err(QueueFull);
-        }
-        for &byte in buf {
-            // Room was checked above, and only this task enqueues.
-            self.0.enqueue(byte).map_err(|_| QueueFull)?;
-        }
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> Result<(), QueueFull> {
-        Ok(())
-    }
-}
+/// The sample task's end of the queue (the core's queue sink, see
+/// [`needle_holder::link`]).
+pub type QueueWriter = needle_holder::link::QueueWriter<'static, QUEUE_BYTES>;
 
 /// Send what the transmitter takes now, without waiting.
 pub fn send_waiting(tx: &mut Tx<USART2>, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {

@@ -66,17 +66,21 @@ mod app {
         );
         let source = ReplayFile::open_from_args();
         let mut clock = dp.TIM2.counter_hz(&mut rcc);
-        let replay =
-            match Replayer::start(source, DeviceConfig::default(), QueueWriter(producer), halt) {
-                Ok(replay) => {
-                    // A rate the timer takes from 16 MHz (every u16 rate does).
-                    let _ = clock.start(u32::from(replay.sample_rate_hz()).Hz());
-                    clock.listen(Event::Update);
-                    Some(replay)
-                }
-                // A bad header: its fault and final status are queued already.
-                Err(_) => None,
-            };
+        let replay = match Replayer::start(
+            source,
+            DeviceConfig::default(),
+            needle_holder::link::QueueWriter(producer),
+            halt,
+        ) {
+            Ok(replay) => {
+                // A rate the timer takes from 16 MHz (every u16 rate does).
+                let _ = clock.start(u32::from(replay.sample_rate_hz()).Hz());
+                clock.listen(Event::Update);
+                Some(replay)
+            }
+            // A bad header: its fault and final status are queued already.
+            Err(_) => None,
+        };
         (
             Shared {
                 done: replay.is_none(),

@@ -7,12 +7,15 @@
 use core::convert::Infallible;
 use core::ptr::{read_volatile, write_volatile};
 
+use heapless::spsc::Consumer;
+
 /// Board name for logs.
 pub const BOARD: &str = "lm3s6965evb";
 
 const UART0_DR: *mut u32 = 0x4000_C000 as *mut u32;
 const UART0_FR: *const u32 = 0x4000_C018 as *const u32;
 const FR_TXFF: u32 = 1 << 5;
+const FR_RXFE: u32 = 1 << 4;
 const FR_BUSY: u32 = 1 << 3;
 
 const SYSCTL_RCGC2: *mut u32 = 0x400F_E108 as *mut u32;
@@ -23,7 +26,7 @@ const GPIO_DEN: usize = 0x51C;
 /// Data register address with only bit 0 unmasked (address bits 9:2 mask the write).
 const GPIOF_DATA_PF0: *mut u32 = (GPIOF_BASE + (1 << 2)) as *mut u32;
 
-/// UART0 transmitter, blocking.
+/// UART0: frames out, commands in.
 pub struct Uart0(());
 
 /// The halt line on PF0, active high.
@@ -41,6 +44,42 @@ pub fn take_peripherals() -> (Uart0, HaltPin) {
         write_volatile(den, read_volatile(den) | 1);
     }
     (Uart0(()), HaltPin(()))
+}
+
+impl Uart0 {
+    /// Move waiting bytes from `queue` into the transmit FIFO until it is
+    /// full; `true` when the queue is empty.
+    pub fn send_waiting<const N: usize>(&mut self, queue: &mut Consumer<'_, u8, N>) -> bool {
+        while let Some(&byte) = queue.peek() {
+            // SAFETY: UART0 flag and data registers; reading FR and writing
+            // DR have no side effects beyond sending the byte.
+            unsafe {
+                if read_volatile(UART0_FR) & FR_TXFF != 0 {
+                    return false;
+                }
+                write_volatile(UART0_DR, byte as u32);
+            }
+            queue.dequeue();
+        }
+        true
+    }
+
+    /// Bytes the host sent that wait in the receive FIFO, into `buf`.
+    pub fn received(&mut self, buf: &mut [u8]) -> usize {
+        let mut n = 0;
+        for slot in buf.iter_mut() {
+            // SAFETY: UART0 flag and data registers; reading DR takes the
+            // byte out of the receive FIFO.
+            unsafe {
+                if read_volatile(UART0_FR) & FR_RXFE != 0 {
+                    break;
+                }
+                *slot = read_volatile(UART0_DR) as u8;
+            }
+            n += 1;
+        }
+        n
+    }
 }
 
 impl embedded_io::ErrorType for Uart0 {

@@ -6,6 +6,8 @@
 use core::convert::Infallible;
 use core::ptr::{read_volatile, write_volatile};
 
+use heapless::spsc::Consumer;
+
 /// Board name for logs.
 pub const BOARD: &str = "mps2-an386";
 
@@ -15,7 +17,9 @@ const UART_STATE: *const u32 = (UART0_BASE + 0x04) as *const u32;
 const UART_CTRL: *mut u32 = (UART0_BASE + 0x08) as *mut u32;
 const UART_BAUDDIV: *mut u32 = (UART0_BASE + 0x10) as *mut u32;
 const STATE_TX_FULL: u32 = 1 << 0;
+const STATE_RX_FULL: u32 = 1 << 1;
 const CTRL_TX_ENABLE: u32 = 1 << 0;
+const CTRL_RX_ENABLE: u32 = 1 << 1;
 /// 25 MHz / 217 ≈ 115200 Bd; the CMSDK UART rejects divisors below 16.
 const BAUDDIV_115200: u32 = 217;
 
@@ -32,9 +36,44 @@ pub fn take_peripherals() -> (Uart0, HaltPin) {
     // SAFETY: single-threaded start-up; UART0 configuration registers.
     unsafe {
         write_volatile(UART_BAUDDIV, BAUDDIV_115200);
-        write_volatile(UART_CTRL, CTRL_TX_ENABLE);
+        write_volatile(UART_CTRL, CTRL_TX_ENABLE | CTRL_RX_ENABLE);
     }
     (Uart0(()), HaltPin(()))
+}
+
+impl Uart0 {
+    /// Move waiting bytes from `queue` into the transmitter until it is
+    /// busy; `true` when the queue is empty.
+    pub fn send_waiting<const N: usize>(&mut self, queue: &mut Consumer<'_, u8, N>) -> bool {
+        while let Some(&byte) = queue.peek() {
+            // SAFETY: UART0 state and data registers.
+            unsafe {
+                if read_volatile(UART_STATE) & STATE_TX_FULL != 0 {
+                    return false;
+                }
+                write_volatile(UART_DATA, byte as u32);
+            }
+            queue.dequeue();
+        }
+        true
+    }
+
+    /// Bytes the host sent that wait in the receive buffer, into `buf`.
+    pub fn received(&mut self, buf: &mut [u8]) -> usize {
+        let mut n = 0;
+        for slot in buf.iter_mut() {
+            // SAFETY: UART0 state and data registers; reading DATA takes
+            // the byte.
+            unsafe {
+                if read_volatile(UART_STATE) & STATE_RX_FULL == 0 {
+                    break;
+                }
+                *slot = read_volatile(UART_DATA) as u8;
+            }
+            n += 1;
+        }
+        n
+    }
 }
 
 impl embedded_io::ErrorType for Uart0 {

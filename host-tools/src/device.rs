@@ -1,0 +1,155 @@
+//! `needle device --port P ACTION`: one command to a device on a serial
+//! port, its reply printed; exit non-zero when the device refuses it (with
+//! its reason) or does not answer.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Result};
+use needle_holder::model::params::LIBRARY;
+use needle_holder::protocol::{Command, TissueSource};
+use needle_holder::units::Nanometres;
+
+use crate::decode::{command_error, describe};
+use crate::frames::{Item, Message};
+use crate::link::Link;
+
+#[derive(Debug, clap::Args)]
+pub struct DeviceArgs {
+    /// Serial port of the device (e.g. /dev/ttyACM0).
+    #[arg(long)]
+    pub port: String,
+    /// Serial baud rate (the Nucleo-F411RE's is 921 600).
+    #[arg(long, default_value_t = 115_200)]
+    pub baud: u32,
+    #[command(subcommand)]
+    pub action: Action,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum Action {
+    /// Make the load cell's present reading its zero (needle out of tissue, unloaded).
+    Tare,
+    /// Use a tissue: a name from the on-device library, or a TOML file such as `needle fit --toml` writes.
+    Tissue {
+        /// Library name (see `needle device tissues`) or path to a .toml file.
+        tissue: String,
+        /// Which entry of the file (default: its first).
+        #[arg(long)]
+        name: Option<String>,
+    },
+    /// List the on-device tissue library (no port needed).
+    Tissues,
+    /// Robot-assist modes (comma-separated: contact, puncture, structure, exit, depth, back-off, speed-limit; or none) and target depth.
+    Assist {
+        /// Modes.
+        modes: String,
+        /// Target depth past the surface for `depth`, mm (0.1–100).
+        #[arg(long, default_value_t = 30.0)]
+        depth_mm: f64,
+    },
+    /// Release the halt line (refused while its cause persists).
+    Rearm,
+    /// Start or stop the sample stream.
+    Stream {
+        #[arg(value_parser = ["on", "off"])]
+        state: String,
+    },
+    /// Print the device's configuration.
+    Config,
+}
+
+pub fn run(args: &DeviceArgs) -> Result<()> {
+    if let Action::Tissues = args.action {
+        for (i, (name, p)) in LIBRARY.iter().enumerate() {
+            println!(
+                "{i:>2}  {name:<18} puncture {:.2} N at {:.1} mm, cutting {:.2} N",
+                p.puncture_force_n,
+                p.puncture_depth_m * 1e3,
+                p.cutting_force_n
+            );
+        }
+        return Ok(());
+    }
+    let command = command_of(&args.action)?;
+    let mut link = Link::open(&args.port, args.baud)?;
+    match link.command(command)? {
+        Ok(()) => println!("done"),
+        Err(e) => bail!("{}: the device refused: {}", args.port, command_error(&e)),
+    }
+    if let Action::Config = args.action {
+        print_config(&mut link, &args.port)?;
+    }
+    Ok(())
+}
+
+/// The command an action sends.
+pub fn command_of(action: &Action) -> Result<Command> {
+    Ok(match action {
+        Action::Tare => Command::Tare,
+        Action::Tissue { tissue, name } => tissue_command(tissue, name.as_deref())?,
+        Action::Tissues => bail!("`tissues` sends nothing"),
+        Action::Assist { modes, depth_mm } => {
+            if !(depth_mm.is_finite() && (0.1..=100.0).contains(depth_mm)) {
+                bail!("--depth-mm {depth_mm}: must be between 0.1 and 100 mm");
+            }
+            Command::SetAssist {
+                modes: crate::detect::parse_assist(modes)?,
+                target_depth: Nanometres::from_m(depth_mm / 1e3),
+            }
+        }
+        Action::Rearm => Command::Rearm,
+        Action::Stream { state } => Command::Stream(state == "on"),
+        Action::Config => Command::ReadConfig,
+    })
+}
+
+/// A library name selects on the device; a file's entry is uploaded.
+fn tissue_command(tissue: &str, name: Option<&str>) -> Result<Command> {
+    if let Some(i) = LIBRARY.iter().position(|(n, _)| *n == tissue) {
+        return Ok(Command::SelectTissue(i as u8));
+    }
+    let path = PathBuf::from(tissue);
+    if !path.exists() {
+        let names: Vec<&str> = LIBRARY.iter().map(|(n, _)| *n).collect();
+        bail!(
+            "{tissue}: neither a tissue in the device's library ({}) nor a file",
+            names.join(", ")
+        );
+    }
+    let entry = crate::tissue::resolve(name, Some(&path))?;
+    Ok(Command::UploadTissue(entry.params))
+}
+
+/// Wait for the configuration frame that answers a read and print it.
+fn print_config(link: &mut Link, port: &str) -> Result<()> {
+    let until = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < until && !link.closed() {
+        for item in link.poll()? {
+            if let Item::Frame(Message::Config(c)) = item {
+                let rate = c.config.velocity.sample_rate_hz;
+                println!("{}", describe(&Message::Config(c.clone()), Some(rate)));
+                let modes: Vec<&str> = needle_holder::assist::AssistModes::NAMES
+                    .iter()
+                    .filter(|(m, _)| c.config.assist.modes.contains(*m))
+                    .map(|(_, n)| *n)
+                    .collect();
+                let tissue = match c.tissue {
+                    TissueSource::Library(_) => "from the library",
+                    TissueSource::Uploaded => "uploaded",
+                };
+                println!(
+                    "rate {rate} Hz, tissue {} ({tissue}), assist {}",
+                    crate::decode::tissue_name(c.tissue),
+                    if modes.is_empty() {
+                        "none".into()
+                    } else {
+                        modes.join(",")
+                    }
+                );
+                return Ok(());
+            }
+        }
+    }
+    bail!("{port}: the device acknowledged but sent no configuration frame")
+}

@@ -1,0 +1,269 @@
+//! `needle record --port P --out DIR`: insertions from a device to trial
+//! CSVs, one per insertion, split where the needle leaves the tissue, with
+//! the device's own columns (velocity, model, residual, phase) after the
+//! trial columns; the raw stream beside them (`stream.bin`, which `needle
+//! decode` reads). Shows progress while recording; stops at Ctrl-C (or
+//! when the device goes away, or after `--seconds`) and writes the trial
+//! in progress first.
+//!
+//! Samples after the last exit with no insertion in them are no trial:
+//! they stay in `stream.bin` only.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use needle_holder::protocol::{Command, Phase, Sample};
+
+use crate::decode::{command_error, csv_row, describe, missing_name, CSV_HEADER};
+use crate::frames::{Item, Message};
+use crate::link::Link;
+
+#[derive(Debug, clap::Args)]
+pub struct RecordArgs {
+    /// Serial port of the device (e.g. /dev/ttyACM0).
+    #[arg(long)]
+    pub port: String,
+    /// Serial baud rate (the Nucleo-F411RE's is 921 600).
+    #[arg(long, default_value_t = 115_200)]
+    pub baud: u32,
+    /// Directory for the trial CSVs (created; must hold no CSV yet).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Stop after this many seconds (default: Ctrl-C or the device going away).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+}
+
+pub fn run(args: &RecordArgs) -> Result<()> {
+    let until = match args.seconds {
+        None => None,
+        Some(s) if s.is_finite() && s > 0.0 => {
+            Some(Instant::now() + Duration::from_secs_f64(s.min(1e9)))
+        }
+        Some(s) => bail!("--seconds {s}: must be a number of seconds above 0"),
+    };
+    prepare_dir(&args.out)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .context("cannot catch Ctrl-C")?;
+    let mut link = Link::open(&args.port, args.baud)?;
+    link.keep_capture();
+    if let Err(e) = link.command(Command::Stream(true))? {
+        bail!(
+            "{}: the device refused to stream: {}",
+            args.port,
+            command_error(&e)
+        );
+    }
+    eprintln!(
+        "recording from {} into {} (Ctrl-C stops)",
+        args.port,
+        args.out.display()
+    );
+    let mut recorder = Recorder::new(&args.out);
+    let mut shown = Instant::now();
+    while !stop.load(Ordering::SeqCst) && !link.closed() && until.is_none_or(|u| Instant::now() < u)
+    {
+        for item in link.poll()? {
+            recorder.item(item)?;
+        }
+        if shown.elapsed() >= Duration::from_millis(500) {
+            recorder.progress();
+            shown = Instant::now();
+        }
+    }
+    for item in link.finish() {
+        recorder.item(item)?;
+    }
+    let capture = args.out.join("stream.bin");
+    std::fs::write(&capture, link.take_capture())
+        .with_context(|| format!("{}: cannot write", capture.display()))?;
+    recorder.finish()?;
+    eprintln!("{}", crate::decode::summary_line(&link.decoder().stats()));
+    Ok(())
+}
+
+/// The output directory: created, and without trial CSVs that the new
+/// ones would mix with.
+fn prepare_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let existing = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot read", dir.display()))?
+        .filter_map(|e| e.ok())
+        .any(|e| e.path().extension().is_some_and(|x| x == "csv"));
+    if existing {
+        bail!(
+            "{}: already holds CSV files; record into an empty directory",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// One trial being written.
+struct TrialFile {
+    path: PathBuf,
+    writer: csv::Writer<std::fs::File>,
+    first_index: u32,
+    samples: u64,
+    entered: bool,
+    last: Option<Sample>,
+}
+
+/// Splits the samples into trials and writes them.
+struct Recorder {
+    dir: PathBuf,
+    rate_hz: Option<u16>,
+    pending: Vec<Sample>,
+    current: Option<TrialFile>,
+    written: usize,
+}
+
+impl Recorder {
+    fn new(dir: &Path) -> Self {
+        Self {
+            dir: dir.to_path_buf(),
+            rate_hz: None,
+            pending: Vec::new(),
+            current: None,
+            written: 0,
+        }
+    }
+
+    fn item(&mut self, item: Item) -> Result<()> {
+        match item {
+            Item::Sample(s) => self.sample(s)?,
+            Item::Frame(Message::Header(h)) => self.learn_rate(h.sample_rate_hz)?,
+            Item::Frame(Message::Status(s)) => self.learn_rate(s.sample_rate_hz)?,
+            Item::Frame(frame @ (Message::Event(_) | Message::Halt(_) | Message::Reply(_))) => {
+                self.line(&describe(&frame, self.rate_hz))
+            }
+            Item::Gap { first, last, why } => self.line(&format!(
+                "gap     samples {first}..={last} {} ({})",
+                missing_name(why),
+                last - first + 1
+            )),
+            Item::Skipped { bytes, reason } => {
+                self.line(&format!("skipped {bytes} bytes ({reason})"))
+            }
+            Item::Frame(_) => {}
+        }
+        Ok(())
+    }
+
+    /// A line above the progress line.
+    fn line(&self, text: &str) {
+        eprintln!("\r\x1b[K{text}");
+    }
+
+    fn learn_rate(&mut self, rate_hz: u16) -> Result<()> {
+        if self.rate_hz.is_none() && rate_hz > 0 {
+            self.rate_hz = Some(rate_hz);
+            for s in std::mem::take(&mut self.pending) {
+                self.sample(s)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn sample(&mut self, s: Sample) -> Result<()> {
+        let Some(rate) = self.rate_hz else {
+            self.pending.push(s);
+            return Ok(());
+        };
+        if self.current.is_none() {
+            let path = self.dir.join(format!("trial_{:03}.csv", self.written));
+            let mut writer = csv::Writer::from_path(&path)
+                .with_context(|| format!("{}: cannot create", path.display()))?;
+            writer
+                .write_record(CSV_HEADER)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            self.current = Some(TrialFile {
+                path,
+                writer,
+                first_index: s.index,
+                samples: 0,
+                entered: false,
+                last: None,
+            });
+        }
+        let Some(trial) = self.current.as_mut() else {
+            return Ok(());
+        };
+        trial
+            .writer
+            .write_record(csv_row(&s, trial.first_index, rate))
+            .with_context(|| format!("{}: cannot write", trial.path.display()))?;
+        trial.samples += 1;
+        trial.last = Some(s);
+        if s.phase != Phase::Out {
+            trial.entered = true;
+        } else if trial.entered {
+            // The needle left the tissue: this insertion is complete.
+            self.close()?;
+        }
+        Ok(())
+    }
+
+    /// Write the trial in hand; one with no insertion is no trial.
+    fn close(&mut self) -> Result<()> {
+        let Some(mut trial) = self.current.take() else {
+            return Ok(());
+        };
+        trial
+            .writer
+            .flush()
+            .with_context(|| format!("{}: cannot write", trial.path.display()))?;
+        drop(trial.writer);
+        if !trial.entered {
+            std::fs::remove_file(&trial.path)
+                .with_context(|| format!("{}: cannot remove", trial.path.display()))?;
+            self.line(&format!(
+                "{} samples after the last insertion (no tissue in them): kept in stream.bin only",
+                trial.samples
+            ));
+            return Ok(());
+        }
+        let rate = f64::from(self.rate_hz.unwrap_or(1));
+        self.line(&format!(
+            "{}: {} samples, {:.2} s",
+            trial.path.display(),
+            trial.samples,
+            trial.samples as f64 / rate
+        ));
+        self.written += 1;
+        Ok(())
+    }
+
+    fn progress(&self) {
+        let (Some(trial), Some(rate)) = (self.current.as_ref(), self.rate_hz) else {
+            return;
+        };
+        let Some(s) = trial.last else { return };
+        eprint!(
+            "\r\x1b[Ktrial {}: {:.1} s, {} samples, x {:.2} mm, f {:.3} N, {}",
+            self.written,
+            trial.samples as f64 / f64::from(rate),
+            trial.samples,
+            s.x.as_m() * 1e3,
+            s.force.as_n(),
+            crate::decode::phase_name(s.phase)
+        );
+    }
+
+    fn finish(mut self) -> Result<()> {
+        if !self.pending.is_empty() {
+            bail!(
+                "{} samples but no header or status frame gave the sample rate",
+                self.pending.len()
+            );
+        }
+        self.close()?;
+        eprintln!("\r\x1b[K{} trials in {}", self.written, self.dir.display());
+        Ok(())
+    }
+}

@@ -1,0 +1,391 @@
+//! The device on a serial port, for real: the CI board's firmware in QEMU
+//! with its UART on a pseudo-terminal, opened through the `serialport`
+//! crate like a `/dev/ttyACM0`. Every command goes to it, and each reply
+//! and effect is checked in the frames that follow; `needle record` over
+//! the port gives the trial CSV `needle decode --csv` gives on a capture
+//! of the same replay. Nothing here skips itself.
+
+use std::path::{Path, PathBuf};
+use std::process::Command as Process;
+use std::time::{Duration, Instant};
+
+use host_tools::firmware::{self, Board, QemuLive, Serial};
+use host_tools::frames::{Item, Message};
+use host_tools::link::Link;
+use host_tools::sim::{self, Plan};
+use needle_holder::assist::AssistModes;
+use needle_holder::config::DeviceConfig;
+use needle_holder::model::params::{LIBRARY, LIVER1};
+use needle_holder::protocol::wire::{Encoder, FRAME_CRC};
+use needle_holder::protocol::{
+    Command, CommandError, ConfigFrame, HaltReason, Status, TissueSource,
+};
+use needle_holder::units::Nanometres;
+
+fn elf() -> PathBuf {
+    firmware::ensure_qemu().expect("qemu-system-arm is needed and could not be installed");
+    firmware::build(Board::Lm3s6965).expect("firmware build")
+}
+
+/// A replay of one insertion, its bridge `offset_counts` off zero.
+fn replay_file(dir: &Path, plan: &Plan, offset_counts: i32) -> PathBuf {
+    let (trial, _) = sim::insertion(&LIVER1, plan);
+    let config = DeviceConfig::default();
+    let cell = needle_holder::calibration::LoadCell {
+        tare_counts: offset_counts,
+        ..config.load_cell
+    };
+    let path = dir.join("insertion.replay");
+    std::fs::write(
+        &path,
+        sim::to_replay(&trial, plan.rate_hz as u16, &cell, &config.encoder),
+    )
+    .unwrap();
+    path
+}
+
+/// Read items until one matches, or fail after `within`. Every item read
+/// is also kept in `SEEN` for checks that look back.
+fn wait_for<T>(
+    link: &mut Link,
+    within: Duration,
+    what: &str,
+    mut pick: impl FnMut(&Item) -> Option<T>,
+) -> T {
+    let until = Instant::now() + within;
+    while Instant::now() < until {
+        let items = link.poll().unwrap();
+        let mut found = None;
+        for item in &items {
+            if found.is_none() {
+                found = pick(item);
+            }
+        }
+        SEEN.with(|seen| seen.borrow_mut().extend(items));
+        if let Some(found) = found {
+            return found;
+        }
+    }
+    panic!("no {what} within {within:?}")
+}
+
+thread_local! {
+    static SEEN: std::cell::RefCell<Vec<Item>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+fn next_config(link: &mut Link) -> ConfigFrame {
+    wait_for(link, Duration::from_secs(3), "config frame", |i| match i {
+        Item::Frame(Message::Config(c)) => Some(**c),
+        _ => None,
+    })
+}
+
+fn next_status(link: &mut Link) -> Status {
+    wait_for(link, Duration::from_secs(3), "status frame", |i| match i {
+        Item::Frame(Message::Status(s)) => Some(*s),
+        _ => None,
+    })
+}
+
+/// Send raw bytes as if they were a command; the reply to them.
+fn raw_reply(link: &mut Link, bytes: &[u8]) -> Result<(), CommandError> {
+    link.send_raw(bytes).unwrap();
+    wait_for(link, Duration::from_secs(3), "reply", |i| match i {
+        Item::Frame(Message::Reply(r)) => Some(r.result.clone()),
+        _ => None,
+    })
+}
+
+#[test]
+fn every_command_over_a_pty_is_answered_and_takes_effect() {
+    let dir = tempfile::tempdir().unwrap();
+    let replay = replay_file(dir.path(), &Plan::PAPER, 3_000);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let mut link = Link::open(&device.port, 115_200).unwrap();
+
+    // Read the configuration back (the device starts with this command).
+    assert_eq!(link.command(Command::ReadConfig).unwrap(), Ok(()));
+    let boot = next_config(&mut link);
+    assert_eq!(boot.config, DeviceConfig::default());
+
+    // Tare, with the needle still in the air: the zero moves to the
+    // bridge's offset (3000 counts, 2 mN of noise on it).
+    assert_eq!(link.command(Command::Tare).unwrap(), Ok(()));
+    let tared = next_config(&mut link);
+    let zero = tared.config.load_cell.tare_counts;
+    assert!((zero - 3_000).abs() < 1_000, "{:?}", tared.config.load_cell);
+    assert_eq!(tared.config.model, boot.config.model);
+
+    // Stop on contact (1.7 s into the replay: set it early).
+    let stop = Command::SetAssist {
+        modes: AssistModes::STOP_ON_CONTACT,
+        target_depth: Nanometres::from_m(0.03),
+    };
+    assert_eq!(link.command(stop).unwrap(), Ok(()));
+    assert_eq!(
+        next_config(&mut link).config.assist.modes,
+        AssistModes::STOP_ON_CONTACT
+    );
+
+    // Select from the library; upload a tissue.
+    let liver2 = LIBRARY.iter().position(|(n, _)| *n == "liver2").unwrap() as u8;
+    assert_eq!(link.command(Command::SelectTissue(liver2)).unwrap(), Ok(()));
+    let selected = next_config(&mut link);
+    assert_eq!(selected.tissue, TissueSource::Library(liver2));
+    assert_eq!(
+        selected.config.load_cell, tared.config.load_cell,
+        "the tare stays"
+    );
+    assert_ne!(selected.config.model, tared.config.model);
+    assert_eq!(link.command(Command::UploadTissue(LIVER1)).unwrap(), Ok(()));
+    let uploaded = next_config(&mut link);
+    assert_eq!(uploaded.tissue, TissueSource::Uploaded);
+    assert_eq!(uploaded.config.model, boot.config.model);
+
+    // Refused commands change nothing.
+    let mut nan = LIVER1;
+    nan.cutting_force_n = f64::NAN;
+    match link.command(Command::UploadTissue(nan)).unwrap() {
+        Err(CommandError::InvalidTissue { field, .. }) => {
+            assert_eq!(field.as_str(), "cutting_force_n")
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(
+        link.command(Command::SelectTissue(200)).unwrap(),
+        Err(CommandError::NoSuchTissue {
+            library_len: LIBRARY.len() as u8
+        })
+    );
+    let too_deep = Command::SetAssist {
+        modes: AssistModes::TARGET_DEPTH,
+        target_depth: Nanometres::from_m(0.5),
+    };
+    assert!(matches!(
+        link.command(too_deep).unwrap(),
+        Err(CommandError::OutOfRange { .. })
+    ));
+    let unknown_mode = Command::SetAssist {
+        modes: AssistModes(0x80),
+        target_depth: Nanometres::from_m(0.01),
+    };
+    assert!(matches!(
+        link.command(unknown_mode).unwrap(),
+        Err(CommandError::OutOfRange { .. })
+    ));
+    // Corrupted (a bit flipped), truncated, and unknown (right CRC,
+    // bytes no command) frames.
+    let mut encoder = Encoder::<256>::default();
+    let good = encoder
+        .encode(&needle_holder::protocol::CommandFrame {
+            seq: 1 << 31,
+            command: Command::Rearm,
+        })
+        .to_vec();
+    let mut flipped = good.clone();
+    flipped[3] ^= 0x10;
+    assert_eq!(raw_reply(&mut link, &flipped), Err(CommandError::Corrupted));
+    assert_eq!(
+        raw_reply(&mut link, &[&good[..4], &[0][..]].concat()),
+        Err(CommandError::Corrupted)
+    );
+    let mut junk = vec![0xee, 0xee, 0xee];
+    junk.extend(needle_holder::protocol::wire::frame_check(&junk).to_le_bytes());
+    let mut framed = cobs::encode_vec(&junk);
+    framed.push(0);
+    assert_eq!(raw_reply(&mut link, &framed), Err(CommandError::Unknown));
+    // A frame of protocol 2's CRC (no implied version byte) is corrupted here.
+    let mut v2 = vec![0x01, 0x05];
+    v2.extend(FRAME_CRC.checksum(&v2).to_le_bytes());
+    let mut framed = cobs::encode_vec(&v2);
+    framed.push(0);
+    assert_eq!(raw_reply(&mut link, &framed), Err(CommandError::Corrupted));
+    assert_eq!(link.command(Command::ReadConfig).unwrap(), Ok(()));
+    let after = next_config(&mut link);
+    assert_eq!(
+        (after.tissue, after.config),
+        (uploaded.tissue, uploaded.config),
+        "nothing changed"
+    );
+
+    // A replayed command: the same frame again is answered, not redone;
+    // an older sequence number with other content is refused.
+    let seq = link.next_seq().unwrap();
+    let tare_again = encoder
+        .encode(&needle_holder::protocol::CommandFrame {
+            seq,
+            command: Command::ReadConfig,
+        })
+        .to_vec();
+    let configs = || {
+        SEEN.with(|seen| {
+            seen.borrow()
+                .iter()
+                .filter(|i| matches!(i, Item::Frame(Message::Config(_))))
+                .count()
+        })
+    };
+    let before = configs();
+    assert_eq!(raw_reply(&mut link, &tare_again), Ok(()));
+    assert_eq!(configs(), before + 1, "carried out: the configuration came");
+    assert_eq!(raw_reply(&mut link, &tare_again), Ok(()));
+    let redone = Instant::now() + Duration::from_millis(300);
+    while Instant::now() < redone {
+        let items = link.poll().unwrap();
+        assert!(
+            !items
+                .iter()
+                .any(|i| matches!(i, Item::Frame(Message::Config(_)))),
+            "a repeat is not carried out again"
+        );
+    }
+    assert_eq!(configs(), before + 1, "a repeat is not carried out again");
+    let stale = encoder
+        .encode(&needle_holder::protocol::CommandFrame {
+            seq,
+            command: Command::Tare,
+        })
+        .to_vec();
+    assert_eq!(
+        raw_reply(&mut link, &stale),
+        Err(CommandError::Stale { next_seq: seq + 1 })
+    );
+
+    // The halt came at the contact (perhaps while the commands above
+    // were answered).
+    let seen_halt = SEEN.with(|seen| {
+        seen.borrow().iter().find_map(|i| match i {
+            Item::Frame(Message::Halt(h)) => Some(*h),
+            _ => None,
+        })
+    });
+    let halt = seen_halt.unwrap_or_else(|| {
+        wait_for(&mut link, Duration::from_secs(10), "halt", |i| match i {
+            Item::Frame(Message::Halt(h)) => Some(*h),
+            _ => None,
+        })
+    });
+    assert_eq!(halt.reason, HaltReason::Contact);
+    assert!(next_status(&mut link).halt);
+    // Stop at 1 mm past the surface: re-arming deeper than that is refused.
+    let depth = Command::SetAssist {
+        modes: AssistModes::TARGET_DEPTH,
+        target_depth: Nanometres::from_m(0.001),
+    };
+    assert_eq!(link.command(depth).unwrap(), Ok(()));
+    std::thread::sleep(Duration::from_millis(800)); // 2.4 mm further in
+    assert_eq!(
+        link.command(Command::Rearm).unwrap(),
+        Err(CommandError::HaltCausePersists {
+            reason: HaltReason::TargetDepth
+        })
+    );
+    assert!(next_status(&mut link).halt, "still halted");
+    let none = Command::SetAssist {
+        modes: AssistModes::NONE,
+        target_depth: Nanometres::from_m(0.03),
+    };
+    assert_eq!(link.command(none).unwrap(), Ok(()));
+    assert_eq!(link.command(Command::Rearm).unwrap(), Ok(()));
+    assert!(!next_status(&mut link).halt, "released");
+
+    // Stop the stream: status goes on, samples do not; start it again.
+    assert_eq!(link.command(Command::Stream(false)).unwrap(), Ok(()));
+    let stopped = next_status(&mut link);
+    assert!(!stopped.streaming);
+    let mut samples_while_stopped = 0;
+    let until = Instant::now() + Duration::from_millis(1200);
+    while Instant::now() < until {
+        samples_while_stopped += link
+            .poll()
+            .unwrap()
+            .iter()
+            .filter(|i| matches!(i, Item::Sample(_)))
+            .count();
+    }
+    assert_eq!(samples_while_stopped, 0);
+    assert_eq!(link.command(Command::Stream(true)).unwrap(), Ok(()));
+    let sample = wait_for(&mut link, Duration::from_secs(2), "sample", |i| match i {
+        Item::Sample(s) => Some(*s),
+        _ => None,
+    });
+    assert!(sample.index > stopped.samples);
+    let stats = link.decoder().stats();
+    assert_eq!(
+        stats.withheld_samples, 0,
+        "every sample the device sent was reconstructed and checked"
+    );
+}
+
+#[test]
+fn needle_record_over_a_pty_gives_the_trial_csv_decode_gives_on_a_capture() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = Plan {
+        speed_mps: 0.01,
+        depth_m: 0.015,
+        dwell_s: 0.5,
+        ..Plan::PAPER
+    };
+    let replay = replay_file(dir.path(), &plan, 0);
+    let elf = elf();
+    let needle = env!("CARGO_BIN_EXE_needle");
+
+    // The capture: the same replay, frames to a file, as fast as QEMU goes.
+    let capture = dir.path().join("capture.bin");
+    let run = firmware::run_qemu(
+        firmware::qemu_command(Board::Lm3s6965, &elf, &replay, Serial::File(&capture), &[]),
+        Duration::from_secs(60),
+    )
+    .unwrap()
+    .success()
+    .unwrap();
+    drop(run);
+    let decoded = dir.path().join("decoded.csv");
+    let status = Process::new(needle)
+        .args(["decode", "--csv"])
+        .arg(&decoded)
+        .arg(&capture)
+        .status()
+        .unwrap();
+    assert!(status.success());
+
+    // Live on a pseudo-terminal, recorded.
+    let device = QemuLive::start(Board::Lm3s6965, &elf, &replay).unwrap();
+    let out = dir.path().join("recorded");
+    let recorded = Process::new(needle)
+        .args(["record", "--port", &device.port, "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&recorded.stderr);
+    assert!(recorded.status.success(), "{stderr}");
+    device.wait(Duration::from_secs(30)).unwrap();
+
+    let trial = std::fs::read_to_string(out.join("trial_000.csv")).unwrap();
+    let whole = std::fs::read_to_string(&decoded).unwrap();
+    assert!(
+        whole.starts_with(&trial),
+        "the recorded trial is the capture's first rows"
+    );
+    let trial_rows = trial.lines().count();
+    let rest: Vec<&str> = whole.lines().skip(trial_rows).collect();
+    // The trial ends where the needle left the tissue; what follows is out.
+    assert!(trial.lines().last().unwrap().ends_with(",out"));
+    assert!(trial.lines().any(|l| l.ends_with(",inserted")));
+    assert!(
+        rest.iter().all(|l| l.ends_with(",out")),
+        "only samples outside follow"
+    );
+    assert!(!out.join("trial_001.csv").exists());
+    // The raw stream is kept and decodes to the same samples.
+    let kept = dir.path().join("kept.csv");
+    let status = Process::new(needle)
+        .args(["decode", "--csv"])
+        .arg(&kept)
+        .arg(out.join("stream.bin"))
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(std::fs::read_to_string(&kept).unwrap().starts_with(&trial));
+    assert!(stderr.contains("trial_000.csv"), "{stderr}");
+}

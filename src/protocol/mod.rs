@@ -1,0 +1,397 @@
+//! The wire protocol, defined once and used by the firmware and the host
+//! alike: the frames the device sends ([`Frame`]), the commands it takes
+//! ([`command`]), and how both are framed on the wire ([`wire`]).
+//!
+//! **The stream (version 3).** After boot the device sends a [`Header`],
+//! a [`ConfigFrame`] (everything the pipeline computes with: calibration,
+//! tissue model, detectors, assist) and a [`Snapshot`] of the pipeline's
+//! state; then the samples as [`batch`]es of raw readings, which the host
+//! turns into force, model, residual and phase with the same core. Events
+//! and halts go at once, unbatched (the batch in hand is sent first, so
+//! frames stay in sample order); a [`Status`] heartbeat with a fresh
+//! snapshot follows every [`STATUS_PERIOD_SAMPLES`] samples, so a host that
+//! lost a batch or joined late is back in step within half a second at
+//! 500 Hz. Every change of configuration or state by a command is followed
+//! by a new config frame or snapshot. Loss is visible: batches carry their
+//! first sample's index, and each frame its CRC.
+//!
+//! Changing any type here changes the bytes on the wire: bump
+//! [`PROTOCOL_VERSION`] (the golden-bytes test below fails until you do).
+
+pub mod batch;
+pub mod command;
+pub mod wire;
+
+use serde::{Deserialize, Serialize};
+
+pub use self::batch::Batch;
+pub use self::command::{Command, CommandError, CommandFrame, Reply};
+pub use self::wire::DecodeError;
+
+use crate::config::DeviceConfig;
+use crate::faults::Faults;
+use crate::pipeline::PipelineState;
+use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
+
+/// Version of the frame format; the host refuses other versions.
+pub const PROTOCOL_VERSION: u16 = 3;
+
+/// Samples between two status heartbeats.
+pub const STATUS_PERIOD_SAMPLES: u32 = 250;
+
+/// Where the needle is in the insertion, as the device tracks it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum Phase {
+    /// Tip outside the tissue.
+    Out,
+    /// Tip pressing on the capsule, before puncture.
+    Loading,
+    /// Tip inside the tissue, after puncture.
+    Inserted,
+    /// Needle moving out of the tissue.
+    Withdrawal,
+}
+
+/// What a detector saw.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum EventKind {
+    /// The tip met the surface.
+    Contact,
+    /// The capsule gave way.
+    Puncture,
+    /// The tip struck and passed an interior structure (vessel).
+    Structure,
+    /// The tip left the tissue into another medium.
+    Exit,
+    /// A fault was raised (see the next status frame).
+    Fault,
+}
+
+/// Sent once at boot: what the stream is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Header {
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub protocol_version: u16,
+    /// Sample rate, Hz: sample index / rate = time since boot.
+    pub sample_rate_hz: u16,
+}
+
+/// One processed sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Sample {
+    /// Sample index since boot.
+    pub index: u32,
+    /// Needle position.
+    pub x: Nanometres,
+    /// Needle velocity (windowed difference, see `kinematics`).
+    pub v: NanometresPerSecond,
+    /// Measured force.
+    pub force: MicroNewtons,
+    /// Force the model expects here.
+    pub model: MicroNewtons,
+    /// `force − model`, saturating.
+    pub residual: MicroNewtons,
+    /// Phase at this sample.
+    pub phase: Phase,
+}
+
+/// A detected event.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Event {
+    /// Sample index at which it was flagged.
+    pub index: u32,
+    /// What it was.
+    pub kind: EventKind,
+    /// Needle position at the event.
+    pub x: Nanometres,
+    /// Force at the event (for a puncture: the peak before the drop).
+    pub force: MicroNewtons,
+    /// Detector's confidence figure, 0–1000 (per mille).
+    pub confidence_permille: u16,
+}
+
+/// Heartbeat with counters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Status {
+    /// [`PROTOCOL_VERSION`] again, so a host that missed the header can check.
+    pub protocol_version: u16,
+    /// Sample rate again, for a host that joined mid-stream.
+    pub sample_rate_hz: u16,
+    /// Samples processed since boot.
+    pub samples: u32,
+    /// Frames that the sink refused since boot.
+    pub frames_dropped: u32,
+    /// Faults raised since boot or the last re-arm (latched).
+    pub faults: Faults,
+    /// Halt line asserted.
+    pub halt: bool,
+    /// Samples are being sent.
+    pub streaming: bool,
+    /// Sequence number the device takes for the next command.
+    pub next_command_seq: u32,
+}
+
+/// Why the device asserted the halt line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum HaltReason {
+    /// A fault (see the status frame).
+    Fault,
+    /// Stop on contact.
+    Contact,
+    /// Stop on capsule puncture.
+    Puncture,
+    /// Stop on an interior structure.
+    Structure,
+    /// Stop on exit from the tissue.
+    Exit,
+    /// The target depth past the surface was reached.
+    TargetDepth,
+    /// Faster than the speed limit before puncture.
+    SpeedLimit,
+}
+
+impl From<EventKind> for HaltReason {
+    fn from(kind: EventKind) -> Self {
+        match kind {
+            EventKind::Contact => Self::Contact,
+            EventKind::Puncture => Self::Puncture,
+            EventKind::Structure => Self::Structure,
+            EventKind::Exit => Self::Exit,
+            EventKind::Fault => Self::Fault,
+        }
+    }
+}
+
+/// Sent when the halt line goes up: why, and where the robot should hold
+/// the tip (behind it when the device asks for a back-off).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Halt {
+    /// Sample index at which the line went up.
+    pub index: u32,
+    /// Why.
+    pub reason: HaltReason,
+    /// Needle position then.
+    pub x: Nanometres,
+    /// Position the robot should bring the needle to and hold.
+    pub hold_x: Nanometres,
+}
+
+/// Where the device's tissue model came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TissueSource {
+    /// The on-device library, by position.
+    Library(u8),
+    /// Uploaded by the host.
+    Uploaded,
+}
+
+/// What the device computes with, from sample `from_index` on: sent after
+/// the header, after every change, and on request.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ConfigFrame {
+    /// First sample computed with it.
+    pub from_index: u32,
+    /// Where the tissue model came from.
+    pub tissue: TissueSource,
+    /// The whole pipeline's configuration: load-cell tare and gain,
+    /// encoder scale, rate, model, detectors, assist.
+    pub config: DeviceConfig,
+}
+
+/// The pipeline's state before sample `next_index`: a host that lost
+/// frames, or joined late, continues from here.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Snapshot {
+    /// The next sample's index.
+    pub next_index: u32,
+    /// The state.
+    pub state: PipelineState,
+}
+
+/// Everything the device sends.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub enum Frame<'a> {
+    /// Stream header.
+    Header(Header),
+    /// The configuration.
+    Config(ConfigFrame),
+    /// Samples, as raw readings.
+    #[serde(borrow)]
+    Batch(Batch<'a>),
+    /// The pipeline's state.
+    Snapshot(Snapshot),
+    /// Detected event.
+    Event(Event),
+    /// Heartbeat.
+    Status(Status),
+    /// The halt line went up.
+    Halt(Halt),
+    /// The answer to a command.
+    Reply(Reply),
+}
+
+/// Largest frame before COBS, CRC included: a full batch and its
+/// fields (the config and snapshot frames are smaller; a test checks).
+pub const MAX_RAW_FRAME: usize = 1 + 5 + 1 + 4 + 2 + batch::BATCH_BYTES + 2;
+
+/// Bytes one encoded frame can take on the wire.
+pub const MAX_ENCODED_FRAME: usize = wire::encoded_bound(MAX_RAW_FRAME);
+
+/// The device's frame encoder.
+pub type FrameEncoder = wire::Encoder<MAX_ENCODED_FRAME>;
+
+/// Decode one device frame from the bytes between two `0x00` delimiters
+/// into `buffer` (a batch borrows its bytes from it).
+pub fn decode<'b>(cobs_bytes: &[u8], buffer: &'b mut [u8]) -> Result<Frame<'b>, DecodeError> {
+    let body = wire::unframe(cobs_bytes, buffer, wire::frame_check)?;
+    wire::parse(body)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn decode_owned(bytes: &[u8]) -> std::string::String {
+        let mut buf = [0u8; MAX_ENCODED_FRAME];
+        std::format!("{:?}", decode(&bytes[..bytes.len() - 1], &mut buf))
+    }
+
+    fn batch_frame() -> Frame<'static> {
+        Frame::Batch(Batch {
+            first_index: 1234,
+            samples: 2,
+            check: [1, 2, 3, 4],
+            raw: &[0x80, 0x01, 0x02, 0x03, 0x04],
+        })
+    }
+
+    /// Pins the wire format. If this fails you changed the bytes on the
+    /// wire: bump PROTOCOL_VERSION and update the expectation.
+    #[test]
+    fn golden_bytes_pin_the_wire_format() {
+        let mut encoder = FrameEncoder::default();
+        let bytes = encoder.encode(&batch_frame());
+        assert_eq!(PROTOCOL_VERSION, 3);
+        // COBS code, tag 2, index 1234, 2 samples, the check, 5 raw bytes,
+        // the CRC (0xc023, checked against a bitwise CRC-16/X.25 over the
+        // implied version byte 3 and the body), the zero.
+        assert_eq!(
+            bytes,
+            &[
+                0x11, 0x02, 0xd2, 0x09, 0x02, 0x01, 0x02, 0x03, 0x04, 0x05, 0x80, 0x01, 0x02, 0x03,
+                0x04, 0x23, 0xc0, 0x00
+            ][..]
+        );
+    }
+
+    #[test]
+    fn any_single_bit_error_is_caught() {
+        let good = FrameEncoder::default().encode(&batch_frame()).to_vec();
+        let body = &good[..good.len() - 1];
+        for bit in 0..body.len() * 8 {
+            let mut bad = body.to_vec();
+            bad[bit / 8] ^= 1 << (bit % 8);
+            let mut buf = [0u8; MAX_ENCODED_FRAME];
+            assert!(
+                decode(&bad, &mut buf).is_err(),
+                "bit {bit} flipped went unnoticed"
+            );
+        }
+    }
+
+    #[test]
+    fn every_variant_round_trips_within_the_size_bound() {
+        let full = [0xffu8; batch::BATCH_BYTES];
+        let mut state = PipelineState::default();
+        let config = crate::config::DEFAULT;
+        for i in 0..40 {
+            config.step(
+                &mut state,
+                crate::pipeline::RawSample {
+                    adc: Some(crate::hal::AdcSample {
+                        counts: i32::MIN + i,
+                        saturated: false,
+                        overrun: false,
+                    }),
+                    encoder_count: (i * 150) as u16,
+                },
+            );
+        }
+        let frames = [
+            Frame::Header(Header {
+                protocol_version: PROTOCOL_VERSION,
+                sample_rate_hz: 500,
+            }),
+            Frame::Config(ConfigFrame {
+                from_index: u32::MAX,
+                tissue: TissueSource::Library(u8::MAX),
+                config,
+            }),
+            Frame::Batch(Batch {
+                first_index: u32::MAX,
+                samples: u8::MAX,
+                check: [0xff; 4],
+                raw: &full,
+            }),
+            Frame::Snapshot(Snapshot {
+                next_index: u32::MAX,
+                state,
+            }),
+            Frame::Event(Event {
+                index: u32::MAX,
+                kind: EventKind::Puncture,
+                x: Nanometres::MIN,
+                force: MicroNewtons::MAX,
+                confidence_permille: 1000,
+            }),
+            Frame::Status(Status {
+                protocol_version: PROTOCOL_VERSION,
+                sample_rate_hz: u16::MAX,
+                samples: u32::MAX,
+                frames_dropped: u32::MAX,
+                faults: Faults(u16::MAX),
+                halt: true,
+                streaming: true,
+                next_command_seq: u32::MAX,
+            }),
+            Frame::Halt(Halt {
+                index: u32::MAX,
+                reason: HaltReason::SpeedLimit,
+                x: Nanometres::MAX,
+                hold_x: Nanometres::MIN,
+            }),
+            Frame::Reply(Reply {
+                seq: u32::MAX,
+                result: Err(CommandError::InvalidTissue {
+                    field: command::text(&"x".repeat(60)),
+                    problem: command::text(&"é".repeat(60)),
+                }),
+            }),
+        ];
+        for frame in frames {
+            let mut encoder = FrameEncoder::default();
+            let bytes = encoder.encode(&frame);
+            assert!(
+                !bytes.is_empty() && bytes.len() <= MAX_ENCODED_FRAME,
+                "{frame:?}"
+            );
+            assert_eq!(
+                bytes.iter().filter(|&&b| b == 0).count(),
+                1,
+                "only the terminator is zero"
+            );
+            assert_eq!(
+                decode_owned(bytes),
+                std::format!("{:?}", Ok::<_, DecodeError>(frame))
+            );
+        }
+    }
+}
