@@ -176,7 +176,10 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         }
     }
 
-    fn answer(&mut self, frame: Result<(CommandFrame, u16), CommandError>) {
+    /// Carry out (or refuse) one command frame that a [`CommandReader`]
+    /// put together, and answer it. For a board that collects command
+    /// bytes outside the sample's lock and takes the lock only for this.
+    pub fn answer(&mut self, frame: Result<(CommandFrame, u16), CommandError>) {
         let (seq, result) = match frame {
             Err(e) => (0, Err(e)),
             Ok((frame, check)) => {

@@ -7,7 +7,10 @@
 //!   conversions set the load cell's zero before the device is armed.
 //! - `watchdog` (TIM5 at 25 Hz): no sample over two periods is an
 //!   `adc_timeout` fault and a halt — a converter unplugged never hangs.
-//! - `drain` (USART2 transmit-empty, lowest): frame bytes to the wire.
+//! - `link` (USART2 transmit-empty and receive-not-empty, lowest): frame
+//!   bytes to the wire; command bytes from it, put together into frames
+//!   here, outside the sample's lock, which a whole command takes only to
+//!   be carried out and answered.
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
@@ -16,9 +19,11 @@ mod app {
     use needle_holder::config::DeviceConfig;
     use needle_holder::device::Device;
     use needle_holder::faults::Faults;
+    use needle_holder::protocol::command::CommandReader;
     use stm32f4xx_hal::gpio::ExtiPin;
     use stm32f4xx_hal::pac::{self, TIM5, USART2};
-    use stm32f4xx_hal::serial::Tx;
+    use stm32f4xx_hal::prelude::*;
+    use stm32f4xx_hal::serial::{Rx, Tx};
     use stm32f4xx_hal::timer::CounterHz;
     use stm32f4xx_hal::ClearFlags;
 
@@ -52,6 +57,8 @@ mod app {
         encoder: Encoder,
         tare: BootTare,
         tx: Tx<USART2>,
+        rx: Rx<USART2>,
+        commands: CommandReader,
         outgoing: Consumer<'static, u8, QUEUE_BYTES>,
         watchdog: CounterHz<TIM5>,
     }
@@ -98,6 +105,8 @@ mod app {
                 encoder: parts.encoder,
                 tare: BootTare::new(MAX_BOOT_OFFSET_COUNTS),
                 tx: parts.tx,
+                rx: parts.rx,
+                commands: CommandReader::default(),
                 outgoing,
                 watchdog: parts.watchdog,
             },
@@ -206,8 +215,21 @@ mod app {
         }
     }
 
-    #[task(binds = USART2, priority = 1, local = [tx, outgoing])]
-    fn drain_link(cx: drain_link::Context) {
+    #[task(binds = USART2, priority = 1, shared = [device], local = [tx, rx, commands, outgoing])]
+    fn link(mut cx: link::Context) {
+        // Line errors (overrun, framing, noise) lose the byte: the frame
+        // it was in fails its CRC and the device says so.
+        while let Ok(byte) = cx.local.rx.read() {
+            if let Some(frame) = cx.local.commands.push(byte) {
+                // Before arming (the boot tare, a quarter second) there is
+                // no device to answer: the host sends again.
+                cx.shared.device.lock(|device| {
+                    if let Some(d) = device.as_mut() {
+                        d.answer(frame);
+                    }
+                });
+            }
+        }
         drain(cx.local.tx, cx.local.outgoing);
     }
 

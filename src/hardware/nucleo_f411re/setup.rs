@@ -12,7 +12,7 @@ use stm32f4xx_hal::pac::{self, TIM5, USART2};
 use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::qei::Qei;
 use stm32f4xx_hal::rcc::Config;
-use stm32f4xx_hal::serial::Tx;
+use stm32f4xx_hal::serial::{Rx, RxListen, Tx};
 use stm32f4xx_hal::timer::{CounterHz, Event};
 
 use super::adc::{rate_for, Acquisition, Converter};
@@ -34,6 +34,8 @@ pub struct Parts {
     pub converter_started: Result<(), Error<()>>,
     pub encoder: Encoder,
     pub tx: Tx<USART2>,
+    /// Commands from the host; its receive interrupt is on.
+    pub rx: Rx<USART2>,
     pub halt: HaltLine,
     pub watchdog: CounterHz<TIM5>,
 }
@@ -80,10 +82,12 @@ pub fn setup(mut dp: pac::Peripherals, cp: cortex_m::Peripherals, sample_rate_hz
         });
 
     let encoder = Encoder(Qei::new(dp.TIM2, (gpioa.pa0, gpioa.pa1), &mut rcc));
-    let tx = dp
+    let (tx, mut rx) = dp
         .USART2
-        .tx(gpioa.pa2, BAUD.bps(), &mut rcc)
-        .unwrap_or_else(|_| unreachable_baud());
+        .serial::<u8>((gpioa.pa2, gpioa.pa3), BAUD.bps(), &mut rcc)
+        .unwrap_or_else(|_| unreachable_baud())
+        .split();
+    rx.listen();
     let mut watchdog = dp.TIM5.counter_hz(&mut rcc);
     // A frequency the timer takes at 100 MHz.
     let _ = watchdog.start(WATCHDOG_HZ.Hz());
@@ -94,6 +98,7 @@ pub fn setup(mut dp: pac::Peripherals, cp: cortex_m::Peripherals, sample_rate_hz
         converter_started,
         encoder,
         tx,
+        rx,
         halt,
         watchdog,
     }
