@@ -16,10 +16,12 @@ MEMORY
   RAM   : ORIGIN = 0x20000000, LENGTH = 64K
 }
 ";
-const F411_MEMORY: &str = "/* STM32F411RE (RM0383 section 2.3): 512 KiB flash, 128 KiB SRAM. */
+const F411_MEMORY: &str = "/* STM32F411RE (RM0383 section 2.3): 512 KiB flash, 128 KiB SRAM. The
+   image gets sectors 0-6 (384 KiB); sector 7 (0x08060000, 128 KiB) is the
+   settings store (src/hardware/nucleo_f411re/store.rs). */
 MEMORY
 {
-  FLASH : ORIGIN = 0x08000000, LENGTH = 512K
+  FLASH : ORIGIN = 0x08000000, LENGTH = 384K
   RAM   : ORIGIN = 0x20000000, LENGTH = 128K
 }
 ";

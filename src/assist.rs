@@ -86,12 +86,18 @@ impl AssistConfig {
     /// `modes` for a tissue: the speed limit scales with its puncture
     /// force, from 10 mm/s down to 1 mm/s; target depth 30 mm.
     pub const fn for_tissue(p: &TissueParams, modes: AssistModes) -> Self {
+        Self::for_peak(MicroNewtons::from_n(p.puncture_force_n), modes)
+    }
+
+    /// [`Self::for_tissue`] for a tissue whose puncture force is
+    /// `expected_peak`.
+    pub const fn for_peak(expected_peak: MicroNewtons, modes: AssistModes) -> Self {
         Self {
             modes,
             target_depth: Nanometres::from_m(0.03),
             max_speed: NanometresPerSecond::from_mps(0.010),
             min_speed: NanometresPerSecond::from_mps(0.001),
-            expected_peak: MicroNewtons::from_n(p.puncture_force_n),
+            expected_peak,
         }
     }
 

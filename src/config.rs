@@ -4,8 +4,10 @@ use crate::assist::{AssistConfig, AssistModes};
 use crate::calibration::{Encoder, LoadCell};
 use crate::detect::DetectConfig;
 use crate::kinematics::VelocityConfig;
-use crate::model::params::{ParamError, TissueParams, LIVER1};
+use crate::model::params::{ParamError, TissueParams, LIBRARY, LIVER1};
+use crate::model::stiffness::Stiffness;
 use crate::model::ModelConfig;
+use crate::units::MicroNewtons;
 use serde::{Deserialize, Serialize};
 
 /// Configuration of the whole per-sample pipeline.
@@ -52,6 +54,123 @@ pub const FIRMWARE_ASSIST: AssistModes = {
 /// The fastest the needle drive moves, nm/s (100 mm/s).
 const MAX_DRIVE_NM_PER_S: i64 = 100_000_000;
 
+/// A tissue as the device computes with it: the model, the detectors'
+/// thresholds and the puncture force the speed limit scales with, all in
+/// fixed point. Made from SI parameters by [`Self::from_params`] — at
+/// compile time for the on-device library, on the host for an upload — so
+/// the device itself never converts a float; an uploaded one is checked
+/// on the device by [`Self::check`], in integers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TissueModel {
+    /// The force model.
+    pub model: ModelConfig,
+    /// Detector thresholds (their rate-dependent parts for 500 Hz; the
+    /// device sets them for its rate).
+    pub detect: DetectConfig,
+    /// Puncture force the tissue's model expects.
+    pub expected_peak: MicroNewtons,
+}
+
+/// A fixed-point parameter that cannot be, named by the TOML key it comes
+/// from.
+const fn bad(ok: bool, field: &'static str, problem: &'static str) -> Result<(), ParamError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ParamError { field, problem })
+    }
+}
+
+impl TissueModel {
+    /// Convert and check SI parameters.
+    pub const fn from_params(p: &TissueParams) -> Result<Self, ParamError> {
+        let model = match ModelConfig::from_params(p) {
+            Ok(model) => model,
+            Err(e) => return Err(e),
+        };
+        Ok(Self {
+            model,
+            detect: DetectConfig::for_tissue(p),
+            expected_peak: MicroNewtons::from_n(p.puncture_force_n),
+        })
+    }
+
+    /// The signs and ranges [`Self::from_params`] guarantees, checked in
+    /// integers: what the device runs on a tissue it did not make.
+    pub fn check(&self) -> Result<(), ParamError> {
+        const NEG: &str = "must not be negative";
+        const POS: &str = "must be positive";
+        let m = &self.model;
+        let f = &m.friction;
+        let d = &self.detect;
+        match m.stiffness {
+            Stiffness::Polynomial { a1, a2 } => {
+                bad(a1.0 >= 0, "a1_n_per_m", NEG)?;
+                bad(a2.0 >= 0, "a2_n_per_m2", NEG)?;
+                bad(
+                    a1.0 > 0 || a2.0 > 0,
+                    "a1_n_per_m",
+                    "and a2 cannot both be zero",
+                )?;
+            }
+            Stiffness::Rational { b_q32, .. } => bad(b_q32 > 0, "rational_b_m_per_n", POS)?,
+        }
+        bad(f.cp.0 >= 0, "cp_n_per_m", NEG)?;
+        bad(f.cn.0 <= 0, "cn_n_per_m", "must not be positive")?;
+        bad(f.bp.0 >= 0, "bp_ns_per_m2", NEG)?;
+        bad(f.bn.0 >= 0, "bn_ns_per_m2", NEG)?;
+        bad(f.dp.0 >= 0, "dp_n_per_m", NEG)?;
+        bad(f.dn.0 <= 0, "dn_n_per_m", "must not be positive")?;
+        bad(f.half_band.0 > 0, "half_band_mps", POS)?;
+        bad(m.cutting.0 >= 0, "cutting_force_n", NEG)?;
+        bad(
+            m.phase.relaxation.0 <= 1 << 16,
+            "relaxation",
+            "must be within 0..=1",
+        )?;
+        bad(m.phase.withdrawal_speed.0 > 0, "withdrawal_speed", POS)?;
+        bad(m.phase.hold_force.0 > 0, "contact_force_n", POS)?;
+        bad(d.contact_force.0 > 0, "contact_force_n", POS)?;
+        bad(
+            d.contact_offset.0 >= 0,
+            "contact_force_n",
+            "gives a negative contact offset",
+        )?;
+        bad(d.puncture_min_peak.0 > 0, "puncture_force_n", POS)?;
+        bad(
+            d.puncture_drop.0 > 0,
+            "puncture_drop_to_n",
+            "must be below puncture_force_n",
+        )?;
+        bad(
+            d.structure_rise.0 > 0 && d.structure_drop.0 > 0,
+            "contact_force_n",
+            POS,
+        )?;
+        bad(d.exit_drop.0 >= 0, "cutting_force_n", NEG)?;
+        bad(d.stuck_rise.0 > 0, "puncture_force_n", POS)?;
+        bad(self.expected_peak.0 > 0, "puncture_force_n", POS)
+    }
+}
+
+/// The on-device tissue library in fixed point, in [`LIBRARY`]'s order,
+/// converted by the compiler.
+pub const LIBRARY_MODELS: [TissueModel; LIBRARY.len()] = {
+    let mut out = [match TissueModel::from_params(&LIVER1) {
+        Ok(m) => m,
+        Err(_) => panic!("liver1 is invalid"),
+    }; LIBRARY.len()];
+    let mut i = 0;
+    while i < LIBRARY.len() {
+        out[i] = match TissueModel::from_params(&LIBRARY[i].1) {
+            Ok(m) => m,
+            Err(_) => panic!("a tissue in the library is invalid"),
+        };
+        i += 1;
+    }
+    out
+};
+
 /// The library name of the firmware's default tissue.
 pub const DEFAULT_TISSUE: &str = "liver1";
 
@@ -71,36 +190,60 @@ impl DeviceConfig {
     /// The bench setup of the paper (10 N load cell, 1 µm encoder, 500 Hz,
     /// velocity over 10 samples) with the model and detectors of `tissue`.
     pub const fn for_tissue(tissue: &TissueParams) -> Result<Self, ParamError> {
-        let model = match ModelConfig::from_params(tissue) {
-            Ok(model) => model,
-            Err(e) => return Err(e),
-        };
-        Ok(Self {
+        match TissueModel::from_params(tissue) {
+            Ok(model) => Ok(Self::for_model(&model)),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// [`Self::for_tissue`] from a tissue already in fixed point.
+    pub const fn for_model(tissue: &TissueModel) -> Self {
+        Self {
             load_cell: LoadCell::TEN_NEWTON_24_BIT,
             encoder: Encoder::ONE_MICRON,
             velocity: VelocityConfig {
                 sample_rate_hz: 500,
                 window: 10,
             },
-            model,
-            detect: DetectConfig::for_tissue(tissue),
-            assist: AssistConfig::for_tissue(tissue, FIRMWARE_ASSIST),
-        })
+            model: tissue.model,
+            detect: tissue.detect,
+            assist: AssistConfig::for_peak(tissue.expected_peak, FIRMWARE_ASSIST),
+        }
     }
 
     /// This configuration (calibration, rate, velocity window, assist
     /// modes and target depth) with `tissue`'s model and detectors.
-    pub fn with_tissue(&self, tissue: &TissueParams) -> Result<Self, ParamError> {
+    /// Integers only: the device runs it on a command.
+    pub fn with_tissue(&self, tissue: &TissueModel) -> Self {
         let mut next = Self {
             load_cell: self.load_cell,
             encoder: self.encoder,
             velocity: self.velocity,
-            ..Self::for_tissue(tissue)?
+            ..Self::for_model(tissue)
         }
         .with_sample_rate(self.velocity.sample_rate_hz);
         next.assist.modes = self.assist.modes;
         next.assist.target_depth = self.assist.target_depth;
-        Ok(next)
+        next
+    }
+
+    /// This configuration with saved settings: their tissue, load-cell
+    /// calibration and assist.
+    pub fn with_settings(&self, settings: &crate::persist::Settings) -> Self {
+        let mut next = self.with_tissue(&settings.model);
+        next.load_cell = settings.load_cell;
+        next.assist.modes = settings.assist_modes;
+        next.assist.target_depth = settings.target_depth;
+        next
+    }
+
+    /// The tissue this configuration computes with, in fixed point.
+    pub fn tissue_model(&self) -> TissueModel {
+        TissueModel {
+            model: self.model,
+            detect: self.detect,
+            expected_peak: self.assist.expected_peak,
+        }
     }
 
     /// The same configuration with other assist modes.
@@ -135,5 +278,38 @@ impl DeviceConfig {
             };
         }
         self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::units::NanometresPerSecond;
+
+    #[test]
+    fn the_library_passes_the_devices_check_and_spoilt_models_do_not() {
+        for (tissue, (name, _)) in LIBRARY_MODELS.iter().zip(LIBRARY) {
+            assert_eq!(tissue.check(), Ok(()), "{name}");
+        }
+        type Spoil = fn(&mut TissueModel);
+        let cases: [(Spoil, &str); 6] = [
+            (|t| t.model.friction.cn.0 = 1, "cn_n_per_m"),
+            (
+                |t| t.model.friction.half_band = NanometresPerSecond(0),
+                "half_band_mps",
+            ),
+            (|t| t.model.cutting = MicroNewtons(-1), "cutting_force_n"),
+            (|t| t.model.phase.relaxation.0 = (1 << 16) + 1, "relaxation"),
+            (
+                |t| t.detect.puncture_drop = MicroNewtons(0),
+                "puncture_drop_to_n",
+            ),
+            (|t| t.expected_peak = MicroNewtons(-5), "puncture_force_n"),
+        ];
+        for (spoil, field) in cases {
+            let mut t = LIBRARY_MODELS[0];
+            spoil(&mut t);
+            assert_eq!(t.check().map_err(|e| e.field), Err(field));
+        }
     }
 }

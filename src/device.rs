@@ -7,10 +7,11 @@ use embedded_io::Write;
 
 use crate::assist::AssistModes;
 use crate::calibration::ZeroTracker;
-use crate::config::{DeviceConfig, DEFAULT_TISSUE};
+use crate::config::{DeviceConfig, TissueModel, DEFAULT_TISSUE, LIBRARY_MODELS};
 use crate::faults::Faults;
 use crate::hal::{EncoderCounter, LoadCellAdc};
 use crate::model::params::LIBRARY;
+use crate::persist::{Loaded, Settings};
 use crate::pipeline::{PipelineState, RawSample};
 use crate::protocol::batch::{samples_per_batch, BatchCheck, BatchWriter};
 use crate::protocol::command::{self, CommandReader};
@@ -52,6 +53,10 @@ pub struct Device<W: Write, H: OutputPin> {
     commands: CommandReader,
     /// The last command taken: its sequence number, check and reply.
     last_command: (u32, u16, Result<(), CommandError>),
+    /// What the board's settings store held at boot.
+    stored: Loaded,
+    /// Settings changed by a command and not yet handed to the store.
+    unsaved: bool,
 }
 
 /// Counters and flags at the end of a run.
@@ -69,18 +74,32 @@ pub struct Summary {
 }
 
 /// The library position of the default tissue.
-fn default_tissue() -> TissueSource {
+pub fn default_tissue() -> TissueSource {
     let at = LIBRARY.iter().position(|(name, _)| *name == DEFAULT_TISSUE);
     at.map_or(TissueSource::Uploaded, |i| TissueSource::Library(i as u8))
 }
 
 impl<W: Write, H: OutputPin> Device<W, H> {
-    /// Start the device: halt released; header, configuration and state
+    /// Start the device with the compiled-in tissue, on a board that
+    /// keeps no settings: halt released; header, configuration and state
     /// sent.
     pub fn new(config: DeviceConfig, sink: W, halt: H) -> Self {
+        Self::restored(config, default_tissue(), Loaded::NotKept, sink, halt)
+    }
+
+    /// [`Self::new`] on a board with a settings store: `config` is made
+    /// from what it held (`stored`), `tissue` says where its tissue came
+    /// from.
+    pub fn restored(
+        config: DeviceConfig,
+        tissue: TissueSource,
+        stored: Loaded,
+        sink: W,
+        halt: H,
+    ) -> Self {
         let mut device = Self {
             config,
-            tissue: default_tissue(),
+            tissue,
             state: PipelineState::default(),
             sink,
             encoder: FrameEncoder::default(),
@@ -95,6 +114,8 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             zero: ZeroTracker::default(),
             commands: CommandReader::default(),
             last_command: (0, 0, Ok(())),
+            stored,
+            unsaved: false,
         };
         if device.halt.set_low().is_err() {
             device.faults = device.faults.union(Faults::HALT_OUTPUT);
@@ -166,6 +187,18 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         &self.config
     }
 
+    /// The settings to keep, once after each command that changed them
+    /// (tissue, calibration, assist); `None` when nothing changed since.
+    pub fn settings_to_save(&mut self) -> Option<Settings> {
+        core::mem::take(&mut self.unsaved).then(|| Settings {
+            tissue: self.tissue,
+            model: self.config.tissue_model(),
+            load_cell: self.config.load_cell,
+            assist_modes: self.config.assist.modes,
+            target_depth: self.config.assist.target_depth,
+        })
+    }
+
     /// Take bytes from the host: every command they complete is carried
     /// out (or refused) and answered. Call between samples.
     pub fn receive(&mut self, bytes: &[u8]) {
@@ -191,6 +224,14 @@ impl<W: Write, H: OutputPin> Device<W, H> {
                     (frame.seq, Err(CommandError::Stale { next_seq }))
                 } else {
                     let result = self.carry_out(frame.command);
+                    let changes_settings = matches!(
+                        frame.command,
+                        Command::Tare
+                            | Command::SelectTissue(_)
+                            | Command::UploadTissue(_)
+                            | Command::SetAssist { .. }
+                    );
+                    self.unsaved |= changes_settings && result.is_ok();
                     self.last_command = (frame.seq, check, result.clone());
                     (frame.seq, result)
                 }
@@ -204,13 +245,19 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         match command {
             Command::Tare => self.tare(),
             Command::SelectTissue(i) => {
-                let library_len = LIBRARY.len() as u8;
-                let (_, params) = LIBRARY
+                let library_len = LIBRARY_MODELS.len() as u8;
+                let tissue = LIBRARY_MODELS
                     .get(usize::from(i))
                     .ok_or(CommandError::NoSuchTissue { library_len })?;
-                self.change_tissue(params, TissueSource::Library(i))
+                self.change_tissue(tissue, TissueSource::Library(i))
             }
-            Command::UploadTissue(params) => self.change_tissue(&params, TissueSource::Uploaded),
+            Command::UploadTissue(tissue) => {
+                tissue.check().map_err(|e| CommandError::InvalidTissue {
+                    field: command::text(e.field),
+                    problem: command::text(e.problem),
+                })?;
+                self.change_tissue(&tissue, TissueSource::Uploaded)
+            }
             Command::SetAssist {
                 modes,
                 target_depth,
@@ -273,17 +320,10 @@ impl<W: Write, H: OutputPin> Device<W, H> {
 
     fn change_tissue(
         &mut self,
-        params: &crate::model::params::TissueParams,
+        tissue: &TissueModel,
         source: TissueSource,
     ) -> Result<(), CommandError> {
-        let next = self
-            .config
-            .with_tissue(params)
-            .map_err(|e| CommandError::InvalidTissue {
-                field: command::text(e.field),
-                problem: command::text(e.problem),
-            })?;
-        self.config = next;
+        self.config = self.config.with_tissue(tissue);
         self.tissue = source;
         self.send_config();
         Ok(())
@@ -374,13 +414,17 @@ impl<W: Write, H: OutputPin> Device<W, H> {
     /// Send the configuration; batches from here on are checked with it.
     fn send_config(&mut self) {
         self.flush_batch();
-        self.batch.set_seed(BatchCheck::seed(&self.config));
         let frame = ConfigFrame {
-            from_index: self.samples,
             tissue: self.tissue,
+            stored: self.stored,
             config: self.config,
         };
-        self.send(&Frame::Config(frame));
+        let bytes = self.encoder.encode(&Frame::Config(frame));
+        self.batch
+            .set_seed(BatchCheck::seed(bytes.split_last().map_or(&[], |(_, b)| b)));
+        if bytes.is_empty() || self.sink.write_all(bytes).is_err() {
+            self.frames_dropped = self.frames_dropped.saturating_add(1);
+        }
     }
 
     /// The pipeline's state, for a host to continue from (only while

@@ -30,6 +30,7 @@ pub mod hal;
 pub mod kinematics;
 pub mod link;
 pub mod model;
+pub mod persist;
 pub mod pipeline;
 pub mod protocol;
 pub mod replay;

@@ -42,10 +42,11 @@ impl Reconstructor {
         *self = Self::default();
     }
 
-    /// The configuration in force from now on.
-    pub fn config_frame(&mut self, frame: &ConfigFrame) {
+    /// The configuration in force from now on; `wire_bytes` are the
+    /// frame as received (COBS-encoded, without its closing zero).
+    pub fn config_frame(&mut self, frame: &ConfigFrame, wire_bytes: &[u8]) {
         self.config = Some(frame.config);
-        self.seed = BatchCheck::seed(&frame.config);
+        self.seed = BatchCheck::seed(wire_bytes);
     }
 
     /// The configuration in force, once one has arrived.

@@ -35,24 +35,29 @@ fn ok(counts: i32) -> Adc {
 }
 
 fn frames(bytes: &[u8]) -> Vec<Frame<'static>> {
+    chunks(bytes).into_iter().map(|(frame, _)| frame).collect()
+}
+
+/// Each frame with its bytes as received.
+fn chunks(bytes: &[u8]) -> Vec<(Frame<'static>, &[u8])> {
     bytes
         .split(|&b| b == 0)
         .filter(|chunk| !chunk.is_empty())
         .map(|chunk| {
             // Leaked: a batch borrows its bytes, and these are tests.
             let buffer = Box::leak(vec![0u8; protocol::MAX_ENCODED_FRAME].into_boxed_slice());
-            protocol::decode(chunk, buffer).expect("valid frame")
+            (protocol::decode(chunk, buffer).expect("valid frame"), chunk)
         })
         .collect()
 }
 
 /// The samples of a stream, through the core's reconstruction.
-fn samples(frames: &[Frame<'_>]) -> Vec<protocol::Sample> {
+fn samples(bytes: &[u8]) -> Vec<protocol::Sample> {
     let mut reconstructor = needle_holder::stream::Reconstructor::default();
     let mut out = Vec::new();
-    for frame in frames {
-        match frame {
-            Frame::Config(c) => reconstructor.config_frame(c),
+    for (frame, chunk) in chunks(bytes) {
+        match &frame {
+            Frame::Config(c) => reconstructor.config_frame(c, chunk),
             Frame::Snapshot(s) => reconstructor.snapshot(s.clone()),
             Frame::Batch(b) => {
                 let _ = reconstructor.batch(b, |s| out.push(s));
@@ -150,10 +155,7 @@ fn a_refused_batch_is_counted_and_samples_resume_at_the_next_snapshot() {
     let summary = device.finish();
     pin.done();
     assert_eq!(summary.frames_dropped, 1);
-    let indices: Vec<u32> = samples(&frames(&sink.accepted))
-        .iter()
-        .map(|s| s.index)
-        .collect();
+    let indices: Vec<u32> = samples(&sink.accepted).iter().map(|s| s.index).collect();
     // The lost batch, and the rest until the snapshot at 250, are not
     // given: the host cannot know the state they start from.
     assert_eq!(indices, (0..25).chain(250..300).collect::<Vec<_>>());
@@ -304,4 +306,55 @@ fn stop_on_puncture_halts_in_the_same_sample_and_asks_for_the_back_off() {
         "{back_off} vs {expected}"
     );
     assert!((expected - 0.5 * 0.01665).abs() < 2e-4, "{expected}");
+}
+
+/// A command's frame as the host sends it.
+fn command_bytes(seq: u32, command: protocol::Command) -> Vec<u8> {
+    let mut encoder =
+        protocol::wire::Encoder::<{ protocol::command::MAX_ENCODED_COMMAND }>::default();
+    encoder
+        .encode(&protocol::CommandFrame { seq, command })
+        .to_vec()
+}
+
+#[test]
+fn settings_changed_by_a_command_are_handed_out_once_and_restore_the_same_configuration() {
+    use needle_holder::assist::AssistModes;
+    use needle_holder::persist::{self, Loaded};
+    use needle_holder::units::Nanometres;
+    let mut sink = Vec::new();
+    let mut device = Device::new(DeviceConfig::default(), &mut sink, RecordingPin::default());
+    assert_eq!(device.settings_to_save(), None, "nothing changed yet");
+    device.receive(&command_bytes(1, protocol::Command::SelectTissue(3)));
+    device.receive(&command_bytes(
+        2,
+        protocol::Command::SetAssist {
+            modes: AssistModes::STOP_ON_PUNCTURE,
+            target_depth: Nanometres(12_000_000),
+        },
+    ));
+    // A refused command changes nothing to keep.
+    device.receive(&command_bytes(3, protocol::Command::SelectTissue(200)));
+    let settings = device.settings_to_save().expect("settings to keep");
+    assert_eq!(device.settings_to_save(), None, "handed out once");
+    let mut buf = [0u8; persist::MAX_RECORD];
+    let mut region = vec![0xFF; 4096];
+    let record = persist::record(&settings, &mut buf);
+    region[..record.len()].copy_from_slice(record);
+    let loaded = persist::load(&region);
+    assert_eq!(loaded.loaded, Loaded::Saved);
+    let restored = DeviceConfig::default().with_settings(&loaded.settings.unwrap());
+    assert_eq!(&restored, device.config());
+}
+
+proptest! {
+    /// Any bytes in the settings sector: no panic, and settings only from
+    /// a record whose CRC holds.
+    #[test]
+    fn any_sector_contents_load_without_panic(bytes in prop::collection::vec(any::<u8>(), 0..1500)) {
+        let loaded = needle_holder::persist::load(&bytes);
+        if loaded.settings.is_none() {
+            prop_assert!(!matches!(loaded.loaded, needle_holder::persist::Loaded::Saved));
+        }
+    }
 }

@@ -374,8 +374,7 @@ pub fn describe(frame: &Message, rate_hz: Option<u16>) -> String {
             format!("header  protocol {}, {} Hz", h.protocol_version, h.sample_rate_hz)
         }
         Message::Config(c) => format!(
-            "config  from {}  tissue {}, tare {} counts, gain {:.4} uN/count, {} nm/count, assist {:#04x}, target depth {:.1} mm",
-            t(c.from_index),
+            "config  tissue {}, tare {} counts, gain {:.4} uN/count, {} nm/count, assist {:#04x}, target depth {:.1} mm",
             tissue_name(c.tissue),
             c.config.load_cell.tare_counts,
             f64::from(c.config.load_cell.gain_q16) / 65536.0,

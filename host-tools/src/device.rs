@@ -118,7 +118,11 @@ fn tissue_command(tissue: &str, name: Option<&str>) -> Result<Command> {
         );
     }
     let entry = crate::tissue::resolve(name, Some(&path))?;
-    Ok(Command::UploadTissue(entry.params))
+    // The device takes tissues in fixed point: the conversion (and its
+    // check) runs here, with the core's own code.
+    let model = needle_holder::config::TissueModel::from_params(&entry.params)
+        .map_err(|e| anyhow::anyhow!("{}: [{}] {e}", path.display(), entry.name))?;
+    Ok(Command::UploadTissue(model))
 }
 
 /// Wait for the configuration frame that answers a read and print it.

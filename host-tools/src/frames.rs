@@ -188,7 +188,7 @@ impl StreamDecoder {
     ) -> Result<(), VersionMismatch> {
         let mut buffer = [0u8; MAX_ENCODED_FRAME];
         match protocol::decode(chunk, &mut buffer) {
-            Ok(frame) => return self.accept(frame, on_item),
+            Ok(frame) => return self.accept(frame, chunk, on_item),
             Err(DecodeError::Crc) => {}
             Err(_) => {
                 self.skip(chunk.len() + 1, "undecodable frame", on_item);
@@ -260,9 +260,12 @@ impl StreamDecoder {
         on_item(Item::Frame(message));
     }
 
+    /// A version-3 frame; `chunk` is its bytes as received (a config
+    /// frame's seed the batch checks).
     fn accept(
         &mut self,
         frame: Frame<'_>,
+        chunk: &[u8],
         on_item: &mut impl FnMut(Item),
     ) -> Result<(), VersionMismatch> {
         let message = match frame {
@@ -282,7 +285,7 @@ impl StreamDecoder {
                 Message::Status(s)
             }
             Frame::Config(c) => {
-                self.reconstructor.config_frame(&c);
+                self.reconstructor.config_frame(&c, chunk);
                 Message::Config(Box::new(c))
             }
             Frame::Snapshot(snapshot) => {
@@ -496,7 +499,8 @@ mod tests {
     #[test]
     fn a_host_with_another_configuration_withholds_every_sample() {
         let liver2 = needle_holder::model::params::LIVER2;
-        let device_config = DeviceConfig::default().with_tissue(&liver2).unwrap();
+        let liver2 = needle_holder::config::TissueModel::from_params(&liver2).unwrap();
+        let device_config = DeviceConfig::default().with_tissue(&liver2);
         let (stream, _) = device_stream(device_config, 300);
         // Swap the config frame for the default's: the host now computes
         // with parameters the device does not use.

@@ -62,7 +62,12 @@ fn the_ci_board_image_fits_the_budget() {
         size.flash_bytes > 4096,
         "{size:?}: implausibly small, sections missed?"
     );
-    assert!(size.flash_bytes <= 32 * 1024, "{size:?}");
+    // 32 KiB until protocol 3 put on the device the serialisers of its
+    // whole configuration and state (config frames, snapshots) and the
+    // command reader (an opt-level "z" build is 26 KiB but costs 950
+    // instructions a sample against 655). The LM3S6965 has 256 KiB; the
+    // real board's image may use 384 KiB.
+    assert!(size.flash_bytes <= 96 * 1024, "{size:?}");
     assert!(size.ram_bytes <= 8 * 1024, "{size:?}");
 }
 
@@ -98,8 +103,10 @@ fn the_instruction_counter_sees_every_sample() {
     );
 }
 
-/// The STM32F411RE's memory (RM0383 §2.3): 512 KiB flash, 128 KiB SRAM.
-const F411_FLASH: std::ops::Range<u64> = 0x0800_0000..0x0808_0000;
+/// The STM32F411RE's memory (RM0383 §2.3): 512 KiB flash, 128 KiB SRAM;
+/// the image may use sectors 0–6, sector 7 (from 0x0806_0000) holds the
+/// settings.
+const F411_FLASH: std::ops::Range<u64> = 0x0800_0000..0x0806_0000;
 const F411_RAM: std::ops::Range<u64> = 0x2000_0000..0x2002_0000;
 
 #[test]

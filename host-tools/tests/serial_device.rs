@@ -14,7 +14,7 @@ use host_tools::frames::{Item, Message};
 use host_tools::link::Link;
 use host_tools::sim::{self, Plan};
 use needle_holder::assist::AssistModes;
-use needle_holder::config::DeviceConfig;
+use needle_holder::config::{DeviceConfig, TissueModel};
 use needle_holder::model::params::{LIBRARY, LIVER1};
 use needle_holder::protocol::wire::{Encoder, FRAME_CRC};
 use needle_holder::protocol::{
@@ -137,15 +137,18 @@ fn every_command_over_a_pty_is_answered_and_takes_effect() {
         "the tare stays"
     );
     assert_ne!(selected.config.model, tared.config.model);
-    assert_eq!(link.command(Command::UploadTissue(LIVER1)).unwrap(), Ok(()));
+    let liver1 = TissueModel::from_params(&LIVER1).unwrap();
+    assert_eq!(link.command(Command::UploadTissue(liver1)).unwrap(), Ok(()));
     let uploaded = next_config(&mut link);
     assert_eq!(uploaded.tissue, TissueSource::Uploaded);
     assert_eq!(uploaded.config.model, boot.config.model);
 
     // Refused commands change nothing.
-    let mut nan = LIVER1;
-    nan.cutting_force_n = f64::NAN;
-    match link.command(Command::UploadTissue(nan)).unwrap() {
+    // A tissue that fails the device's own check (the host converts
+    // tissues to fixed point; the device trusts no conversion).
+    let mut pulling = liver1;
+    pulling.model.cutting = needle_holder::units::MicroNewtons(-1);
+    match link.command(Command::UploadTissue(pulling)).unwrap() {
         Err(CommandError::InvalidTissue { field, .. }) => {
             assert_eq!(field.as_str(), "cutting_force_n")
         }

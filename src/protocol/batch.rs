@@ -21,7 +21,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::DeviceConfig;
 use crate::hal::AdcSample;
 use crate::pipeline::RawSample;
 use crate::protocol::Sample;
@@ -69,13 +68,13 @@ impl Default for BatchCheck {
 }
 
 impl BatchCheck {
-    /// The check a batch starts from under `config`: FNV-1a over its
-    /// postcard bytes, so a host computing with another configuration
-    /// fails every batch, even those whose samples would agree.
-    pub fn seed(config: &DeviceConfig) -> Self {
-        let mut bytes = [0u8; 512];
-        let used = postcard::to_slice(config, &mut bytes).map_or(&[][..], |b| &*b);
-        Self(used.iter().fold(Self::default().0, |h, &b| {
+    /// The check a batch starts from after the config frame `wire_bytes`
+    /// (as sent, COBS-encoded, without the closing zero): FNV-1a over them,
+    /// so a host computing with another configuration fails every batch,
+    /// even those whose samples would agree. The bytes of a config frame
+    /// depend only on the configuration, so a lost repeat costs nothing.
+    pub fn seed(wire_bytes: &[u8]) -> Self {
+        Self(wire_bytes.iter().fold(Self::default().0, |h, &b| {
             (h ^ u32::from(b)).wrapping_mul(0x0100_0193)
         }))
     }

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use super::wire::{encoded_bound, DecodeError};
 use super::HaltReason;
 use crate::assist::AssistModes;
-use crate::model::params::TissueParams;
+use crate::config::TissueModel;
 use crate::units::{MicroNewtons, Nanometres};
 
 /// What the host can ask.
@@ -32,9 +32,9 @@ pub enum Command {
     /// Model and detectors from the on-device tissue library, by position
     /// (`needle device tissues` lists them).
     SelectTissue(u8),
-    /// Model and detectors from these parameters (what `needle fit --toml`
-    /// writes); checked like the library's.
-    UploadTissue(TissueParams),
+    /// Model and detectors from a tissue the host converted to fixed point
+    /// (from what `needle fit --toml` writes, say); the device checks it.
+    UploadTissue(TissueModel),
     /// Robot-assist modes and the target depth past the surface.
     SetAssist {
         /// Modes, [`AssistModes`] bits.
@@ -144,9 +144,10 @@ pub struct Reply {
     pub result: Result<(), CommandError>,
 }
 
-/// Largest command frame before COBS, CRC included (an upload: 18 `f64`
-/// and the law, the tag, the sequence number).
-pub const MAX_RAW_COMMAND: usize = 1 + 5 + 1 + 18 * 8 + 1 + 2;
+/// Largest command frame before COBS, CRC included: an upload (a
+/// tissue's fixed-point model and thresholds, at most 5 bytes a field and
+/// 10 for the rational law's two `i64`), the tag, the sequence number.
+pub const MAX_RAW_COMMAND: usize = 5 + 1 + 1 + 1 + 2 * 10 + 7 * 5 + 5 + 3 * 5 + 10 * 5 + 5 + 2;
 /// Largest command frame on the wire.
 pub const MAX_ENCODED_COMMAND: usize = encoded_bound(MAX_RAW_COMMAND);
 
@@ -207,5 +208,60 @@ impl CommandReader {
                 Ok((super::wire::parse::<CommandFrame>(body)?, check))
             }),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::LIBRARY_MODELS;
+    use crate::model::stiffness::Stiffness;
+    use crate::protocol::wire::Encoder;
+
+    #[test]
+    fn the_largest_command_fits_its_bound_and_every_command_reads_back() {
+        let mut huge = LIBRARY_MODELS[0];
+        huge.model.stiffness = Stiffness::Rational {
+            a_q48: i64::MIN,
+            b_q32: i64::MIN,
+        };
+        huge.model.cutting = MicroNewtons::MIN;
+        let commands = [
+            Command::Tare,
+            Command::SelectTissue(u8::MAX),
+            Command::UploadTissue(huge),
+            Command::SetAssist {
+                modes: AssistModes(u8::MAX),
+                target_depth: Nanometres::MIN,
+            },
+            Command::Rearm,
+            Command::Stream(false),
+            Command::ReadConfig,
+        ];
+        for command in commands {
+            let frame = CommandFrame {
+                seq: u32::MAX,
+                command,
+            };
+            let mut encoder = Encoder::<MAX_ENCODED_COMMAND>::default();
+            let bytes = encoder.encode(&frame).to_vec();
+            assert!(!bytes.is_empty(), "{command:?} does not fit");
+            let mut reader = CommandReader::default();
+            let mut got = None;
+            for &b in &bytes {
+                got = reader.push(b).or(got);
+            }
+            assert_eq!(got.map(|r| r.map(|(f, _)| f)), Some(Ok(frame)));
+        }
+    }
+
+    #[test]
+    fn a_run_longer_than_any_command_is_one_corrupted_frame() {
+        let mut reader = CommandReader::default();
+        let answers: std::vec::Vec<_> = core::iter::repeat_n(0x55u8, 3 * MAX_ENCODED_COMMAND)
+            .chain([0, 0, 0])
+            .filter_map(|b| reader.push(b))
+            .collect();
+        assert_eq!(answers, [Err(CommandError::Corrupted)]);
     }
 }

@@ -193,14 +193,16 @@ pub enum TissueSource {
     Uploaded,
 }
 
-/// What the device computes with, from sample `from_index` on: sent after
-/// the header, after every change, and on request.
+/// What the device computes with, from the next sample on: sent after the
+/// header, after every change, on request, and now and then for a host
+/// that joined late. The same configuration always gives the same bytes,
+/// and their hash seeds every batch's check ([`batch::BatchCheck::seed`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ConfigFrame {
-    /// First sample computed with it.
-    pub from_index: u32,
     /// Where the tissue model came from.
     pub tissue: TissueSource,
+    /// What the board's settings store held at boot.
+    pub stored: crate::persist::Loaded,
     /// The whole pipeline's configuration: load-cell tare and gain,
     /// encoder scale, rate, model, detectors, assist.
     pub config: DeviceConfig,
@@ -331,8 +333,8 @@ mod tests {
                 sample_rate_hz: 500,
             }),
             Frame::Config(ConfigFrame {
-                from_index: u32::MAX,
                 tissue: TissueSource::Library(u8::MAX),
+                stored: crate::persist::Loaded::SavedBeforeTorn,
                 config,
             }),
             Frame::Batch(Batch {

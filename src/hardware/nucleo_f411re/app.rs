@@ -17,9 +17,11 @@ mod app {
     use heapless::spsc::{Consumer, Queue};
     use needle_holder::calibration::{BootTare, TareResult};
     use needle_holder::config::DeviceConfig;
-    use needle_holder::device::Device;
+    use needle_holder::device::{default_tissue, Device};
     use needle_holder::faults::Faults;
+    use needle_holder::persist::Loaded;
     use needle_holder::protocol::command::CommandReader;
+    use needle_holder::protocol::TissueSource;
     use stm32f4xx_hal::gpio::ExtiPin;
     use stm32f4xx_hal::pac::{self, TIM5, USART2};
     use stm32f4xx_hal::prelude::*;
@@ -32,6 +34,7 @@ mod app {
     use super::super::halt::HaltLine;
     use super::super::link::{drain, QueueWriter, QUEUE_BYTES};
     use super::super::setup::setup;
+    use super::super::store::Store;
 
     type Dev = Device<QueueWriter, HaltLine>;
 
@@ -49,6 +52,9 @@ mod app {
         /// Samples taken, for the watchdog.
         seen: u32,
         config: DeviceConfig,
+        /// Where the configuration came from: the tissue's source and
+        /// what the settings store held.
+        origin: (TissueSource, Loaded),
     }
 
     #[local]
@@ -61,6 +67,7 @@ mod app {
         commands: CommandReader,
         outgoing: Consumer<'static, u8, QUEUE_BYTES>,
         watchdog: CounterHz<TIM5>,
+        store: Store,
     }
 
     /// The sample rate, chosen at build time (features `rate-1khz`,
@@ -76,8 +83,17 @@ mod app {
     #[init(local = [queue: Queue<u8, QUEUE_BYTES> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         super::super::stack::paint();
-        let config = DeviceConfig::default().with_sample_rate(SAMPLE_RATE_HZ);
-        let parts = setup(cx.device, cx.core, config.velocity.sample_rate_hz);
+        let base = DeviceConfig::default().with_sample_rate(SAMPLE_RATE_HZ);
+        let parts = setup(cx.device, cx.core, base.velocity.sample_rate_hz);
+        // The saved tissue, calibration and assist, or the compiled
+        // default (the config frame says which).
+        let (mut store, load) = Store::open(parts.flash);
+        store.prepare(load.settings.as_ref());
+        defmt::info!("settings: {}", load.loaded);
+        let (config, tissue) = match &load.settings {
+            Some(s) => (base.with_settings(s), s.tissue),
+            None => (base, default_tissue()),
+        };
         defmt::info!(
             "needle-holder {} on {} at {=u16} Hz",
             env!("CARGO_PKG_VERSION"),
@@ -90,10 +106,16 @@ mod app {
             unarmed: Some((needle_holder::link::QueueWriter(producer), parts.halt)),
             seen: 0,
             config,
+            origin: (tissue, load.loaded),
         };
         if let Err(e) = parts.converter_started {
             defmt::error!("ADS1220 did not start: {}", defmt::Debug2Format(&e));
-            let device = arm(&mut shared.device, &mut shared.unarmed, &config);
+            let device = arm(
+                &mut shared.device,
+                &mut shared.unarmed,
+                &config,
+                shared.origin,
+            );
             if let Some(device) = device {
                 device.raise(Faults::ADC_ERROR);
             }
@@ -109,6 +131,7 @@ mod app {
                 commands: CommandReader::default(),
                 outgoing,
                 watchdog: parts.watchdog,
+                store,
             },
         )
     }
@@ -118,16 +141,17 @@ mod app {
         device: &'a mut Option<Dev>,
         unarmed: &mut Option<(QueueWriter, HaltLine)>,
         config: &DeviceConfig,
+        (tissue, stored): (TissueSource, Loaded),
     ) -> Option<&'a mut Dev> {
         if device.is_none() {
             if let Some((sink, halt)) = unarmed.take() {
-                *device = Some(Device::new(*config, sink, halt));
+                *device = Some(Device::restored(*config, tissue, stored, sink, halt));
             }
         }
         device.as_mut()
     }
 
-    #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config], local = [acquisition, encoder, tare])]
+    #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config, origin], local = [acquisition, encoder, tare])]
     fn sample(cx: sample::Context) {
         let acquisition = cx.local.acquisition;
         acquisition
@@ -140,15 +164,16 @@ mod app {
             cx.shared.unarmed,
             cx.shared.seen,
             cx.shared.config,
+            cx.shared.origin,
         );
         let (encoder, tare) = (cx.local.encoder, cx.local.tare);
-        shared.lock(|device, unarmed, seen, config| {
+        shared.lock(|device, unarmed, seen, config, origin| {
             *seen = seen.wrapping_add(1);
             match conversion {
                 Conversion::Partial => {}
                 Conversion::Failed(e) => {
                     defmt::error!("ADS1220: {}", defmt::Debug2Format(&e));
-                    if let Some(d) = arm(device, unarmed, config) {
+                    if let Some(d) = arm(device, unarmed, config, *origin) {
                         d.tick(&mut Broken, encoder);
                     }
                 }
@@ -159,11 +184,11 @@ mod app {
                             TareResult::Zero(zero) => {
                                 config.load_cell.tare_counts = zero;
                                 defmt::info!("tare {=i32} counts: armed", zero);
-                                arm(device, unarmed, config);
+                                arm(device, unarmed, config, *origin);
                             }
                             TareResult::Loaded(mean) => {
                                 defmt::error!("load at boot: {=i32} counts", mean);
-                                if let Some(d) = arm(device, unarmed, config) {
+                                if let Some(d) = arm(device, unarmed, config, *origin) {
                                     d.raise(Faults::LOAD_AT_BOOT);
                                 }
                             }
@@ -182,7 +207,7 @@ mod app {
         rtic::pend(pac::Interrupt::USART2);
     }
 
-    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0, ticks: u32 = 0])]
+    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config, origin], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0, ticks: u32 = 0])]
     fn watchdog(mut cx: watchdog::Context) {
         cx.local.watchdog.clear_all_flags();
         // Every 10 s, how deep the stack has been.
@@ -205,9 +230,14 @@ mod app {
         *cx.local.quiet = cx.local.quiet.saturating_add(1);
         if *cx.local.quiet == 2 {
             defmt::error!("no data-ready: adc_timeout");
-            let mut shared = (cx.shared.device, cx.shared.unarmed, cx.shared.config);
-            shared.lock(|device, unarmed, config| {
-                if let Some(d) = arm(device, unarmed, config) {
+            let mut shared = (
+                cx.shared.device,
+                cx.shared.unarmed,
+                cx.shared.config,
+                cx.shared.origin,
+            );
+            shared.lock(|device, unarmed, config, origin| {
+                if let Some(d) = arm(device, unarmed, config, *origin) {
                     d.raise(Faults::ADC_TIMEOUT);
                 }
             });
@@ -233,9 +263,21 @@ mod app {
         drain(cx.local.tx, cx.local.outgoing);
     }
 
-    #[idle]
-    fn idle(_: idle::Context) -> ! {
+    /// Between interrupts: settings a command changed go to flash (each
+    /// programmed byte stalls the flash for microseconds, so samples keep
+    /// their time).
+    #[idle(shared = [device], local = [store])]
+    fn idle(mut cx: idle::Context) -> ! {
         loop {
+            let changed = cx
+                .shared
+                .device
+                .lock(|device| device.as_mut().and_then(|d| d.settings_to_save()));
+            if let Some(settings) = changed {
+                if cx.local.store.save(&settings) {
+                    defmt::info!("settings saved");
+                }
+            }
             cortex_m::asm::wfi();
         }
     }

@@ -9,12 +9,13 @@
 //! | ADS1220 /DRDY | PA10 (EXTI10, falling) | D2 (CN9-3) |
 //! | encoder A, B | PA0, PA1 (TIM2 CH1, CH2, encoder mode) | A0, A1 (CN8-1, CN8-2) |
 //! | halt line (to the robot) | PA8, push-pull, active high | D7 (CN9-8) |
-//! | frames out | PA2 (USART2_TX) at 921 600 Bd | the ST-LINK's virtual COM port |
+//! | frames out, commands in | PA2 (USART2_TX), PA3 (USART2_RX) at 921 600 Bd | the ST-LINK's virtual COM port |
 //!
 //! Split by concern as stabilizer does: [`setup`] brings the chip up and
 //! hands out the parts, [`adc`] is the converter on its bus, [`encoder`]
 //! the timer in encoder mode, [`link`] the frame queue and its drain,
-//! [`halt`] the line and what a panic does to it; [`app`] is the RTIC
+//! [`halt`] the line and what a panic does to it, [`store`] the settings
+//! sector in flash; [`app`] is the RTIC
 //! application that schedules them (the converter's data-ready is the
 //! sample clock).
 //!
@@ -36,6 +37,8 @@ mod replay_app;
 #[cfg(not(feature = "f411-replay"))]
 pub mod setup;
 pub mod stack;
+#[cfg(not(feature = "f411-replay"))]
+pub mod store;
 
 // defmt over RTT on the board (probe-rs reads it); over semihosting in
 // QEMU, where the replay image runs.

@@ -38,6 +38,8 @@ pub struct Parts {
     pub rx: Rx<USART2>,
     pub halt: HaltLine,
     pub watchdog: CounterHz<TIM5>,
+    /// The flash interface, for the settings store.
+    pub flash: pac::FLASH,
 }
 
 /// Bring everything up for `sample_rate_hz`.
@@ -101,6 +103,7 @@ pub fn setup(mut dp: pac::Peripherals, cp: cortex_m::Peripherals, sample_rate_hz
         rx,
         halt,
         watchdog,
+        flash: dp.FLASH,
     }
 }
 
