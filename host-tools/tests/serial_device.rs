@@ -392,3 +392,38 @@ fn needle_record_over_a_pty_gives_the_trial_csv_decode_gives_on_a_capture() {
     assert!(std::fs::read_to_string(&kept).unwrap().starts_with(&trial));
     assert!(stderr.contains("trial_000.csv"), "{stderr}");
 }
+
+#[test]
+fn ctrl_c_stops_needle_record_and_keeps_the_trial_in_hand() {
+    let dir = tempfile::tempdir().unwrap();
+    // The paper's insertion: 25 s, interrupted well before its end.
+    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let out = dir.path().join("recorded");
+    let mut record = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["record", "--port", &device.port, "--out"])
+        .arg(&out)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Into the tissue (contact at 1.7 s, puncture at 7.2 s), then Ctrl-C.
+    std::thread::sleep(Duration::from_secs(5));
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(unsafe { libc::kill(record.id() as i32, libc::SIGINT) }, 0);
+    let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(10))
+        .unwrap()
+        .expect("needle record stops at Ctrl-C");
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut record.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(status.success(), "{stderr}");
+    let trial =
+        std::fs::read_to_string(out.join("trial_000.csv")).expect("the trial in hand is written");
+    let rows: Vec<&str> = trial.lines().skip(1).collect();
+    assert!(rows.len() > 500, "{} rows", rows.len());
+    assert!(
+        rows.iter().any(|r| r.ends_with(",loading")),
+        "it was in the tissue"
+    );
+    assert!(out.join("stream.bin").exists());
+    drop(device);
+}
