@@ -110,11 +110,38 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
     out.finish(&stats)
 }
 
+/// The CSV of segment `segment` (from 0): the first is `base` itself.
+fn segment_path(base: &Path, segment: u32) -> PathBuf {
+    if segment == 0 {
+        return base.to_path_buf();
+    }
+    let stem = base
+        .file_stem()
+        .map_or_else(Default::default, |s| s.to_string_lossy().into_owned());
+    let ext = base
+        .extension()
+        .map_or_else(String::new, |e| format!(".{}", e.to_string_lossy()));
+    base.with_file_name(format!("{stem}-{}{ext}", segment + 1))
+}
+
+/// A trial CSV with its header line.
+fn create_csv(path: &Path) -> Result<csv::Writer<std::fs::File>> {
+    let mut w = csv::Writer::from_path(path)
+        .with_context(|| format!("{}: cannot create", path.display()))?;
+    w.write_record(CSV_HEADER)
+        .with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(w)
+}
+
 /// Where decoded items go: text lines, and samples to CSV when asked.
 struct Output {
     text: std::io::BufWriter<std::io::Stdout>,
     csv: Option<csv::Writer<std::fs::File>>,
     csv_path: Option<PathBuf>,
+    /// The path `--csv` named; later segments go beside it.
+    csv_base: Option<PathBuf>,
+    /// Segments begun after the first (the index went back).
+    segment: u32,
     rate_hz: Option<u16>,
     /// Samples that arrived before the sample rate was known.
     pending: Vec<Sample>,
@@ -122,20 +149,14 @@ struct Output {
 
 impl Output {
     fn new(csv_path: Option<&Path>, rate_hz: Option<u16>) -> Result<Self> {
-        let csv = match csv_path {
-            Some(path) => {
-                let mut w = csv::Writer::from_path(path)
-                    .with_context(|| format!("{}: cannot create", path.display()))?;
-                w.write_record(CSV_HEADER)?;
-                Some(w)
-            }
-            None => None,
-        };
+        let csv = csv_path.map(create_csv).transpose()?;
         let text = std::io::BufWriter::new(std::io::stdout());
         Ok(Self {
             text,
             csv,
             csv_path: csv_path.map(Path::to_path_buf),
+            csv_base: csv_path.map(Path::to_path_buf),
+            segment: 0,
             rate_hz,
             pending: Vec::new(),
         })
@@ -165,7 +186,31 @@ impl Output {
                 missing_name(why),
                 last - first + 1
             )?,
+            Item::Restart { last } => self.restart(last)?,
         }
+        Ok(())
+    }
+
+    /// The index went back: samples from here on go to a new CSV
+    /// (`NAME-2.csv`, `NAME-3.csv`, …), so no file's time goes back.
+    fn restart(&mut self, last: u32) -> Result<()> {
+        self.segment += 1;
+        let Some(base) = self.csv_base.clone() else {
+            writeln!(self.text, "restart after sample {last}: the index went back (a device restart, or a stretch of the stream twice); a new segment")?;
+            return Ok(());
+        };
+        if let Some(mut w) = self.csv.take() {
+            w.flush().with_context(|| self.csv_context())?;
+        }
+        let path = segment_path(&base, self.segment);
+        writeln!(
+            self.text,
+            "restart after sample {last}: the index went back (a device restart, or a stretch of the stream twice); segment {} goes to {}",
+            self.segment + 1,
+            path.display()
+        )?;
+        self.csv = Some(create_csv(&path)?);
+        self.csv_path = Some(path);
         Ok(())
     }
 
@@ -208,8 +253,16 @@ impl Output {
         }
         if let Some(mut w) = self.csv.take() {
             w.flush().with_context(|| self.csv_context())?;
-            if let Some(path) = &self.csv_path {
-                eprintln!("wrote {} samples to {}", stats.samples, path.display());
+            if let Some(path) = &self.csv_base {
+                let more = match self.segment {
+                    0 => String::new(),
+                    n => format!(" and {n} more segment files beside it"),
+                };
+                eprintln!(
+                    "wrote {} samples to {}{more}",
+                    stats.samples,
+                    path.display()
+                );
             }
         }
         eprintln!("{}", summary_line(stats));
@@ -247,7 +300,7 @@ pub fn csv_row(s: &Sample, first_index: u32, rate_hz: u16) -> [String; 7] {
 /// One-line account of a stream.
 pub fn summary_line(s: &StreamStats) -> String {
     format!(
-        "{} frames ({} samples, {} events), {} gaps ({} samples lost, {} withheld), {} bytes skipped in {} runs",
+        "{} frames ({} samples, {} events), {} gaps ({} samples lost, {} withheld), {} bytes skipped in {} runs{}",
         s.frames,
         s.samples,
         s.events,
@@ -255,7 +308,12 @@ pub fn summary_line(s: &StreamStats) -> String {
         s.lost_samples,
         s.withheld_samples,
         s.skipped_bytes,
-        s.skipped_runs
+        s.skipped_runs,
+        if s.restarts > 0 {
+            format!(", {} restarts (new segments)", s.restarts)
+        } else {
+            String::new()
+        }
     )
 }
 

@@ -85,6 +85,10 @@ pub enum Item {
     Skipped { bytes: usize, reason: &'static str },
     /// Samples `first..=last` are missing.
     Gap { first: u32, last: u32, why: Missing },
+    /// The sample index went back after sample `last` (the device
+    /// restarted, or a stretch of the stream came twice): what follows is
+    /// a new segment, its indices (and times) from their own start.
+    Restart { last: u32 },
 }
 
 /// Counters over a whole stream.
@@ -102,6 +106,8 @@ pub struct StreamStats {
     pub withheld_samples: u64,
     /// Bytes of the stream, delimiters included.
     pub bytes: u64,
+    /// Times the sample index went back (new segments).
+    pub restarts: u64,
 }
 
 /// The stream speaks a protocol version this needle cannot read.
@@ -129,6 +135,10 @@ pub struct StreamDecoder {
     /// Bytes thrown away since the pending buffer overflowed.
     overflow: usize,
     next_index: Option<u32>,
+    /// Where the segment before a restart stopped: a later jump forward
+    /// to it is that segment going on (a stretch of the stream came
+    /// twice), not samples lost.
+    resume_at: Option<u32>,
     reconstructor: Reconstructor,
     stats: StreamStats,
 }
@@ -228,6 +238,18 @@ impl StreamDecoder {
 
     /// Samples up to `index` (exclusive) that should have come and did not.
     fn missing_before(&mut self, index: u32, why: Missing, on_item: &mut impl FnMut(Item)) {
+        if let (Some(expected), Some(resume)) = (self.next_index, self.resume_at) {
+            if expected < resume && index >= resume {
+                // Back where the earlier segment stopped: it goes on.
+                self.stats.restarts += 1;
+                on_item(Item::Restart {
+                    last: expected.wrapping_sub(1),
+                });
+                self.next_index = Some(resume);
+                self.resume_at = None;
+                self.reconstructor.lose_step();
+            }
+        }
         if let Some(expected) = self.next_index {
             if index > expected {
                 self.gap(expected, index - 1, why, on_item);
@@ -245,7 +267,24 @@ impl StreamDecoder {
         on_item(Item::Gap { first, last, why });
     }
 
+    /// The index goes back to `index`: a new segment.
+    fn went_back(&mut self, index: u32, on_item: &mut impl FnMut(Item)) -> bool {
+        match self.next_index {
+            Some(expected) if index < expected => {
+                self.stats.restarts += 1;
+                on_item(Item::Restart {
+                    last: expected.wrapping_sub(1),
+                });
+                self.resume_at = Some(expected);
+                self.next_index = None;
+                true
+            }
+            _ => false,
+        }
+    }
+
     fn sample(&mut self, s: Sample, on_item: &mut impl FnMut(Item)) {
+        self.went_back(s.index, on_item);
         self.missing_before(s.index, Missing::Lost, on_item);
         self.next_index = Some(s.index.wrapping_add(1));
         self.stats.samples += 1;
@@ -272,7 +311,9 @@ impl StreamDecoder {
             Frame::Header(h) => {
                 check_version(h.protocol_version, PROTOCOL_VERSION)?;
                 // The device (re)started: indices begin again.
+                self.went_back(0, on_item);
                 self.next_index = None;
+                self.resume_at = None;
                 self.reconstructor.restart();
                 Message::Header(h)
             }
@@ -289,6 +330,7 @@ impl StreamDecoder {
                 Message::Config(Box::new(c))
             }
             Frame::Snapshot(snapshot) => {
+                self.went_back(snapshot.next_index, on_item);
                 self.missing_before(snapshot.next_index, Missing::Lost, on_item);
                 self.next_index = Some(snapshot.next_index);
                 self.reconstructor.snapshot(snapshot.clone());
@@ -308,6 +350,9 @@ impl StreamDecoder {
     }
 
     fn batch(&mut self, batch: &protocol::Batch<'_>, on_item: &mut impl FnMut(Item)) {
+        if self.went_back(batch.first_index, on_item) {
+            self.reconstructor.lose_step();
+        }
         if self.next_index.is_some_and(|e| batch.first_index > e) {
             self.missing_before(batch.first_index, Missing::Lost, on_item);
             self.reconstructor.lose_step();
@@ -332,7 +377,9 @@ impl StreamDecoder {
         let message = match frame {
             v2::Frame::Header(h) => {
                 check_version(h.protocol_version, 2)?;
+                self.went_back(0, on_item);
                 self.next_index = None;
+                self.resume_at = None;
                 Message::Header(Header {
                     protocol_version: h.protocol_version,
                     sample_rate_hz: h.sample_rate_hz,

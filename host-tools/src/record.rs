@@ -150,6 +150,11 @@ impl Recorder {
             Item::Skipped { bytes, reason } => {
                 self.line(&format!("skipped {bytes} bytes ({reason})"))
             }
+            // The device restarted: the trial in hand ends there.
+            Item::Restart { last } => {
+                self.line(&format!("the device restarted after sample {last}"));
+                self.close()?;
+            }
             Item::Frame(_) => {}
         }
         Ok(())

@@ -230,3 +230,97 @@ fn a_csv_that_cannot_be_written_is_named() {
     assert!(!out.status.success());
     assert!(err.contains("/dev/full"), "{err}");
 }
+
+/// A capture of the host twin on a simulated liver insertion at 500 Hz.
+fn twin_capture(seconds: f64) -> Vec<u8> {
+    use host_tools::sim::{self, Plan};
+    use needle_holder::config::DeviceConfig;
+    use needle_holder::model::params::LIVER1;
+    let plan = Plan {
+        depth_m: seconds * 0.003 - 0.005,
+        dwell_s: 0.0,
+        ..Plan::PAPER
+    };
+    let (trial, _) = sim::insertion(&LIVER1, &plan);
+    let config = DeviceConfig::default();
+    let replay = sim::to_replay(&trial, 500, &config.load_cell, &config.encoder);
+    host_tools::twin::run(&replay).frames
+}
+
+/// Each CSV's `t_s` column, which must rise from row to row.
+fn times(path: &std::path::Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let t: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert!(
+        t.windows(2).all(|w| w[1] > w[0]),
+        "{}: time goes back",
+        path.display()
+    );
+    t
+}
+
+#[test]
+fn decode_splits_at_an_index_that_goes_back_and_never_writes_time_backwards() {
+    // Row 6: a chunk repeated, or two captures joined (a reboot): the index
+    // going back was not reported, the jump forward counted as thousands
+    // of lost samples, and the CSV's time went backwards.
+    let dir = tempfile::tempdir().unwrap();
+    let one = twin_capture(12.0);
+    // Two captures joined: the device rebooted.
+    let joined = dir.path().join("joined.bin");
+    std::fs::write(&joined, [one.clone(), one.clone()].concat()).unwrap();
+    let csv = dir.path().join("joined.csv");
+    let out = needle(&[
+        "decode",
+        joined.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(text.contains("restart after sample"), "{text}");
+    assert!(
+        err.contains("0 samples lost") && err.contains("1 restarts"),
+        "{err}"
+    );
+    let (first, second) = (times(&csv), times(&dir.path().join("joined-2.csv")));
+    assert_eq!(first.len(), second.len());
+    // A stretch of the stream twice (cut at frame boundaries): up to b,
+    // a..c again, then on from b — a restart, and the first segment going
+    // on where it stopped, with nothing lost.
+    let frames: Vec<&[u8]> = one.split_inclusive(|&b| b == 0).collect();
+    let (a, c, b) = (frames.len() / 4, frames.len() / 3, frames.len() / 2);
+    let repeated: Vec<u8> = frames[..b]
+        .iter()
+        .chain(&frames[a..c])
+        .chain(&frames[b..])
+        .flat_map(|f| f.to_vec())
+        .collect();
+    let rep = dir.path().join("repeated.bin");
+    std::fs::write(&rep, repeated).unwrap();
+    let csv = dir.path().join("repeated.csv");
+    let out = needle(&[
+        "decode",
+        rep.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("0 samples lost") && err.contains("2 restarts"),
+        "{err}"
+    );
+    let segments = [
+        csv.clone(),
+        dir.path().join("repeated-2.csv"),
+        dir.path().join("repeated-3.csv"),
+    ];
+    let total: usize = segments.iter().map(|p| times(p).len()).sum();
+    assert!(total >= first.len(), "every sample is in some segment");
+}
