@@ -105,9 +105,11 @@ impl VelocityState {
         // 64-bit division is a library call on Cortex-M (~100 instructions);
         // the product fits 32 bits for any speed below 2^31/N nm/s, and both
         // divisions truncate toward zero, so the result is the same.
+        // `span` ≥ 1, so neither division can fail; the checked forms
+        // say so to the compiler (no panic path is linked).
         NanometresPerSecond(match i32::try_from(scaled) {
-            Ok(s) => s / span,
-            Err(_) => saturate_i32(scaled / span as i64),
+            Ok(s) => s.checked_div(span).unwrap_or(0),
+            Err(_) => saturate_i32(scaled.checked_div(span as i64).unwrap_or(0)),
         })
     }
 }

@@ -57,7 +57,7 @@ fn main() -> ! {
         // Between samples: the link, and what the host sent.
         while !uart.send_waiting(&mut outgoing) {}
         let n = uart.received(&mut incoming);
-        replay.receive(&incoming[..n]);
+        replay.receive(incoming.get(..n).unwrap_or(&[]));
         if let Some(clock) = clock.as_mut() {
             if !clock.period_began() {
                 continue;

@@ -212,6 +212,7 @@ fn event(
 /// threshold, 1000 ‰ at twice it and beyond.
 pub fn confidence_permille(evidence: MicroNewtons, threshold: MicroNewtons) -> u16 {
     let t = i64::from(threshold.0.max(1));
-    let over = (i64::from(evidence.0) - t).clamp(0, t);
+    // max/min rather than clamp, which panics if `t` were negative.
+    let over = (i64::from(evidence.0) - t).max(0).min(t);
     (500 + over * 500 / t) as u16
 }

@@ -24,6 +24,10 @@ pub use qemu::*;
 #[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
 mod replay_file;
 
+/// Semihosting without a panic path, and the defmt logger over it.
+#[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
+mod semihost;
+
 /// Markers around each sample for `needle bench`'s instruction count.
 #[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
 mod bench;
@@ -44,5 +48,5 @@ pub mod exit_code {
 /// Leave QEMU with `code`.
 #[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
 pub fn exit(code: i32) -> ! {
-    semihosting::process::exit(code)
+    semihost::exit(code)
 }

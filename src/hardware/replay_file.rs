@@ -4,18 +4,15 @@
 
 use core::ffi::CStr;
 
-use semihosting::experimental::env::args;
-use semihosting::fs::File;
-use semihosting::io::Read as _;
-
+use super::semihost::{self, Fd};
 use super::{exit, exit_code};
 
 const BLOCK: usize = 512;
-const MAX_PATH: usize = 256;
+const MAX_LINE: usize = 512;
 
 /// A buffered semihosting file implementing [`embedded_io::Read`].
 pub struct ReplayFile {
-    file: File,
+    fd: Fd,
     buf: [u8; BLOCK],
     start: usize,
     end: usize,
@@ -27,30 +24,34 @@ impl ReplayFile {
     /// `-kernel ELF -append PATH`). Exits QEMU with
     /// [`exit_code::NO_REPLAY`] when there is none or it cannot be opened.
     pub fn open_from_args() -> Self {
-        let Ok(argv) = args::<MAX_PATH>() else {
+        let mut line = [0u8; MAX_LINE];
+        let Some(line) = semihost::command_line(&mut line) else {
             defmt::error!(
                 "no semihosting command line (or longer than {=usize} bytes)",
-                MAX_PATH
+                MAX_LINE
             );
             exit(exit_code::NO_REPLAY)
         };
-        let Some(Ok(path)) = (&argv).into_iter().last() else {
-            defmt::error!("usage: needle-holder REPLAY_FILE");
+        let Some(path) = semihost::words(line)
+            .last()
+            .filter(|_| semihost::words(line).count() > 1)
+        else {
+            defmt::error!("usage: needle-holder [--live] REPLAY_FILE");
             exit(exit_code::NO_REPLAY)
         };
-        let mut cpath = [0u8; MAX_PATH];
-        let len = path.len().min(MAX_PATH - 1);
-        cpath[..len].copy_from_slice(&path.as_bytes()[..len]);
-        let opened = CStr::from_bytes_with_nul(&cpath[..=len])
-            .ok()
-            .and_then(|p| File::open(p).ok());
-        let Some(file) = opened else {
-            defmt::error!("cannot open replay file {=str}", path);
+        let mut cpath = [0u8; MAX_LINE + 1];
+        let opened = cpath
+            .get_mut(..path.len())
+            .map(|dst| dst.copy_from_slice(path))
+            .and_then(|()| CStr::from_bytes_until_nul(&cpath).ok())
+            .and_then(|p| semihost::open(p, semihost::READ_BINARY));
+        let Some(fd) = opened else {
+            defmt::error!("cannot open replay file {=[u8]:a}", path);
             exit(exit_code::NO_REPLAY)
         };
-        defmt::info!("replaying {=str}", path);
+        defmt::info!("replaying {=[u8]:a}", path);
         Self {
-            file,
+            fd,
             buf: [0; BLOCK],
             start: 0,
             end: 0,
@@ -62,10 +63,9 @@ impl ReplayFile {
 /// (The F411 replay image has no live mode: its TIM2 is its clock.)
 #[cfg_attr(feature = "board-f411", allow(dead_code))]
 pub fn flag_given(flag: &str) -> bool {
-    let Ok(argv) = args::<MAX_PATH>() else {
-        return false;
-    };
-    (&argv).into_iter().any(|a| a.is_ok_and(|a| a == flag))
+    let mut line = [0u8; MAX_LINE];
+    semihost::command_line(&mut line)
+        .is_some_and(|line| semihost::words(line).any(|w| w == flag.as_bytes()))
 }
 
 impl embedded_io::ErrorType for ReplayFile {
@@ -74,15 +74,14 @@ impl embedded_io::ErrorType for ReplayFile {
 
 impl embedded_io::Read for ReplayFile {
     fn read(&mut self, out: &mut [u8]) -> Result<usize, Self::Error> {
-        if self.start == self.end {
+        if self.start >= self.end {
             self.start = 0;
-            self.end = self
-                .file
-                .read(&mut self.buf)
-                .map_err(|_| embedded_io::ErrorKind::Other)?;
+            self.end =
+                semihost::read(self.fd, &mut self.buf).ok_or(embedded_io::ErrorKind::Other)?;
         }
-        let n = out.len().min(self.end - self.start);
-        out[..n].copy_from_slice(&self.buf[self.start..self.start + n]);
+        let waiting = self.buf.get(self.start..self.end).unwrap_or(&[]);
+        let n = out.len().min(waiting.len());
+        out.iter_mut().zip(waiting).for_each(|(o, &b)| *o = b);
         self.start += n;
         Ok(n)
     }

@@ -77,7 +77,9 @@ impl Friction {
         } else {
             let upper = affine_times(self.dp, PerLength2Q48(0), 0, l);
             let lower = affine_times(self.dn, PerLength2Q48(0), 0, l);
-            MicroNewtons(state.last_sliding.0.clamp(lower, upper))
+            // max/min rather than clamp: no panic when a tissue's band is
+            // upside down (upper wins).
+            MicroNewtons(state.last_sliding.0.max(lower).min(upper))
         }
     }
 }

@@ -222,7 +222,7 @@ impl BatchWriter {
             first_index: self.first_index,
             samples: self.samples,
             check: self.check.0.to_le_bytes(),
-            raw: &self.bytes[..self.len],
+            raw: self.bytes.get(..self.len).unwrap_or(&[]),
         }
     }
 

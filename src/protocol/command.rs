@@ -198,7 +198,7 @@ impl CommandReader {
         let mut raw = [0u8; MAX_ENCODED_COMMAND];
         Some(
             super::wire::unframe(
-                &self.buf[..len],
+                self.buf.get(..len).unwrap_or(&[]),
                 &mut raw,
                 crate::protocol::wire::frame_check,
             )

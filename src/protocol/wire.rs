@@ -99,7 +99,7 @@ impl<const N: usize> Encoder<N> {
             len: 1,
         };
         match postcard::serialize_with_flavor(message, flavor) {
-            Ok(len) => &self.out[..len],
+            Ok(len) => self.out.get(..len).unwrap_or(&[]),
             Err(_) => &[],
         }
     }
@@ -206,7 +206,8 @@ pub fn unframe<'b>(
     if n < 3 {
         return Err(DecodeError::Crc);
     }
-    let (body, crc) = buffer[..n].split_at(n - 2);
+    let frame = buffer.get(..n).ok_or(DecodeError::Cobs)?;
+    let (body, crc) = frame.split_at_checked(n - 2).ok_or(DecodeError::Crc)?;
     if check(body).to_le_bytes() != crc {
         return Err(DecodeError::Crc);
     }

@@ -41,11 +41,9 @@ pub mod stack;
 pub mod store;
 
 // defmt over RTT on the board (probe-rs reads it); over semihosting in
-// QEMU, where the replay image runs.
+// QEMU, where the replay image runs (`hardware::semihost`).
 #[cfg(not(feature = "f411-replay"))]
 use defmt_rtt as _;
-#[cfg(feature = "f411-replay")]
-use defmt_semihosting as _;
 
 /// Board name for logs.
 pub const BOARD: &str = "nucleo-f411re";

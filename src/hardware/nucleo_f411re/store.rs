@@ -29,7 +29,7 @@ impl Store {
     /// Read the log.
     pub fn open(flash: FLASH) -> (Self, Load) {
         let flash = LockedFlash::new(flash);
-        let load = persist::load(&flash.read()[OFFSET..OFFSET + LEN]);
+        let load = persist::load(flash.read().get(OFFSET..OFFSET + LEN).unwrap_or(&[]));
         let next_free = load.next_free;
         (Self { flash, next_free }, load)
     }

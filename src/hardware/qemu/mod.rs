@@ -1,9 +1,8 @@
 //! The QEMU boards: replay source, UART0, semihosting.
 
-// Linked for their side effects: the critical-section implementation and the
-// defmt global logger.
+// Linked for its side effect: the critical-section implementation (the
+// defmt logger is `hardware::semihost`'s).
 use cortex_m as _;
-use defmt_semihosting as _;
 
 pub use super::bench::BenchMarkers;
 pub use super::replay_file::{flag_given, ReplayFile};
