@@ -247,8 +247,11 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
     let kinds = ["contact", "puncture", "structure", "exit"];
     let mut total: Vec<KindScore> = score(&[], &[], 1.0, &kinds);
     let mut trials = Vec::new();
-    for file in crate::trial::dataset_files(dir)? {
-        let trial = crate::trial::read(&file)?;
+    let (dataset, unreadable) = crate::trial::read_dataset(dir, "detect")?;
+    if let Some(truth) = &truth {
+        warn_if_truth_disagrees(dir, truth, &dataset, &unreadable);
+    }
+    for (file, trial) in dataset {
         let detection = detect_trial(&trial, config);
         let events = &detection.events;
         let name = file
@@ -280,11 +283,46 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
             "faults": detection.faults,
         }));
     }
-    let mut out = serde_json::json!({ "trials": trials });
+    let skipped: Vec<Value> = unreadable.iter().map(|u| u.to_json()).collect();
+    let mut out = serde_json::json!({ "trials": trials, "skipped": skipped });
     if truth.is_some() {
         out["evaluation"] = serde_json::to_value(&total)?;
     }
     Ok(out)
+}
+
+/// Say so when `truth.json` and the CSVs beside it do not describe the
+/// same trials (a simulation over an older one, a file added or removed):
+/// trials without truth go unscored, truth without a trial counts nothing.
+fn warn_if_truth_disagrees(
+    dir: &Path,
+    truth: &Value,
+    dataset: &[(std::path::PathBuf, crate::trial::Trial)],
+    unreadable: &[crate::trial::Unreadable],
+) {
+    let listed: std::collections::BTreeSet<&str> = truth["trials"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|t| t["file"].as_str())
+        .collect();
+    let present: std::collections::BTreeSet<String> = dataset
+        .iter()
+        .map(|(f, _)| f)
+        .chain(unreadable.iter().map(|u| &u.file))
+        .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    let untold: Vec<&String> = present
+        .iter()
+        .filter(|f| !listed.contains(f.as_str()))
+        .collect();
+    let missing: Vec<&&str> = listed.iter().filter(|f| !present.contains(**f)).collect();
+    if !untold.is_empty() || !missing.is_empty() {
+        eprintln!(
+            "needle detect: {}: truth.json and the CSVs disagree: no truth for {untold:?}, no CSV for {missing:?}; scoring only the trials both have",
+            dir.display()
+        );
+    }
 }
 
 pub fn run(args: &DetectArgs) -> Result<()> {

@@ -165,6 +165,54 @@ pub fn write(path: &Path, trial: &Trial) -> Result<()> {
         .with_context(|| format!("{}: cannot write", path.display()))
 }
 
+/// A dataset's trial that could not be read, and why (file and line).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unreadable {
+    pub file: PathBuf,
+    pub reason: String,
+}
+
+impl Unreadable {
+    /// As it goes into a command's JSON `skipped` list.
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({ "file": self.file.display().to_string(), "reason": self.reason })
+    }
+}
+
+/// Every trial of a dataset, by **the one rule for bad files** that `fit`,
+/// `detect` and `diagnose` share: a file that cannot be read (missing
+/// columns, a non-number, time not increasing, empty, not a regular file)
+/// is left out with a warning on stderr naming it and the line at fault,
+/// and listed in the command's JSON `skipped`; the command goes on with
+/// the others and fails only when none is left. `command` names the
+/// warning's sender.
+pub fn read_dataset(dir: &Path, command: &str) -> Result<(Vec<(PathBuf, Trial)>, Vec<Unreadable>)> {
+    let files = dataset_files(dir)?;
+    let mut trials = Vec::new();
+    let mut unreadable = Vec::new();
+    for file in files {
+        match read(&file) {
+            Ok(trial) => trials.push((file, trial)),
+            Err(err) => {
+                eprintln!("needle {command}: {err:#} (left out)");
+                unreadable.push(Unreadable {
+                    file,
+                    reason: format!("{err:#}"),
+                });
+            }
+        }
+    }
+    if trials.is_empty() {
+        bail!(
+            "{}: none of its {} trial files could be read (the first: {})",
+            dir.display(),
+            unreadable.len(),
+            unreadable.first().map_or("", |u| u.reason.as_str())
+        );
+    }
+    Ok((trials, unreadable))
+}
+
 /// All `*.csv` files of a dataset directory, sorted by name.
 pub fn dataset_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)

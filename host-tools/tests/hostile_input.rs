@@ -324,3 +324,73 @@ fn decode_splits_at_an_index_that_goes_back_and_never_writes_time_backwards() {
     let total: usize = segments.iter().map(|p| times(p).len()).sum();
     assert!(total >= first.len(), "every sample is in some segment");
 }
+
+#[test]
+fn one_bad_file_among_good_ones_is_left_out_by_every_command_naming_file_and_line() {
+    // Row 13: `fit` skipped a bad CSV, `detect` and `diagnose` stopped at
+    // it. One rule now: left out with a warning naming file and line,
+    // listed in the JSON's `skipped`, the others analysed.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    let sim = needle(&["simulate", "--out", d, "--trials", "3", "--seed", "4"]);
+    assert!(sim.status.success());
+    std::fs::write(
+        dir.path().join("zz_bad.csv"),
+        "t_s,x_m,f_n\n0,0,0\n0.001,0,0\n0.0005,0,0\n",
+    )
+    .unwrap();
+    for command in ["fit", "detect", "diagnose"] {
+        let json = dir.path().join(format!("{command}.json"));
+        let out = needle(&[command, d, "--json", json.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{command}: {err}");
+        assert!(
+            err.contains("zz_bad.csv:4: time does not increase"),
+            "{command}: {err}"
+        );
+        let value: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let skipped = value["skipped"]
+            .as_array()
+            .unwrap_or_else(|| panic!("{command}: no skipped list"));
+        assert!(
+            skipped
+                .iter()
+                .any(|s| s["file"].as_str().unwrap_or("").ends_with("zz_bad.csv")),
+            "{command}: {skipped:?}"
+        );
+    }
+    // Only bad files: an error, not an empty analysis.
+    let bad_only = tempfile::tempdir().unwrap();
+    std::fs::write(bad_only.path().join("a.csv"), "t_s,x_m\n0,0\n").unwrap();
+    for command in ["fit", "detect", "diagnose"] {
+        let out = needle(&[command, bad_only.path().to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success(),
+            "{command} accepted a dataset of bad files"
+        );
+        assert!(err.contains("a.csv:1: no `f_n` column"), "{command}: {err}");
+    }
+}
+
+#[test]
+fn detect_warns_when_truth_json_and_the_csvs_disagree() {
+    // Row 10's second half: CSVs and truth.json that disagree were scored
+    // without a word.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    assert!(
+        needle(&["simulate", "--out", d, "--trials", "3", "--seed", "2"])
+            .status
+            .success()
+    );
+    std::fs::remove_file(dir.path().join("trial_001.csv")).unwrap();
+    let out = needle(&["detect", d]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("truth.json and the CSVs disagree") && err.contains("trial_001.csv"),
+        "{err}"
+    );
+}

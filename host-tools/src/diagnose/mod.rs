@@ -378,10 +378,18 @@ fn improvement(base: &Scored, with: &Scored) -> (f64, f64) {
 /// take the nominal model from those fits unless `params` is given, and
 /// prepare each trial against it.
 pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, Vec<Prepared>)> {
+    load_reporting(dir, params).map(|(p, data, _)| (p, data))
+}
+
+/// [`load`], with the files left out and why (for the JSON's `skipped`).
+pub fn load_reporting(
+    dir: &Path,
+    params: Option<&TissueParams>,
+) -> Result<(TissueParams, Vec<Prepared>, Vec<Value>)> {
     let mut trials = Vec::new();
-    let mut skipped = Vec::new();
-    for file in crate::trial::dataset_files(dir)? {
-        let trial = crate::trial::read(&file)?;
+    let (dataset, unreadable) = crate::trial::read_dataset(dir, "diagnose")?;
+    let mut skipped: Vec<Value> = unreadable.iter().map(|u| u.to_json()).collect();
+    for (file, trial) in dataset {
         match fit_trial(&trial) {
             Ok(fit) => trials.push((file, trial, fit)),
             Err(e) => {
@@ -409,7 +417,7 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
                 .iter()
                 .map(|(f, _, fit)| (f.clone(), fit.clone()))
                 .collect();
-            nominal_params(&fits, skipped)?
+            nominal_params(&fits, skipped.clone())?
         }
     };
     // The diagnosis fits the model to these forces: the force settles
@@ -437,7 +445,7 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
             prepare(name, trial, fit, &params, v)
         })
         .collect();
-    Ok((params, data))
+    Ok((params, data, skipped))
 }
 
 /// The nominal model found again with the named effects' fitted
@@ -1043,7 +1051,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         }
     };
     progress("reading and fitting the trials");
-    let (_, mut data) = load(&args.dir, params.as_ref())?;
+    let (_, mut data, skipped) = load_reporting(&args.dir, params.as_ref())?;
     if args.device_model {
         for p in &mut data {
             let path = args.dir.join(&p.file);
@@ -1057,7 +1065,8 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         (false, Some(_)) => Nominal::Given,
         (false, None) => Nominal::Fitted,
     };
-    let out = diagnose_with_progress(&data, nominal, &mut progress);
+    let mut out = diagnose_with_progress(&data, nominal, &mut progress);
+    out["skipped"] = Value::from(skipped);
     progress("done");
     eprintln!("{}", report::headline(&out));
     if let Some(path) = &args.residuals {

@@ -94,13 +94,15 @@ fn static_estimate(
 /// Fit every trial of a dataset and aggregate. Files that cannot be
 /// fitted are reported in `skipped` and left out.
 pub fn fit_dataset(dir: &Path) -> Result<Value> {
-    let files = crate::trial::dataset_files(dir)?;
+    let (trials, unreadable) = crate::trial::read_dataset(dir, "fit")?;
+    let total = trials.len() + unreadable.len();
     let mut fits = Vec::new();
-    let mut skipped = Vec::new();
-    for file in &files {
-        let fitted = crate::trial::read(file)
-            .and_then(|t| fit_trial(&t).with_context(|| format!("{}: cannot fit", file.display())));
-        match fitted {
+    let mut skipped: Vec<Value> = unreadable
+        .iter()
+        .map(|u| json!({ "file": name_of(&u.file), "reason": u.reason }))
+        .collect();
+    for (file, trial) in &trials {
+        match fit_trial(trial).with_context(|| format!("{}: cannot fit", file.display())) {
             Ok(fit) => fits.push((file.clone(), fit)),
             Err(err) => {
                 eprintln!("needle fit: {err:#} (left out)");
@@ -109,11 +111,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
         }
     }
     if fits.is_empty() {
-        bail!(
-            "{}: none of {} trials could be fitted",
-            dir.display(),
-            files.len()
-        );
+        bail!("{}: none of {total} trials could be fitted", dir.display());
     }
     Ok(summarise(&fits, skipped))
 }
