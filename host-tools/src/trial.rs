@@ -165,6 +165,9 @@ pub fn write(path: &Path, trial: &Trial) -> Result<()> {
         .with_context(|| format!("{}: cannot write", path.display()))
 }
 
+/// A dataset's trials that could be read, with their files.
+pub type Dataset = Vec<(PathBuf, Trial)>;
+
 /// A dataset's trial that could not be read, and why (file and line).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Unreadable {
@@ -186,7 +189,7 @@ impl Unreadable {
 /// and listed in the command's JSON `skipped`; the command goes on with
 /// the others and fails only when none is left. `command` names the
 /// warning's sender.
-pub fn read_dataset(dir: &Path, command: &str) -> Result<(Vec<(PathBuf, Trial)>, Vec<Unreadable>)> {
+pub fn read_dataset(dir: &Path, command: &str) -> Result<(Dataset, Vec<Unreadable>)> {
     let files = dataset_files(dir)?;
     let mut trials = Vec::new();
     let mut unreadable = Vec::new();
