@@ -37,7 +37,7 @@ pub fn force_vs_position(
     }
     let pad = 0.05 * (f1 - f0).max(0.1);
     let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
-    let err = |e: DrawingAreaErrorKind<_>| anyhow!("{}: cannot draw: {e:?}", path.display());
+    let err = |e| drawing_error(path, e);
     root.fill(&WHITE).map_err(err)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
@@ -87,4 +87,20 @@ pub fn force_vs_position(
         .map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
+}
+
+/// A plotters error as a user reads it: the file that cannot be written
+/// and why, not the error's debug form.
+pub fn drawing_error(
+    path: &std::path::Path,
+    e: DrawingAreaErrorKind<std::io::Error>,
+) -> anyhow::Error {
+    use plotters::drawing::DrawingAreaErrorKind as Area;
+    use plotters_backend::DrawingErrorKind as Backend;
+    match e {
+        Area::BackendError(Backend::DrawingError(io)) => {
+            anyhow!("{}: cannot write: {io}", path.display())
+        }
+        other => anyhow!("{}: cannot draw: {other}", path.display()),
+    }
 }

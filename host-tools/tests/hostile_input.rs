@@ -394,3 +394,41 @@ fn detect_warns_when_truth_json_and_the_csvs_disagree() {
         "{err}"
     );
 }
+
+#[test]
+fn outputs_that_cannot_be_written_name_their_path_in_words() {
+    // Row 12's rest: `--plot /nodir/x.svg` said `BackendError(DrawingError(Os
+    // {..}))`, `simulate --out existing_file` said "cannot create: File
+    // exists".
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("d");
+    let d = d.to_str().unwrap();
+    assert!(
+        needle(&["simulate", "--out", d, "--trials", "2", "--seed", "3"])
+            .status
+            .success()
+    );
+    let missing = dir.path().join("nodir").join("x.svg");
+    let out = needle(&["fit", d, "--plot", missing.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("x.svg: cannot write: No such file or directory"),
+        "{err}"
+    );
+    assert!(!err.contains("BackendError"), "{err}");
+    let report = dir.path().join("nodir").join("r.html");
+    let out = needle(&["diagnose", d, "--report", report.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("cannot write") && !err.contains("BackendError"),
+        "{err}"
+    );
+    let file = dir.path().join("afile");
+    std::fs::write(&file, "").unwrap();
+    let out = needle(&["simulate", "--out", file.to_str().unwrap(), "--trials", "1"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("afile: is a file, not a directory"), "{err}");
+}

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Result};
+use anyhow::Result;
 use plotters::prelude::*;
 
 use super::prepare::{Prepared, PHASES};
@@ -22,7 +22,7 @@ const BANDS: [RGBColor; 7] = [
 
 /// Draw `p` with its nominal model and `augmented` (same samples) to `path`.
 pub fn draw(path: &Path, p: &Prepared, augmented: &[f64], label: &str) -> Result<()> {
-    let err = |e: DrawingAreaErrorKind<_>| anyhow!("{}: cannot draw: {e:?}", path.display());
+    let err = |e| crate::plot::drawing_error(path, e);
     let root = SVGBackend::new(path, (1000, 720)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let (top, bottom) = root.split_vertically(400);

@@ -986,6 +986,12 @@ impl Dataset<'_> {
             form,
             rig,
         } = *self;
+        if dir.exists() && !dir.is_dir() {
+            bail!(
+                "{}: is a file, not a directory (--out names the directory the trials go to)",
+                dir.display()
+            );
+        }
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
         clear_previous(dir)?;
