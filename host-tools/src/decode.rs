@@ -85,9 +85,7 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         items.into_iter().try_for_each(|item| out.item(item))
     };
     if let Some(path) = &args.file {
-        let bytes =
-            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-        feed(&bytes, &mut decoder, &mut out)?;
+        read_blocks(path, |block| feed(block, &mut decoder, &mut out))?;
     } else if let Some(port) = &args.port {
         let mut serial = serialport::new(port, args.baud)
             .timeout(Duration::from_millis(100))
@@ -108,6 +106,44 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
     let stats = decoder.finish(|item| tail.push(item));
     tail.into_iter().try_for_each(|item| out.item(item))?;
     out.finish(&stats)
+}
+
+/// Read a capture a block at a time into `each` (memory bounded whatever
+/// the capture's size, time linear in it), with a progress line on stderr
+/// every second while it lasts.
+fn read_blocks(path: &Path, mut each: impl FnMut(&[u8]) -> Result<()>) -> Result<()> {
+    let shown = path.display();
+    let mut file = std::fs::File::open(path).with_context(|| format!("{shown}: cannot read"))?;
+    let total = file.metadata().map_or(0, |m| m.len());
+    let mut block = vec![0u8; 1 << 16];
+    let (mut done, mut last_shown, mut progressed) = (0u64, Instant::now(), false);
+    loop {
+        let n = match file.read(&mut block) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e).with_context(|| format!("{shown}: cannot read")),
+        };
+        each(&block[..n])?;
+        done += n as u64;
+        if last_shown.elapsed() >= Duration::from_secs(1) {
+            let percent = if total > 0 {
+                100.0 * done as f64 / total as f64
+            } else {
+                0.0
+            };
+            eprint!(
+                "\rdecode: {shown}: {:.0} MB of {:.0} MB ({percent:.0} %)",
+                done as f64 / 1e6,
+                total as f64 / 1e6
+            );
+            (last_shown, progressed) = (Instant::now(), true);
+        }
+    }
+    if progressed {
+        eprintln!();
+    }
+    Ok(())
 }
 
 /// The CSV of segment `segment` (from 0): the first is `base` itself.

@@ -165,6 +165,40 @@ pub fn write(path: &Path, trial: &Trial) -> Result<()> {
         .with_context(|| format!("{}: cannot write", path.display()))
 }
 
+/// A progress line on stderr for work that lasts: nothing for the first
+/// second, then at most one line a second.
+pub struct Progress {
+    command: String,
+    started: std::time::Instant,
+    last: Option<std::time::Instant>,
+}
+
+impl Progress {
+    pub fn new(command: &str) -> Self {
+        Self {
+            command: command.to_owned(),
+            started: std::time::Instant::now(),
+            last: None,
+        }
+    }
+
+    /// Say `what` if a second has passed since the start and since the
+    /// last line.
+    pub fn say(&mut self, what: impl FnOnce() -> String) {
+        let now = std::time::Instant::now();
+        let second = std::time::Duration::from_secs(1);
+        if now - self.started >= second && self.last.is_none_or(|l| now - l >= second) {
+            eprintln!(
+                "needle {}: {:5.1} s: {}",
+                self.command,
+                (now - self.started).as_secs_f64(),
+                what()
+            );
+            self.last = Some(now);
+        }
+    }
+}
+
 /// A dataset's trials that could be read, with their files.
 pub type Dataset = Vec<(PathBuf, Trial)>;
 
@@ -191,9 +225,12 @@ impl Unreadable {
 /// warning's sender.
 pub fn read_dataset(dir: &Path, command: &str) -> Result<(Dataset, Vec<Unreadable>)> {
     let files = dataset_files(dir)?;
+    let count = files.len();
     let mut trials = Vec::new();
     let mut unreadable = Vec::new();
-    for file in files {
+    let mut progress = Progress::new(command);
+    for (k, file) in files.into_iter().enumerate() {
+        progress.say(|| format!("reading trial {} of {count}: {}", k + 1, file.display()));
         match read(&file) {
             Ok(trial) => trials.push((file, trial)),
             Err(err) => {

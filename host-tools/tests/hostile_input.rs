@@ -432,3 +432,45 @@ fn outputs_that_cannot_be_written_name_their_path_in_words() {
     assert!(!out.status.success());
     assert!(err.contains("afile: is a file, not a directory"), "{err}");
 }
+
+#[test]
+#[allow(clippy::zombie_processes)] // reaped by wait4, which clippy does not know
+fn decode_reads_a_capture_in_bounded_memory() {
+    // Row 11 (for decode): a capture was read whole into memory. 64 MB of
+    // line noise (a zero every 100 kB) now passes through 64 kB blocks.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("noise.bin");
+    let mut chunk = vec![0x55u8; 100_000];
+    chunk[99_999] = 0;
+    // Written a chunk at a time: a child's peak counts the parent's pages
+    // it was forked with.
+    let mut file = std::fs::File::create(&path).unwrap();
+    for _ in 0..671 {
+        std::io::Write::write_all(&mut file, &chunk).unwrap();
+    }
+    drop(file);
+    let log = dir.path().join("stderr.txt");
+    let child = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["decode", path.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    // This child's own peak (wait4, which reaps it), not the largest of
+    // the suite's.
+    // SAFETY: wait4 on our own child's pid fills the status and usage.
+    let (status, peak_kb) = unsafe {
+        let mut status = 0;
+        let mut usage: libc::rusage = std::mem::zeroed();
+        libc::wait4(child.id() as i32, &mut status, 0, &mut usage);
+        (status, usage.ru_maxrss)
+    };
+    let err = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
+        "{err}"
+    );
+    assert!(err.contains("bytes skipped"), "{err}");
+    // Reading the capture whole would take 64 MB.
+    assert!(peak_kb < 48 * 1024, "peak resident {peak_kb} kB");
+}

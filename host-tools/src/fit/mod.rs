@@ -101,7 +101,16 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
         .iter()
         .map(|u| json!({ "file": name_of(&u.file), "reason": u.reason }))
         .collect();
-    for (file, trial) in &trials {
+    let mut progress = crate::trial::Progress::new("fit");
+    for (k, (file, trial)) in trials.iter().enumerate() {
+        progress.say(|| {
+            format!(
+                "fitting trial {} of {}: {}",
+                k + 1,
+                trials.len(),
+                file.display()
+            )
+        });
         match fit_trial(trial).with_context(|| format!("{}: cannot fit", file.display())) {
             Ok(fit) => fits.push((file.clone(), fit)),
             Err(err) => {
