@@ -22,6 +22,15 @@ use needle_holder::protocol::{
 };
 use needle_holder::units::Nanometres;
 
+/// The devices here run in real time: one at a time, so that two QEMUs
+/// (and their hosts) do not share the machine's cores and slow each
+/// other's sample clocks.
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 fn elf() -> PathBuf {
     firmware::ensure_qemu().expect("qemu-system-arm is needed and could not be installed");
     firmware::build(Board::Lm3s6965).expect("firmware build")
@@ -98,6 +107,7 @@ fn raw_reply(link: &mut Link, bytes: &[u8]) -> Result<(), CommandError> {
 
 #[test]
 fn every_command_over_a_pty_is_answered_and_takes_effect() {
+    let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let replay = replay_file(dir.path(), &Plan::PAPER, 3_000);
     let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
@@ -339,6 +349,7 @@ fn every_command_over_a_pty_is_answered_and_takes_effect() {
 
 #[test]
 fn needle_record_over_a_pty_gives_the_trial_csv_decode_gives_on_a_capture() {
+    let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let plan = Plan {
         speed_mps: 0.01,
@@ -412,6 +423,7 @@ fn needle_record_over_a_pty_gives_the_trial_csv_decode_gives_on_a_capture() {
 
 #[test]
 fn ctrl_c_stops_needle_record_and_keeps_the_trial_in_hand() {
+    let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     // The paper's insertion: 25 s, interrupted well before its end.
     let replay = replay_file(dir.path(), &Plan::PAPER, 0);
@@ -447,6 +459,7 @@ fn ctrl_c_stops_needle_record_and_keeps_the_trial_in_hand() {
 
 #[test]
 fn garbage_from_the_host_does_not_disturb_the_samples() {
+    let _alone = one_at_a_time();
     // Issue 19, bad input: a host that sends garbage continuously. In QEMU
     // the device's clock is real time, so its sample rate and the stream's
     // completeness are what can be observed: 2 s of random bytes at full
