@@ -81,8 +81,9 @@ impl Acquisition {
         }
         let n = i64::from(self.taken);
         let sample = AdcSample {
-            // The mean of at most two 24-bit codes fits i32.
-            counts: (self.sum / n) as i32,
+            // The mean of at most two 24-bit codes fits i32; `n` ≥ 1
+            // (checked_div so no panic path is linked for it).
+            counts: self.sum.checked_div(n).unwrap_or(0) as i32,
             saturated: self.saturated,
             overrun: core::mem::take(&mut self.overrun),
         };
