@@ -16,9 +16,10 @@ use crate::link::Link;
 
 #[derive(Debug, clap::Args)]
 pub struct DeviceArgs {
-    /// Serial port of the device (e.g. /dev/ttyACM0).
+    /// Serial port of the device (e.g. /dev/ttyACM0); every action but
+    /// `tissues` needs it.
     #[arg(long)]
-    pub port: String,
+    pub port: Option<String>,
     /// Serial baud rate (the Nucleo-F411RE's is 921 600).
     #[arg(long, default_value_t = 115_200)]
     pub baud: u32,
@@ -72,13 +73,16 @@ pub fn run(args: &DeviceArgs) -> Result<()> {
         return Ok(());
     }
     let command = command_of(&args.action)?;
-    let mut link = Link::open(&args.port, args.baud)?;
+    let Some(port) = &args.port else {
+        bail!("--port: which serial port is the device on (e.g. --port /dev/ttyACM0)?");
+    };
+    let mut link = Link::open(port, args.baud)?;
     match link.command(command)? {
         Ok(()) => println!("done"),
-        Err(e) => bail!("{}: the device refused: {}", args.port, command_error(&e)),
+        Err(e) => bail!("{port}: the device refused: {}", command_error(&e)),
     }
     if let Action::Config = args.action {
-        print_config(&mut link, &args.port)?;
+        print_config(&mut link, port)?;
     }
     Ok(())
 }

@@ -474,3 +474,41 @@ fn decode_reads_a_capture_in_bounded_memory() {
     // Reading the capture whole would take 64 MB.
     assert!(peak_kb < 48 * 1024, "peak resident {peak_kb} kB");
 }
+
+#[test]
+fn needle_device_checks_its_arguments_before_the_port() {
+    // The library listing needs no device; every other action names the
+    // port it lacks; bad numbers and names are refused before any byte
+    // is sent.
+    let out = needle(&["device", "tissues"]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("liver1"));
+    for (args, says) in [
+        (&["device", "tare"][..], "--port"),
+        (
+            &[
+                "device",
+                "--port",
+                "/dev/null",
+                "assist",
+                "puncture",
+                "--depth-mm",
+                "NaN",
+            ],
+            "--depth-mm NaN",
+        ),
+        (
+            &["device", "--port", "/dev/null", "assist", "sideways"],
+            "unknown assist mode `sideways`",
+        ),
+        (
+            &["device", "--port", "/dev/null", "tissue", "spleen"],
+            "spleen: neither a tissue",
+        ),
+    ] {
+        let out = needle(args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} accepted");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+}
