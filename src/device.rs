@@ -422,9 +422,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         let bytes = self.encoder.encode(&Frame::Config(frame));
         self.batch
             .set_seed(BatchCheck::seed(bytes.split_last().map_or(&[], |(_, b)| b)));
-        if bytes.is_empty() || self.sink.write_all(bytes).is_err() {
-            self.frames_dropped = self.frames_dropped.saturating_add(1);
-        }
+        deliver(&mut self.sink, &mut self.frames_dropped, bytes);
     }
 
     /// The pipeline's state, for a host to continue from (only while
@@ -446,9 +444,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             return;
         }
         let bytes = self.encoder.encode(&Frame::Batch(self.batch.frame()));
-        if bytes.is_empty() || self.sink.write_all(bytes).is_err() {
-            self.frames_dropped = self.frames_dropped.saturating_add(1);
-        }
+        deliver(&mut self.sink, &mut self.frames_dropped, bytes);
         self.batch.clear();
     }
 
@@ -457,8 +453,14 @@ impl<W: Write, H: OutputPin> Device<W, H> {
     fn send(&mut self, frame: &Frame<'_>) {
         self.flush_batch();
         let bytes = self.encoder.encode(frame);
-        if bytes.is_empty() || self.sink.write_all(bytes).is_err() {
-            self.frames_dropped = self.frames_dropped.saturating_add(1);
-        }
+        deliver(&mut self.sink, &mut self.frames_dropped, bytes);
+    }
+}
+
+/// Encoded frame bytes to the sink; a frame that did not encode (empty) or
+/// that the sink refused counts as dropped.
+fn deliver<W: Write>(sink: &mut W, frames_dropped: &mut u32, bytes: &[u8]) {
+    if bytes.is_empty() || sink.write_all(bytes).is_err() {
+        *frames_dropped = frames_dropped.saturating_add(1);
     }
 }

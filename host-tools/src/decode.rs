@@ -161,7 +161,7 @@ fn segment_path(base: &Path, segment: u32) -> PathBuf {
 }
 
 /// A trial CSV with its header line.
-fn create_csv(path: &Path) -> Result<csv::Writer<std::fs::File>> {
+pub fn create_csv(path: &Path) -> Result<csv::Writer<std::fs::File>> {
     let mut w = csv::Writer::from_path(path)
         .with_context(|| format!("{}: cannot create", path.display()))?;
     w.write_record(CSV_HEADER)

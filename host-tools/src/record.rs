@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use needle_holder::protocol::{Command, Phase, Sample};
 
-use crate::decode::{command_error, csv_row, describe, missing_name, CSV_HEADER};
+use crate::decode::{command_error, create_csv, csv_row, describe, missing_name};
 use crate::frames::{Item, Message};
 use crate::link::Link;
 
@@ -182,11 +182,7 @@ impl Recorder {
         };
         if self.current.is_none() {
             let path = self.dir.join(format!("trial_{:03}.csv", self.written));
-            let mut writer = csv::Writer::from_path(&path)
-                .with_context(|| format!("{}: cannot create", path.display()))?;
-            writer
-                .write_record(CSV_HEADER)
-                .with_context(|| format!("{}: cannot write", path.display()))?;
+            let writer = create_csv(&path)?;
             self.current = Some(TrialFile {
                 path,
                 writer,
