@@ -24,12 +24,7 @@ impl Trial {
 
     /// Sample rate, Hz, from the median time step (robust to a late sample).
     pub fn rate_hz(&self) -> f64 {
-        let mut dt: Vec<f64> = self.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-        if dt.is_empty() {
-            return 0.0;
-        }
-        let mid = dt.len() / 2;
-        1.0 / *dt.select_nth_unstable_by(mid, f64::total_cmp).1
+        median_rate_hz(&self.t_s)
     }
 
     /// Every `step`-th sample, from the first: a slower rig's recording of
@@ -46,18 +41,34 @@ impl Trial {
     /// The step [`Self::thinned`] takes to bring this trial to `most_hz`
     /// or below: 1 when it is there already.
     pub fn thinning_step(&self, most_hz: f64) -> usize {
-        let ratio = self.rate_hz() / most_hz;
-        if ratio.is_finite() && ratio > 1.0 {
-            ratio.ceil() as usize
-        } else {
-            1
-        }
+        step_to(self.rate_hz(), most_hz)
     }
 
     pub fn push(&mut self, t_s: f64, x_m: f64, f_n: f64) {
         self.t_s.push(t_s);
         self.x_m.push(x_m);
         self.f_n.push(f_n);
+    }
+}
+
+/// Sample rate, Hz, from the median step of increasing times; 0 for fewer
+/// than two.
+fn median_rate_hz(t_s: &[f64]) -> f64 {
+    let mut dt: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    if dt.is_empty() {
+        return 0.0;
+    }
+    let mid = dt.len() / 2;
+    1.0 / *dt.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// The thinning step that brings `rate_hz` to `most_hz` or below.
+fn step_to(rate_hz: f64, most_hz: f64) -> usize {
+    let ratio = rate_hz / most_hz;
+    if ratio.is_finite() && ratio > 1.0 {
+        ratio.ceil() as usize
+    } else {
+        1
     }
 }
 
@@ -81,70 +92,202 @@ fn open_csv(path: &Path) -> Result<csv::Reader<std::fs::File>> {
         .with_context(|| format!("{shown}: cannot open"))
 }
 
-/// Read a trial, checking columns, numbers and time order.
-pub fn read(path: &Path) -> Result<Trial> {
+/// Each row of a trial CSV in one pass, as the values of `columns` (the
+/// first must be `t_s`; unused places 0), checking columns, numbers and
+/// time order; returns the number of rows. `progress` hears of long reads.
+fn each_row(
+    path: &Path,
+    columns: &[&str],
+    mut progress: Option<&mut Progress>,
+    mut row: impl FnMut([f64; 4]),
+) -> Result<usize> {
     let shown = path.display();
     let mut reader = open_csv(path)?;
     let headers = reader
         .headers()
         .with_context(|| format!("{shown}:1: cannot read the header"))?;
-    let column = |name: &str| {
-        headers
-            .iter()
-            .position(|h| h == name)
-            .with_context(|| format!("{shown}:1: no `{name}` column (need t_s,x_m,f_n)"))
-    };
-    let (ti, xi, fi) = (column("t_s")?, column("x_m")?, column("f_n")?);
-    let mut trial = Trial::default();
-    for record in reader.records() {
-        let record = record.with_context(|| format!("{shown}: malformed CSV"))?;
+    let at = columns
+        .iter()
+        .map(|name| {
+            let hint = if TRIAL.contains(name) {
+                " (a trial needs t_s,x_m,f_n)"
+            } else {
+                ""
+            };
+            headers
+                .iter()
+                .position(|h| h == *name)
+                .with_context(|| format!("{shown}:1: no `{name}` column{hint}"))
+        })
+        .collect::<Result<Vec<usize>>>()?;
+    let mut last_t_s: Option<f64> = None;
+    let mut rows = 0;
+    let mut record = csv::StringRecord::new();
+    while reader
+        .read_record(&mut record)
+        .with_context(|| format!("{shown}: malformed CSV"))?
+    {
         let line = record.position().map_or(0, |p| p.line());
-        let field = |i: usize, name: &str| -> Result<f64> {
+        let mut values = [0.0_f64; 4];
+        for ((value, &i), name) in values.iter_mut().zip(&at).zip(columns) {
             let text = record.get(i).unwrap_or("");
-            let value: f64 = text.parse().map_err(|_| {
+            *value = text.parse().map_err(|_| {
                 anyhow::anyhow!("{shown}:{line}: `{name}` is not a number: {text:?}")
             })?;
             if !value.is_finite() {
                 bail!("{shown}:{line}: `{name}` is not finite: {text:?}");
             }
-            Ok(value)
-        };
-        let (t, x, f) = (field(ti, "t_s")?, field(xi, "x_m")?, field(fi, "f_n")?);
-        if let Some(&last) = trial.t_s.last() {
-            if t <= last {
-                bail!("{shown}:{line}: time does not increase ({t} s after {last} s)");
+        }
+        let t = values[0];
+        if let Some(last) = last_t_s.filter(|&last| t <= last) {
+            bail!("{shown}:{line}: time does not increase ({t} s after {last} s)");
+        }
+        last_t_s = Some(t);
+        row(values);
+        rows += 1;
+        if rows % (1 << 16) == 0 {
+            if let Some(p) = progress.as_deref_mut() {
+                p.say(|| format!("reading {shown}: {rows} rows"));
             }
         }
-        trial.push(t, x, f);
     }
-    if trial.is_empty() {
+    if rows == 0 {
         bail!("{shown}: no samples");
     }
+    Ok(rows)
+}
+
+const TRIAL: [&str; 3] = ["t_s", "x_m", "f_n"];
+
+/// Read a whole trial, checking columns, numbers and time order.
+pub fn read(path: &Path) -> Result<Trial> {
+    let mut trial = Trial::default();
+    each_row(path, &TRIAL, None, |[t, x, f, _]| trial.push(t, x, f))?;
     Ok(trial)
 }
 
-/// An extra column of a trial CSV by name (e.g. `model_n` of `needle
-/// decode --csv`), with the same checks as [`read`].
-pub fn read_column(path: &Path, name: &str) -> Result<Vec<f64>> {
-    let shown = path.display();
-    let mut reader = open_csv(path)?;
-    let at = reader
-        .headers()
-        .with_context(|| format!("{shown}:1: cannot read the header"))?
-        .iter()
-        .position(|h| h == name)
-        .with_context(|| format!("{shown}:1: no `{name}` column"))?;
-    let mut values = Vec::new();
-    for record in reader.records() {
-        let record = record.with_context(|| format!("{shown}: malformed CSV"))?;
-        let line = record.position().map_or(0, |p| p.line());
-        let text = record.get(at).unwrap_or("");
-        match text.parse::<f64>() {
-            Ok(v) if v.is_finite() => values.push(v),
-            _ => bail!("{shown}:{line}: `{name}` is not a finite number: {text:?}"),
+/// The fastest rate the analyses (`fit`, `detect`, `diagnose`) read a trial
+/// at: the device's own top rate (the ADS1220's 2 kSPS). A faster
+/// recording is thinned as it is read, as [`Trial::thinned`] does.
+pub const ANALYSIS_MOST_HZ: f64 = 2000.0;
+
+/// The most samples of one trial the analyses hold: 2¹⁹, i.e. 4.4 min at
+/// 2 kHz, 17 min at 500 Hz, 87 min at 100 Hz — far more than an
+/// insertion. A longer recording is thinned further, by halves, so that
+/// memory stays bounded whatever the file's length.
+pub const ANALYSIS_MOST_SAMPLES: usize = 1 << 19;
+
+/// Rows read before the first is dropped: the rate is the median step of
+/// these, which one late sample or a gap does not move.
+const PROBE_ROWS: usize = 1024;
+
+/// A trial as the analyses read it: every `step`-th of its `rows` rows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Analysed {
+    pub trial: Trial,
+    pub rows: usize,
+    pub step: usize,
+}
+
+impl Analysed {
+    /// What the thinning did, for a note on stderr; `None` when every row
+    /// was kept.
+    pub fn thinning_note(&self, path: &Path) -> Option<String> {
+        (self.step > 1).then(|| {
+            format!(
+                "{}: {} rows, thinned to 1 in {} ({} samples at {:.0} Hz) to stay within {} Hz and {} samples",
+                path.display(),
+                self.rows,
+                self.step,
+                self.trial.len(),
+                self.trial.rate_hz(),
+                ANALYSIS_MOST_HZ,
+                ANALYSIS_MOST_SAMPLES
+            )
+        })
+    }
+}
+
+/// Rows kept as they stream in, in memory bounded by
+/// [`ANALYSIS_MOST_SAMPLES`]: once the probe has set the step, row `i` is
+/// kept when `i % step == 0`; when the kept rows reach the bound, the
+/// step doubles and every other kept row goes, which keeps exactly the
+/// rows of the new step. One pass, linear time.
+struct Thinner {
+    kept: Vec<[f64; 4]>,
+    rows: usize,
+    /// 0 until the probe has set it.
+    step: usize,
+}
+
+impl Thinner {
+    fn new() -> Self {
+        Self {
+            kept: Vec::with_capacity(PROBE_ROWS),
+            rows: 0,
+            step: 0,
         }
     }
-    Ok(values)
+
+    fn push(&mut self, row: [f64; 4]) {
+        let i = self.rows;
+        self.rows += 1;
+        if self.step == 0 {
+            self.kept.push(row);
+            if self.kept.len() == PROBE_ROWS {
+                self.set_step();
+            }
+        } else if i % self.step == 0 {
+            self.kept.push(row);
+            if self.kept.len() >= ANALYSIS_MOST_SAMPLES {
+                self.step *= 2;
+                self.keep_every(2);
+            }
+        }
+    }
+
+    fn set_step(&mut self) {
+        let t_s: Vec<f64> = self.kept.iter().map(|r| r[0]).collect();
+        self.step = step_to(median_rate_hz(&t_s), ANALYSIS_MOST_HZ);
+        self.keep_every(self.step);
+    }
+
+    fn keep_every(&mut self, n: usize) {
+        let mut k = 0;
+        self.kept.retain(|_| {
+            k += 1;
+            (k - 1) % n == 0
+        });
+    }
+
+    fn finish(mut self) -> (Vec<[f64; 4]>, usize, usize) {
+        if self.step == 0 {
+            self.set_step();
+        }
+        (self.kept, self.rows, self.step)
+    }
+}
+
+/// Read a trial for analysis, in one pass and bounded memory (see
+/// [`ANALYSIS_MOST_HZ`], [`ANALYSIS_MOST_SAMPLES`]).
+pub fn read_for_analysis(path: &Path, progress: Option<&mut Progress>) -> Result<Analysed> {
+    let mut thinner = Thinner::new();
+    each_row(path, &TRIAL, progress, |row| thinner.push(row))?;
+    let (kept, rows, step) = thinner.finish();
+    let mut trial = Trial::default();
+    for [t, x, f, _] in kept {
+        trial.push(t, x, f);
+    }
+    Ok(Analysed { trial, rows, step })
+}
+
+/// An extra column of a trial CSV by name (e.g. `model_n` of `needle
+/// decode --csv`), with the checks of [`read`], at the rows
+/// [`read_for_analysis`] keeps of the same file.
+pub fn read_column_for_analysis(path: &Path, name: &str) -> Result<Vec<f64>> {
+    let mut thinner = Thinner::new();
+    each_row(path, &["t_s", name], None, |row| thinner.push(row))?;
+    Ok(thinner.finish().0.iter().map(|r| r[1]).collect())
 }
 
 /// Write a trial CSV (`t_s,x_m,f_n`; µs, nm and µN resolution).
@@ -222,7 +365,8 @@ impl Unreadable {
 /// is left out with a warning on stderr naming it and the line at fault,
 /// and listed in the command's JSON `skipped`; the command goes on with
 /// the others and fails only when none is left. `command` names the
-/// warning's sender.
+/// warning's sender. Each trial is read by [`read_for_analysis`]: one
+/// pass, memory bounded whatever the file's size, a note when it thinned.
 pub fn read_dataset(dir: &Path, command: &str) -> Result<(Dataset, Vec<Unreadable>)> {
     let files = dataset_files(dir)?;
     let count = files.len();
@@ -231,8 +375,13 @@ pub fn read_dataset(dir: &Path, command: &str) -> Result<(Dataset, Vec<Unreadabl
     let mut progress = Progress::new(command);
     for (k, file) in files.into_iter().enumerate() {
         progress.say(|| format!("reading trial {} of {count}: {}", k + 1, file.display()));
-        match read(&file) {
-            Ok(trial) => trials.push((file, trial)),
+        match read_for_analysis(&file, Some(&mut progress)) {
+            Ok(analysed) => {
+                if let Some(note) = analysed.thinning_note(&file) {
+                    eprintln!("needle {command}: {note}");
+                }
+                trials.push((file, analysed.trial));
+            }
             Err(err) => {
                 eprintln!("needle {command}: {err:#} (left out)");
                 unreadable.push(Unreadable {
@@ -312,6 +461,52 @@ mod tests {
         for (text, expected) in cases {
             let err = format!("{:#}", read(&write(&dir, text)).unwrap_err());
             assert!(err.contains(expected), "{err} lacks {expected}");
+        }
+    }
+
+    #[test]
+    fn a_long_trial_is_read_in_bounded_memory_as_every_step_th_row() {
+        // 1.2 M rows at 100 Hz: past the bound twice, so the step doubles
+        // twice and the kept rows are exactly every 4th.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("long.csv");
+        let mut out = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        use std::io::Write;
+        writeln!(out, "t_s,x_m,f_n").unwrap();
+        let rows = 1_200_000;
+        for i in 0..rows {
+            writeln!(out, "{},{},{}", i as f64 / 100.0, i as f64 * 1e-9, i % 7).unwrap();
+        }
+        drop(out);
+        let read = read_for_analysis(&path, None).unwrap();
+        assert_eq!((read.rows, read.step), (rows, 4));
+        assert!(read.trial.len() <= ANALYSIS_MOST_SAMPLES);
+        assert_eq!(read.trial.len(), rows / 4);
+        for (k, (&t, &f)) in read.trial.t_s.iter().zip(&read.trial.f_n).enumerate() {
+            assert_eq!(t, (4 * k) as f64 / 100.0);
+            assert_eq!(f, ((4 * k) % 7) as f64);
+        }
+        assert!(read
+            .thinning_note(&path)
+            .unwrap()
+            .contains("1200000 rows, thinned to 1 in 4"));
+    }
+
+    #[test]
+    fn a_fast_trial_is_thinned_to_the_devices_top_rate_and_a_slow_one_kept_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        for (rate_hz, step) in [(10_000.0, 5), (2000.0, 1), (100.0, 1)] {
+            let text: String = std::iter::once("t_s,x_m,f_n\n".to_owned())
+                .chain((0..3000).map(|i| format!("{},0,{i}\n", i as f64 / rate_hz)))
+                .collect();
+            let path = write(&dir, &text);
+            let read = read_for_analysis(&path, None).unwrap();
+            assert_eq!(read.step, step, "{rate_hz} Hz");
+            assert_eq!(read.trial.len(), 3000_usize.div_ceil(step));
+            assert_eq!(read.trial.f_n[1], step as f64);
+            let column = read_column_for_analysis(&path, "f_n").unwrap();
+            assert_eq!(column, read.trial.f_n);
+            assert_eq!(read.thinning_note(&path).is_some(), step > 1);
         }
     }
 }

@@ -1055,7 +1055,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     if args.device_model {
         for p in &mut data {
             let path = args.dir.join(&p.file);
-            let model_n = crate::trial::read_column(&path, "model_n")?;
+            let model_n = crate::trial::read_column_for_analysis(&path, "model_n")?;
             p.use_nominal(model_n)
                 .with_context(|| format!("{}: `model_n`", path.display()))?;
         }
