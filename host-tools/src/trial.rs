@@ -145,7 +145,7 @@ fn each_row(
         last_t_s = Some(t);
         row(values);
         rows += 1;
-        if rows % (1 << 16) == 0 {
+        if rows.is_multiple_of(1 << 16) {
             if let Some(p) = progress.as_deref_mut() {
                 p.say(|| format!("reading {shown}: {rows} rows"));
             }
@@ -237,7 +237,7 @@ impl Thinner {
             if self.kept.len() == PROBE_ROWS {
                 self.set_step();
             }
-        } else if i % self.step == 0 {
+        } else if i.is_multiple_of(self.step) {
             self.kept.push(row);
             if self.kept.len() >= ANALYSIS_MOST_SAMPLES {
                 self.step *= 2;
@@ -256,7 +256,7 @@ impl Thinner {
         let mut k = 0;
         self.kept.retain(|_| {
             k += 1;
-            (k - 1) % n == 0
+            (k - 1).is_multiple_of(n)
         });
     }
 
