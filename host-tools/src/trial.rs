@@ -121,7 +121,7 @@ fn each_row(
         })
         .collect::<Result<Vec<usize>>>()?;
     let mut last_t_s: Option<f64> = None;
-    let mut rows = 0;
+    let mut rows: usize = 0;
     let mut record = csv::StringRecord::new();
     while reader
         .read_record(&mut record)
@@ -253,7 +253,7 @@ impl Thinner {
     }
 
     fn keep_every(&mut self, n: usize) {
-        let mut k = 0;
+        let mut k: usize = 0;
         self.kept.retain(|_| {
             k += 1;
             (k - 1).is_multiple_of(n)
