@@ -130,17 +130,20 @@ pub fn load(region: &[u8]) -> Load {
         if n > MAX_BODY || at + len > region.len() {
             break;
         }
-        let record = &region[at..at + len];
-        let crc_at = len - 4;
-        let stored = u32::from_le_bytes([
-            record[crc_at],
-            record[crc_at + 1],
-            record[crc_at + 2],
-            record[crc_at + 3],
-        ]);
-        let body = &record[HEAD..HEAD + n];
+        // Every slice checked (`get`), none indexed: the loader reads
+        // whatever the sector holds and links no panic path.
+        let Some(record) = region.get(at..at + len) else {
+            break;
+        };
+        let (Some(covered), Some(crc)) = (record.get(..HEAD + n), record.get(len - 4..)) else {
+            break;
+        };
+        let Ok(stored) = <[u8; 4]>::try_from(crc).map(u32::from_le_bytes) else {
+            break;
+        };
+        let body = covered.get(HEAD..).unwrap_or(&[]);
         match postcard::from_bytes::<Settings>(body) {
-            Ok(settings) if CRC32.checksum(&record[..HEAD + n]) == stored => {
+            Ok(settings) if CRC32.checksum(covered) == stored => {
                 latest = Some(settings);
                 torn = false;
             }
@@ -174,9 +177,18 @@ pub fn record<'a>(settings: &Settings, out: &'a mut [u8; MAX_RECORD]) -> &'a [u8
     out[6] = FORMAT_VERSION;
     out[7] = 0;
     let len = record_len(n);
-    let crc = CRC32.checksum(&out[..HEAD + n]);
-    out[len - 4..len].copy_from_slice(&crc.to_le_bytes());
-    &out[..len]
+    // Checked slices: `n` is the body postcard wrote, within MAX_BODY,
+    // which the compiler cannot see.
+    let Some(crc) = out.get(..HEAD + n).map(|covered| CRC32.checksum(covered)) else {
+        return &[];
+    };
+    let Some(tail) = out.get_mut(len - 4..len) else {
+        return &[];
+    };
+    for (byte, crc_byte) in tail.iter_mut().zip(crc.to_le_bytes()) {
+        *byte = crc_byte;
+    }
+    out.get(..len).unwrap_or(&[])
 }
 
 #[cfg(test)]

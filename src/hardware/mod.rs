@@ -28,6 +28,9 @@ mod replay_file;
 #[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
 mod semihost;
 
+/// defmt framing shared by the loggers, without a panic path.
+mod log_frames;
+
 /// Markers around each sample for `needle bench`'s instruction count.
 #[cfg(any(not(feature = "board-f411"), feature = "f411-replay"))]
 mod bench;

@@ -7,11 +7,13 @@
 //! their descriptors, and the logger panics on re-entry, in places the
 //! compiler cannot remove, which links `core::panicking` into an image
 //! meant never to panic. Here a failed call is an error the caller
-//! handles, and a log call that finds the logger busy is dropped.
+//! handles, and a log call that finds the logger busy is dropped
+//! ([`super::log_frames`]).
 
 use core::cell::UnsafeCell;
 use core::ffi::CStr;
-use core::sync::atomic::{AtomicBool, Ordering};
+
+use super::log_frames::global_logger;
 
 use semihosting::sys::arm_compat::syscall::{
     syscall, syscall_readonly, OperationNumber, ParamRegR, ParamRegW,
@@ -93,29 +95,18 @@ pub fn exit(code: i32) -> ! {
 }
 
 /// The defmt logger: frames over semihosting to QEMU's standard output.
-#[defmt::global_logger]
-struct Logger;
+/// Standard output, opened on first use.
+struct Out(UnsafeCell<Option<Fd>>);
 
-struct State {
-    taken: AtomicBool,
-    restore: UnsafeCell<critical_section::RestoreState>,
-    encoder: UnsafeCell<defmt::Encoder>,
-    out: UnsafeCell<Option<Fd>>,
-}
+// SAFETY: only touched from inside a log, which holds the critical section.
+unsafe impl Sync for Out {}
 
-// SAFETY: every access but `taken` happens inside the critical section
-// that `acquire` enters and `release` leaves.
-unsafe impl Sync for State {}
+static OUT: Out = Out(UnsafeCell::new(None));
 
-static STATE: State = State {
-    taken: AtomicBool::new(false),
-    restore: UnsafeCell::new(critical_section::RestoreState::invalid()),
-    encoder: UnsafeCell::new(defmt::Encoder::new()),
-    out: UnsafeCell::new(None),
-};
-
-/// Write encoded bytes to standard output (opened on first use).
-fn emit(out: &mut Option<Fd>, bytes: &[u8]) {
+/// Write encoded bytes to standard output.
+fn emit(bytes: &[u8]) {
+    // SAFETY: called only by `FRAMES` from inside the open log.
+    let out = unsafe { &mut *OUT.0.get() };
     if out.is_none() {
         *out = open(c":tt", WRITE);
     }
@@ -124,51 +115,4 @@ fn emit(out: &mut Option<Fd>, bytes: &[u8]) {
     }
 }
 
-// SAFETY: the critical section is entered in `acquire` and left in
-// `release`, once each; the cells are only touched between them, and a
-// nested `acquire` (a log from an interrupt inside a log) is refused.
-unsafe impl defmt::Logger for Logger {
-    fn acquire() {
-        // SAFETY: paired with the release below (or at once, if busy).
-        let restore = unsafe { critical_section::acquire() };
-        if STATE.taken.load(Ordering::Relaxed) {
-            // SAFETY: leaves the section just entered; the log is dropped.
-            unsafe { critical_section::release(restore) };
-            return;
-        }
-        STATE.taken.store(true, Ordering::Relaxed);
-        // SAFETY: inside the critical section, the logger ours.
-        unsafe {
-            STATE.restore.get().write(restore);
-            let out = &mut *STATE.out.get();
-            (*STATE.encoder.get()).start_frame(|b| emit(out, b));
-        }
-    }
-
-    unsafe fn flush() {}
-
-    unsafe fn release() {
-        if !STATE.taken.load(Ordering::Relaxed) {
-            return;
-        }
-        // SAFETY: inside the critical section `acquire` entered.
-        unsafe {
-            let out = &mut *STATE.out.get();
-            (*STATE.encoder.get()).end_frame(|b| emit(out, b));
-            let restore = STATE.restore.get().read();
-            STATE.taken.store(false, Ordering::Relaxed);
-            critical_section::release(restore);
-        }
-    }
-
-    unsafe fn write(bytes: &[u8]) {
-        if !STATE.taken.load(Ordering::Relaxed) {
-            return;
-        }
-        // SAFETY: inside the critical section `acquire` entered.
-        unsafe {
-            let out = &mut *STATE.out.get();
-            (*STATE.encoder.get()).write(bytes, |b| emit(out, b));
-        }
-    }
-}
+global_logger!(emit);

@@ -1,4 +1,4 @@
-//! The ADS1220 on SPI1 (mode 1, 6.25 MHz), chip select on PB6, data-ready
+//! The ADS1220 on SPI1 (mode 1, 6.25 MHz; [`super::spi`]), chip select on PB6, data-ready
 //! on PA10; and what the sample task makes of its conversions: a pair
 //! averaged into one sample at 500 Hz (the converter has no 500 SPS mode;
 //! averaging two 1000 SPS conversions also halves the noise power), and a
@@ -7,18 +7,19 @@
 
 use core::convert::Infallible;
 
-use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+use embedded_hal_bus::spi::ExclusiveDevice;
 use needle_holder::ads1220::{Ads1220, DataRate, Error};
 use needle_holder::hal::{AdcSample, LoadCellAdc};
-use stm32f4xx_hal::gpio::{Input, Output, PushPull, PA10, PB6};
-use stm32f4xx_hal::pac::SPI1;
-use stm32f4xx_hal::spi::Spi;
+
+use super::clocks::CycleDelay;
+use super::pins::{ChipSelect, DataReady};
+use super::spi::Spi1;
 
 /// SPI1 with the converter's chip select.
-pub type Bus = ExclusiveDevice<Spi<SPI1>, PB6<Output<PushPull>>, NoDelay>;
+pub type Bus = ExclusiveDevice<Spi1, ChipSelect, CycleDelay>;
 
 /// The converter on its bus.
-pub type Converter = Ads1220<Bus, PA10<Input>>;
+pub type Converter = Ads1220<Bus, DataReady>;
 
 /// The converter's rate and how many conversions make one sample, for a
 /// sample rate the core is configured for.

@@ -12,7 +12,7 @@
 //!   here, outside the sample's lock, which a whole command takes only to
 //!   be carried out and answered.
 
-#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
+#[rtic::app(device = stm32f4::stm32f411, peripherals = true)]
 mod app {
     use heapless::spsc::{Consumer, Queue};
     use needle_holder::calibration::{BootTare, TareResult};
@@ -22,19 +22,16 @@ mod app {
     use needle_holder::persist::Loaded;
     use needle_holder::protocol::command::CommandReader;
     use needle_holder::protocol::TissueSource;
-    use stm32f4xx_hal::gpio::ExtiPin;
-    use stm32f4xx_hal::pac::{self, TIM5, USART2};
-    use stm32f4xx_hal::prelude::*;
-    use stm32f4xx_hal::serial::{Rx, Tx};
-    use stm32f4xx_hal::timer::CounterHz;
-    use stm32f4xx_hal::ClearFlags;
+    use stm32f4::stm32f411 as pac;
 
     use super::super::adc::{Acquisition, Broken, Conversion, Ready};
     use super::super::encoder::Encoder;
     use super::super::halt::HaltLine;
     use super::super::link::{drain, QueueWriter, QUEUE_BYTES};
+    use super::super::serial::Usart2;
     use super::super::setup::setup;
     use super::super::store::Store;
+    use super::super::timer::Watchdog;
 
     type Dev = Device<QueueWriter, HaltLine>;
 
@@ -62,11 +59,10 @@ mod app {
         acquisition: Acquisition,
         encoder: Encoder,
         tare: BootTare,
-        tx: Tx<USART2>,
-        rx: Rx<USART2>,
+        serial: Usart2,
         commands: CommandReader,
         outgoing: Consumer<'static, u8, QUEUE_BYTES>,
-        watchdog: CounterHz<TIM5>,
+        watchdog: Watchdog,
         store: Store,
     }
 
@@ -84,7 +80,7 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         super::super::stack::paint();
         let base = DeviceConfig::default().with_sample_rate(SAMPLE_RATE_HZ);
-        let parts = setup(cx.device, cx.core, base.velocity.sample_rate_hz);
+        let parts = setup(cx.device, base.velocity.sample_rate_hz);
         // The saved tissue, calibration and assist, or the compiled
         // default (the config frame says which).
         let (mut store, load) = Store::open(parts.flash);
@@ -126,8 +122,7 @@ mod app {
                 acquisition: parts.acquisition,
                 encoder: parts.encoder,
                 tare: BootTare::new(MAX_BOOT_OFFSET_COUNTS),
-                tx: parts.tx,
-                rx: parts.rx,
+                serial: parts.serial,
                 commands: CommandReader::default(),
                 outgoing,
                 watchdog: parts.watchdog,
@@ -154,10 +149,7 @@ mod app {
     #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config, origin], local = [acquisition, encoder, tare])]
     fn sample(cx: sample::Context) {
         let acquisition = cx.local.acquisition;
-        acquisition
-            .converter
-            .data_ready_pin()
-            .clear_interrupt_pending_bit();
+        acquisition.converter.data_ready_pin().clear_pending();
         let conversion = acquisition.convert();
         let mut shared = (
             cx.shared.device,
@@ -201,7 +193,7 @@ mod app {
         });
         // Data-ready fell again while this sample was in hand: the next
         // one is late.
-        if acquisition.converter.data_ready_pin().check_interrupt() {
+        if acquisition.converter.data_ready_pin().pending() {
             acquisition.overrun = true;
         }
         rtic::pend(pac::Interrupt::USART2);
@@ -209,7 +201,7 @@ mod app {
 
     #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config, origin], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0, ticks: u32 = 0])]
     fn watchdog(mut cx: watchdog::Context) {
-        cx.local.watchdog.clear_all_flags();
+        cx.local.watchdog.clear();
         // Every 10 s, how deep the stack has been.
         *cx.local.ticks = cx.local.ticks.wrapping_add(1);
         if cx
@@ -245,11 +237,11 @@ mod app {
         }
     }
 
-    #[task(binds = USART2, priority = 1, shared = [device], local = [tx, rx, commands, outgoing])]
+    #[task(binds = USART2, priority = 1, shared = [device], local = [serial, commands, outgoing])]
     fn link(mut cx: link::Context) {
         // Line errors (overrun, framing, noise) lose the byte: the frame
         // it was in fails its CRC and the device says so.
-        while let Ok(byte) = cx.local.rx.read() {
+        while let Some(byte) = cx.local.serial.read() {
             if let Some(frame) = cx.local.commands.push(byte) {
                 // Before arming (the boot tare, a quarter second) there is
                 // no device to answer: the host sends again.
@@ -260,7 +252,7 @@ mod app {
                 });
             }
         }
-        drain(cx.local.tx, cx.local.outgoing);
+        drain(cx.local.serial, cx.local.outgoing);
     }
 
     /// Between interrupts: settings a command changed go to flash (each

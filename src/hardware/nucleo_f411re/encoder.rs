@@ -3,16 +3,28 @@
 //! 32 bits; the core unwraps 16, so the low half is what it reads.
 
 use needle_holder::hal::EncoderCounter;
-use stm32f4xx_hal::hal_02::Qei as _;
-use stm32f4xx_hal::pac::TIM2;
-use stm32f4xx_hal::qei::Qei;
+use stm32f4::stm32f411 as pac;
 
 /// TIM2 in encoder mode on PA0 (A) and PA1 (B).
-pub struct Encoder(pub Qei<TIM2>);
+pub struct Encoder(pac::TIM2);
+
+impl Encoder {
+    /// Counting from 0 (RM0383 §13.3.16: channels on TI1 and TI2, slave
+    /// mode 3, the whole 32-bit range).
+    pub fn new(tim: pac::TIM2) -> Self {
+        tim.ccmr1_input().write(|w| w.cc1s().ti1().cc2s().ti2());
+        tim.smcr().write(|w| w.sms().encoder_mode_3());
+        // SAFETY: any value is a reload value.
+        tim.arr().write(|w| unsafe { w.bits(u32::MAX) });
+        tim.cnt().reset();
+        tim.cr1().write(|w| w.cen().set_bit());
+        Self(tim)
+    }
+}
 
 impl EncoderCounter for Encoder {
     fn count(&mut self) -> u16 {
         // Wrapping on purpose: the core unwraps a 16-bit count.
-        self.0.count() as u16
+        self.0.cnt().read().bits() as u16
     }
 }

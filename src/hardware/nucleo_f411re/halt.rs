@@ -2,18 +2,45 @@
 //! stop). It is driven high from reset until the device is armed, and a
 //! panic or HardFault drives it high and leaves it there.
 
-use stm32f4xx_hal::gpio::{Output, PushPull, PA8};
-use stm32f4xx_hal::pac;
+use core::convert::Infallible;
+
+use stm32f4::stm32f411 as pac;
 
 /// The halt line, as the core's [`embedded_hal::digital::OutputPin`].
-pub type HaltLine = PA8<Output<PushPull>>;
+pub struct HaltLine(());
+
+impl HaltLine {
+    /// PA8 made a push-pull output, driven high (asserted) before it is
+    /// one, so the robot never sees it low at boot.
+    pub fn asserted(gpioa: &pac::GPIOA) -> Self {
+        assert_halt_raw();
+        gpioa.moder().modify(|_, w| w.moder8().output());
+        Self(())
+    }
+}
+
+impl embedded_hal::digital::ErrorType for HaltLine {
+    type Error = Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for HaltLine {
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        assert_halt_raw();
+        Ok(())
+    }
+
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        // SAFETY: as in `assert_halt_raw`, resetting BR8 only.
+        unsafe { (*pac::GPIOA::ptr()).bsrr().write(|w| w.br8().set_bit()) };
+        Ok(())
+    }
+}
 
 /// Assert the halt line from anywhere, whatever state the program is in.
 fn assert_halt_raw() {
     // SAFETY: GPIOA's bit set/reset register is write-only and atomic:
-    // setting BS8 drives PA8 high without touching any other pin, and the
-    // pin was made a push-pull output at boot. Nothing else runs after a
-    // panic or HardFault.
+    // setting BS8 drives PA8 high without touching any other pin. Nothing
+    // else runs after a panic or HardFault.
     unsafe { (*pac::GPIOA::ptr()).bsrr().write(|w| w.bs8().set_bit()) };
 }
 

@@ -5,11 +5,8 @@
 //! queue is dropped whole, and the core counts it in its status frames.
 
 use heapless::spsc::Consumer;
-use stm32f4xx_hal::pac::USART2;
-use stm32f4xx_hal::prelude::*;
-use stm32f4xx_hal::serial::Tx;
-#[cfg(not(feature = "f411-replay"))]
-use stm32f4xx_hal::serial::TxListen;
+
+use super::serial::Usart2;
 
 /// Bytes the queue holds: about 40 ms of a 2 kHz stream, so a stall of
 /// the drain that long loses nothing.
@@ -20,9 +17,9 @@ pub const QUEUE_BYTES: usize = 4096;
 pub type QueueWriter = needle_holder::link::QueueWriter<'static, QUEUE_BYTES>;
 
 /// Send what the transmitter takes now, without waiting.
-pub fn send_waiting(tx: &mut Tx<USART2>, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {
+pub fn send_waiting(serial: &mut Usart2, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {
     while let Some(&byte) = queue.peek() {
-        if tx.write(byte).is_err() {
+        if !serial.write(byte) {
             break;
         }
         queue.dequeue();
@@ -32,11 +29,7 @@ pub fn send_waiting(tx: &mut Tx<USART2>, queue: &mut Consumer<'static, u8, QUEUE
 /// [`send_waiting`], then listen for transmit-empty while bytes wait and
 /// stop listening once the queue is empty.
 #[cfg(not(feature = "f411-replay"))]
-pub fn drain(tx: &mut Tx<USART2>, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {
-    send_waiting(tx, queue);
-    if queue.ready() {
-        tx.listen();
-    } else {
-        tx.unlisten();
-    }
+pub fn drain(serial: &mut Usart2, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {
+    send_waiting(serial, queue);
+    serial.listen_tx(queue.ready());
 }

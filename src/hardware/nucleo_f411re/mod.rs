@@ -12,12 +12,22 @@
 //! | frames out, commands in | PA2 (USART2_TX), PA3 (USART2_RX) at 921 600 Bd | the ST-LINK's virtual COM port |
 //!
 //! Split by concern as stabilizer does: [`setup`] brings the chip up and
-//! hands out the parts, [`adc`] is the converter on its bus, [`encoder`]
-//! the timer in encoder mode, [`link`] the frame queue and its drain,
-//! [`halt`] the line and what a panic does to it, [`store`] the settings
-//! sector in flash; [`app`] is the RTIC
-//! application that schedules them (the converter's data-ready is the
-//! sample clock).
+//! hands out the parts, [`clocks`] the clock tree, [`pins`] the GPIO,
+//! [`adc`] is the converter on its bus ([`spi`]), [`encoder`] the timer in
+//! encoder mode, [`serial`] USART2 and [`link`] the frame queue and its
+//! drain, [`timer`] the watchdog's tick, [`halt`] the line and what a
+//! panic does to it, [`store`] the settings sector in flash, [`rtt`] the
+//! defmt logger; [`app`] is the RTIC application that schedules them (the
+//! converter's data-ready is the sample clock).
+//!
+//! All of it is on the registers, through the peripheral access crate
+//! (`stm32f4`), not on stm32f4xx-hal: the HAL's clock set-up (`freeze`)
+//! checks every configuration at run time and links the panics for those
+//! it refuses (and embedded-hal-bus's delay-less SPI device and defmt-rtt
+//! link more: a real delay here, and our own RTT logger); the
+//! firmware is proved, at link time, to have no panic path
+//! (`host-tools/tests/firmware_image.rs`). Each register write cites the
+//! reference manual (RM0383) where the value is not self-evident.
 //!
 //! With feature `f411-replay` the same board code runs [`replay_app`]
 //! instead: the replay file (over semihosting) in place of the converter
@@ -28,22 +38,32 @@
 pub mod adc;
 #[cfg(not(feature = "f411-replay"))]
 mod app;
+// The replay image runs on the HSI and only sends.
+#[cfg_attr(feature = "f411-replay", allow(dead_code))]
+pub mod clocks;
 #[cfg(not(feature = "f411-replay"))]
 pub mod encoder;
 pub mod halt;
 pub mod link;
+// The replay image sets up only USART2's pins.
+#[cfg_attr(feature = "f411-replay", allow(dead_code))]
+pub mod pins;
 #[cfg(feature = "f411-replay")]
 mod replay_app;
-#[cfg(not(feature = "f411-replay"))]
-pub mod setup;
-pub mod stack;
-#[cfg(not(feature = "f411-replay"))]
-pub mod store;
-
 // defmt over RTT on the board (probe-rs reads it); over semihosting in
 // QEMU, where the replay image runs (`hardware::semihost`).
 #[cfg(not(feature = "f411-replay"))]
-use defmt_rtt as _;
+mod rtt;
+#[cfg_attr(feature = "f411-replay", allow(dead_code))]
+pub mod serial;
+#[cfg(not(feature = "f411-replay"))]
+pub mod setup;
+#[cfg(not(feature = "f411-replay"))]
+pub mod spi;
+pub mod stack;
+#[cfg(not(feature = "f411-replay"))]
+pub mod store;
+pub mod timer;
 
 /// Board name for logs.
 pub const BOARD: &str = "nucleo-f411re";

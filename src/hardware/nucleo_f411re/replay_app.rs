@@ -7,21 +7,18 @@
 //! replay the device's final status goes out, the queue drains, and QEMU
 //! exits 0.
 
-#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
+#[rtic::app(device = stm32f4::stm32f411, peripherals = true)]
 mod app {
     use heapless::spsc::{Consumer, Queue};
     use needle_holder::config::DeviceConfig;
     use needle_holder::replay::Replayer;
-    use stm32f4xx_hal::gpio::PinState;
-    use stm32f4xx_hal::pac::{TIM2, USART2};
-    use stm32f4xx_hal::prelude::*;
-    use stm32f4xx_hal::rcc::Config;
-    use stm32f4xx_hal::serial::Tx;
-    use stm32f4xx_hal::timer::{CounterHz, Event};
-    use stm32f4xx_hal::ClearFlags;
 
+    use super::super::clocks::{self, HSI};
     use super::super::halt::HaltLine;
     use super::super::link::{QueueWriter, QUEUE_BYTES};
+    use super::super::pins;
+    use super::super::serial::Usart2;
+    use super::super::timer::SampleClock;
     use super::super::BOARD;
     use crate::hardware::bench::BenchMarkers;
     use crate::hardware::exit;
@@ -42,8 +39,8 @@ mod app {
         /// The replay, until it has ended.
         replay: Option<Replayer<ReplayFile, QueueWriter, HaltLine>>,
         markers: BenchMarkers,
-        clock: CounterHz<TIM2>,
-        tx: Tx<USART2>,
+        clock: Option<SampleClock>,
+        serial: Usart2,
         outgoing: Consumer<'static, u8, QUEUE_BYTES>,
     }
 
@@ -51,13 +48,10 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         super::super::stack::paint();
         let dp = cx.device;
-        let mut rcc = dp.RCC.freeze(Config::hsi());
-        let gpioa = dp.GPIOA.split(&mut rcc);
-        let halt: HaltLine = gpioa.pa8.into_push_pull_output_in_state(PinState::High);
-        let tx = match dp.USART2.tx(gpioa.pa2, REPLAY_BAUD.bps(), &mut rcc) {
-            Ok(tx) => tx,
-            Err(_) => exit(crate::hardware::exit_code::NO_REPLAY),
-        };
+        clocks::enable_peripherals(&dp.RCC);
+        let halt = HaltLine::asserted(&dp.GPIOA);
+        pins::usart2(&dp.GPIOA);
+        let serial = Usart2::new(dp.USART2, HSI.pclk1_hz, REPLAY_BAUD, false);
         let (producer, outgoing) = cx.local.queue.split();
         defmt::info!(
             "needle-holder {} on {} (replay)",
@@ -65,22 +59,17 @@ mod app {
             BOARD
         );
         let source = ReplayFile::open_from_args();
-        let mut clock = dp.TIM2.counter_hz(&mut rcc);
-        let replay = match Replayer::start(
+        // A bad header: its fault and final status are queued already.
+        let replay = Replayer::start(
             source,
             DeviceConfig::default(),
             needle_holder::link::QueueWriter(producer),
             halt,
-        ) {
-            Ok(replay) => {
-                // A rate the timer takes from 16 MHz (every u16 rate does).
-                let _ = clock.start(u32::from(replay.sample_rate_hz()).Hz());
-                clock.listen(Event::Update);
-                Some(replay)
-            }
-            // A bad header: its fault and final status are queued already.
-            Err(_) => None,
-        };
+        )
+        .ok();
+        let clock = replay
+            .as_ref()
+            .map(|r| SampleClock::start(dp.TIM2, HSI.apb1_timer_hz, u32::from(r.sample_rate_hz())));
         (
             Shared {
                 done: replay.is_none(),
@@ -89,7 +78,7 @@ mod app {
                 replay,
                 markers: BenchMarkers::calibrated(),
                 clock,
-                tx,
+                serial,
                 outgoing,
             },
         )
@@ -98,7 +87,9 @@ mod app {
     #[task(binds = TIM2, priority = 2, shared = [done], local = [replay, markers, clock])]
     fn sample(mut cx: sample::Context) {
         let l = cx.local;
-        l.clock.clear_all_flags();
+        if let Some(clock) = l.clock.as_mut() {
+            clock.clear();
+        }
         // None once ended: an update already pending when the timer
         // stopped finds nothing to do.
         let Some(replay) = l.replay.as_mut() else {
@@ -115,24 +106,26 @@ mod app {
             summary.faults.0,
             super::super::stack::high_water_bytes()
         );
-        l.clock.unlisten(Event::Update);
+        if let Some(clock) = l.clock.as_mut() {
+            clock.stop();
+        }
         *l.replay = None;
         cx.shared.done.lock(|d| *d = true);
     }
 
     /// The link's drain, at the lowest priority: bytes to USART2 while
     /// any wait, sleep until the next sample otherwise.
-    #[idle(shared = [done], local = [tx, outgoing])]
+    #[idle(shared = [done], local = [serial, outgoing])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
             let finished = cx.shared.done.lock(|d| *d);
-            super::super::link::send_waiting(cx.local.tx, cx.local.outgoing);
+            super::super::link::send_waiting(cx.local.serial, cx.local.outgoing);
             if cx.local.outgoing.ready() {
                 continue;
             }
             if finished {
                 // The last byte out of the shift register before QEMU goes.
-                while cx.local.tx.flush().is_err() {}
+                while !cx.local.serial.sent() {}
                 exit(0);
             }
             cortex_m::asm::wfi();

@@ -4,25 +4,23 @@
 //! data-ready as a falling-edge interrupt, the encoder timer, USART2 for
 //! frames, and TIM5 as the data-ready watchdog.
 
-use embedded_hal::spi::MODE_1;
 use embedded_hal_bus::spi::ExclusiveDevice;
 use needle_holder::ads1220::{Ads1220, Config as AdcConfig, Error};
-use stm32f4xx_hal::gpio::{Edge, PinState};
-use stm32f4xx_hal::pac::{self, TIM5, USART2};
-use stm32f4xx_hal::prelude::*;
-use stm32f4xx_hal::qei::Qei;
-use stm32f4xx_hal::rcc::Config;
-use stm32f4xx_hal::serial::{Rx, RxListen, Tx};
-use stm32f4xx_hal::timer::{CounterHz, Event};
+use stm32f4::stm32f411 as pac;
 
 use super::adc::{rate_for, Acquisition, Converter};
+use super::clocks::{self, CycleDelay};
 use super::encoder::Encoder;
 use super::halt::HaltLine;
+use super::pins::{self, ChipSelect, DataReady};
+use super::serial::Usart2;
+use super::spi::Spi1;
+use super::timer::Watchdog;
 
 /// Frames' baud rate on the ST-LINK's virtual COM port.
 pub const BAUD: u32 = 921_600;
-/// SPI clock: APB2's 100 MHz / 16, under the ADS1220's 6.6 MHz limit.
-const SPI_HZ: u32 = 6_250_000;
+/// The ADS1220's fastest SPI clock (datasheet §7.6: 150 ns period).
+const SPI_MOST_HZ: u32 = 6_600_000;
 /// How often the watchdog looks for samples; two looks without one is an
 /// `adc_timeout` (40–80 ms: 20 samples at the slowest rate).
 pub const WATCHDOG_HZ: u32 = 25;
@@ -33,47 +31,36 @@ pub struct Parts {
     /// Set up by `start`, or why the converter would not start.
     pub converter_started: Result<(), Error<()>>,
     pub encoder: Encoder,
-    pub tx: Tx<USART2>,
-    /// Commands from the host; its receive interrupt is on.
-    pub rx: Rx<USART2>,
+    /// Frames out, commands in (its receive interrupt is on).
+    pub serial: Usart2,
     pub halt: HaltLine,
-    pub watchdog: CounterHz<TIM5>,
+    pub watchdog: Watchdog,
     /// The flash interface, for the settings store.
     pub flash: pac::FLASH,
 }
 
 /// Bring everything up for `sample_rate_hz`.
-pub fn setup(mut dp: pac::Peripherals, cp: cortex_m::Peripherals, sample_rate_hz: u16) -> Parts {
-    // The Nucleo's HSE is the ST-LINK's 8 MHz MCO output (bypass).
-    let mut rcc = dp.RCC.freeze(
-        Config::hse(8.MHz())
-            .bypass_hse_oscillator()
-            .sysclk(100.MHz()),
-    );
-    let gpioa = dp.GPIOA.split(&mut rcc);
-    let gpiob = dp.GPIOB.split(&mut rcc);
-    let halt = gpioa.pa8.into_push_pull_output_in_state(PinState::High);
+pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
+    clocks::enable_peripherals(&dp.RCC);
+    let halt = HaltLine::asserted(&dp.GPIOA);
+    let clocks = clocks::to_100mhz(&dp.RCC, &dp.FLASH, &dp.PWR);
 
-    let spi = dp.SPI1.spi(
-        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
-        MODE_1,
-        SPI_HZ.Hz(),
-        &mut rcc,
-    );
-    let cs = gpiob.pb6.into_push_pull_output_in_state(PinState::High);
-    let mut drdy = gpioa.pa10.into_pull_up_input();
-    let mut syscfg = dp.SYSCFG.constrain(&mut rcc);
-    drdy.make_interrupt_source(&mut syscfg);
-    drdy.trigger_on_edge(&mut dp.EXTI, Edge::Falling);
-    drdy.enable_interrupt(&mut dp.EXTI);
+    pins::spi1(&dp.GPIOA, &dp.GPIOB);
+    pins::data_ready(&dp.GPIOA, &dp.SYSCFG, &dp.EXTI);
+    let spi = Spi1::new(dp.SPI1, clocks.pclk2_hz, SPI_MOST_HZ);
+    let delay = CycleDelay {
+        sysclk_hz: clocks.sysclk_hz,
+    };
     // Chip select is a push-pull pin: setting it cannot fail.
-    let device = match ExclusiveDevice::new_no_delay(spi, cs) {
+    let device = match ExclusiveDevice::new(spi, ChipSelect::new(), delay) {
         Ok(d) => d,
         Err(never) => match never {},
     };
-    let mut converter: Converter = Ads1220::new(device, drdy);
+    let mut converter: Converter = Ads1220::new(device, DataReady::new());
     let (rate, per_sample) = rate_for(sample_rate_hz);
-    let mut delay = cp.SYST.delay(&rcc.clocks);
+    let mut delay = CycleDelay {
+        sysclk_hz: clocks.sysclk_hz,
+    };
     let converter_started = converter
         .start(&AdcConfig::bridge(rate), &mut delay)
         .map_err(|e| match e {
@@ -83,36 +70,19 @@ pub fn setup(mut dp: pac::Peripherals, cp: cortex_m::Peripherals, sample_rate_hz
             Error::Readback { wrote, read } => Error::Readback { wrote, read },
         });
 
-    let encoder = Encoder(Qei::new(dp.TIM2, (gpioa.pa0, gpioa.pa1), &mut rcc));
-    let (tx, mut rx) = dp
-        .USART2
-        .serial::<u8>((gpioa.pa2, gpioa.pa3), BAUD.bps(), &mut rcc)
-        .unwrap_or_else(|_| unreachable_baud())
-        .split();
-    rx.listen();
-    let mut watchdog = dp.TIM5.counter_hz(&mut rcc);
-    // A frequency the timer takes at 100 MHz.
-    let _ = watchdog.start(WATCHDOG_HZ.Hz());
-    watchdog.listen(Event::Update);
+    pins::encoder(&dp.GPIOA);
+    let encoder = Encoder::new(dp.TIM2);
+    pins::usart2(&dp.GPIOA);
+    let serial = Usart2::new(dp.USART2, clocks.pclk1_hz, BAUD, true);
+    let watchdog = Watchdog::start(dp.TIM5, clocks.apb1_timer_hz, WATCHDOG_HZ);
 
     Parts {
         acquisition: Acquisition::new(converter, per_sample),
         converter_started,
         encoder,
-        tx,
-        rx,
+        serial,
         halt,
         watchdog,
         flash: dp.FLASH,
-    }
-}
-
-/// 921 600 Bd from APB1's 50 MHz is within the USART's range; a build
-/// that changed the clocks so it is not would stop here with the halt line
-/// asserted.
-fn unreachable_baud() -> ! {
-    defmt::error!("USART2 cannot make {=u32} Bd", BAUD);
-    loop {
-        cortex_m::asm::wfi();
     }
 }

@@ -8,19 +8,23 @@
 //! (programming stalls the flash for microseconds at a time).
 
 use needle_holder::persist::{self, Load, Settings, MAX_RECORD, MIN_ROOM};
-use stm32f4xx_hal::flash::{FlashExt, LockedFlash};
-use stm32f4xx_hal::pac::FLASH;
+use stm32f4::stm32f411::FLASH;
 
 /// The sector's number.
 const SECTOR: u8 = 7;
-/// Its offset from the start of flash.
-const OFFSET: usize = 0x6_0000;
+/// Its address.
+const BASE: usize = 0x0806_0000;
 /// Its size.
 const LEN: usize = 128 * 1024;
 
-/// The settings sector.
+/// The flash controller's unlock sequence (RM0383 §3.5.1).
+const KEYS: [u32; 2] = [0x4567_0123, 0xCDEF_89AB];
+
+/// The settings sector, through the flash controller's registers
+/// (RM0383 §3.5–3.6): unlocked for one operation at a time, every error
+/// flag read back.
 pub struct Store {
-    flash: LockedFlash,
+    flash: FLASH,
     /// Where the next record goes; `None` when full (or the write failed).
     next_free: Option<usize>,
 }
@@ -28,8 +32,11 @@ pub struct Store {
 impl Store {
     /// Read the log.
     pub fn open(flash: FLASH) -> (Self, Load) {
-        let flash = LockedFlash::new(flash);
-        let load = persist::load(flash.read().get(OFFSET..OFFSET + LEN).unwrap_or(&[]));
+        // SAFETY: the sector is memory-mapped flash that the memory map
+        // keeps out of the image; it changes only through `self`, which
+        // holds no reference into it while it does.
+        let sector = unsafe { core::slice::from_raw_parts(BASE as *const u8, LEN) };
+        let load = persist::load(sector);
         let next_free = load.next_free;
         (Self { flash, next_free }, load)
     }
@@ -41,7 +48,7 @@ impl Store {
             return;
         }
         defmt::warn!("settings sector full or unreadable: erasing it");
-        if self.flash.unlocked().erase(SECTOR).is_err() {
+        if !self.erase() {
             defmt::error!("settings sector: erase failed");
             return;
         }
@@ -64,15 +71,73 @@ impl Store {
             self.next_free = None;
             return false;
         }
-        let written = self
-            .flash
-            .unlocked()
-            .program(OFFSET + at, record.iter())
-            .is_ok();
+        let written = self.program(BASE + at, record);
         self.next_free = (written && LEN - end >= MIN_ROOM).then_some(end);
         if !written {
             defmt::error!("settings sector: programming failed");
         }
         written
+    }
+
+    /// Erase the sector (1–2 s, every flash fetch stalled meanwhile).
+    fn erase(&mut self) -> bool {
+        self.unlocked(|flash| {
+            // SAFETY: the sector number is one of the chip's (0..=7).
+            flash.cr().modify(|_, w| unsafe {
+                w.psize().psize32();
+                w.snb().bits(SECTOR);
+                w.ser().sector_erase()
+            });
+            flash.cr().modify(|_, w| w.strt().start());
+            Self::finished(flash)
+        })
+    }
+
+    /// Program `bytes` from `address`, a byte at a time (any supply
+    /// voltage takes that parallelism).
+    fn program(&mut self, address: usize, bytes: &[u8]) -> bool {
+        self.unlocked(|flash| {
+            flash.cr().modify(|_, w| w.psize().psize8().pg().program());
+            bytes.iter().enumerate().all(|(i, &byte)| {
+                // SAFETY: inside the settings sector (the caller checked
+                // the record fits), which the image never uses; with PG
+                // set a byte write is a program operation.
+                unsafe { ((address + i) as *mut u8).write_volatile(byte) };
+                Self::finished(flash)
+            })
+        })
+    }
+
+    /// Run `operation` with the controller unlocked and its old error
+    /// flags cleared; lock it again after, whatever happened.
+    fn unlocked(&mut self, operation: impl FnOnce(&FLASH) -> bool) -> bool {
+        let flash = &self.flash;
+        if flash.cr().read().lock().bit_is_set() {
+            for key in KEYS {
+                // SAFETY: the documented key sequence.
+                flash.keyr().write(|w| unsafe { w.bits(key) });
+            }
+        }
+        // SAFETY: the flags are cleared by writing 1 (all but BSY).
+        flash.sr().write(|w| unsafe { w.bits(0xF3) });
+        let done = operation(flash);
+        flash.cr().write(|w| w.lock().set_bit());
+        done
+    }
+
+    /// Wait for the operation in hand to end; whether it ended without an
+    /// error flag.
+    fn finished(flash: &FLASH) -> bool {
+        while flash.sr().read().bsy().bit_is_set() {}
+        let sr = flash.sr().read();
+        let failed = sr.pgserr().bit_is_set()
+            || sr.pgperr().bit_is_set()
+            || sr.pgaerr().bit_is_set()
+            || sr.wrperr().bit_is_set()
+            || sr.operr().bit_is_set();
+        // Only the end-of-operation and error flags: written back to clear.
+        // SAFETY: as in `unlocked`.
+        flash.sr().write(|w| unsafe { w.bits(sr.bits() & 0xF3) });
+        !failed
     }
 }

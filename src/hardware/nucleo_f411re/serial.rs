@@ -1,0 +1,75 @@
+//! USART2 (the ST-LINK's virtual COM port), 8N1, on the registers: frames
+//! out a byte per transmit-empty, commands in a byte per receive-not-empty.
+
+use stm32f4::stm32f411 as pac;
+
+pub struct Usart2(pac::USART2);
+
+impl Usart2 {
+    /// Enabled at `baud` from APB1's `pclk1_hz`, receiving; with the
+    /// receive interrupt if `rx_interrupt`.
+    pub fn new(usart: pac::USART2, pclk1_hz: u32, baud: u32, rx_interrupt: bool) -> Self {
+        // 16× oversampling: BRR is the clock over the baud rate, as a
+        // 12.4 fixed-point divider (RM0383 §19.3.4), rounded.
+        let brr = pclk1_hz
+            .saturating_add(baud / 2)
+            .checked_div(baud)
+            .unwrap_or(0);
+        // SAFETY: any 16-bit value is a divider; 921 600 Bd from 50 MHz
+        // is 54 (0.5 % fast), 115 200 from 16 MHz 139.
+        usart
+            .brr()
+            .write(|w| unsafe { w.bits(brr.clamp(16, 0xFFFF) as u16) });
+        usart.cr1().write(|w| {
+            w.ue().set_bit();
+            w.te().set_bit();
+            w.re().set_bit();
+            w.rxneie().bit(rx_interrupt)
+        });
+        Self(usart)
+    }
+
+    /// The next byte received, if any. A byte with a framing, noise or
+    /// parity error is dropped (the frame it belongs to then fails its
+    /// CRC, and the device says so); an overrun lost bytes the same way.
+    pub fn read(&mut self) -> Option<u8> {
+        loop {
+            let sr = self.0.sr().read();
+            if sr.rxne().bit_is_clear() {
+                if sr.ore().bit_is_set() {
+                    // Reading DR after SR clears the overrun flag.
+                    let _ = self.0.dr().read();
+                }
+                return None;
+            }
+            let byte = self.0.dr().read().dr().bits() as u8;
+            if sr.fe().bit_is_clear() && sr.nf().bit_is_clear() && sr.pe().bit_is_clear() {
+                return Some(byte);
+            }
+        }
+    }
+
+    /// Send `byte` if the transmitter takes one now.
+    pub fn write(&mut self, byte: u8) -> bool {
+        if self.0.sr().read().txe().bit_is_clear() {
+            return false;
+        }
+        // SAFETY: any byte is data.
+        self.0
+            .dr()
+            .write(|w| unsafe { w.dr().bits(u16::from(byte)) });
+        true
+    }
+
+    /// Whether the last byte has left the shift register (the replay
+    /// image waits for it before leaving QEMU).
+    #[cfg_attr(not(feature = "f411-replay"), allow(dead_code))]
+    pub fn sent(&self) -> bool {
+        self.0.sr().read().tc().bit_is_set()
+    }
+
+    /// Interrupt on transmit-empty, or not.
+    pub fn listen_tx(&mut self, on: bool) {
+        self.0.cr1().modify(|_, w| w.txeie().bit(on));
+    }
+}
