@@ -50,6 +50,11 @@ pub struct Acquisition {
 pub enum Conversion {
     /// More conversions to come before a sample.
     Partial,
+    /// The edge was stale: data-ready is high again, the conversion it
+    /// announced already read (the task ran a period late and read the
+    /// next one). Nothing to do; a converter that stops altogether is the
+    /// watchdog's `adc_timeout`.
+    Stale,
     /// A whole sample.
     Sample(AdcSample),
     /// The bus or the converter failed.
@@ -72,6 +77,7 @@ impl Acquisition {
     pub fn convert(&mut self) -> Conversion {
         let one = match self.converter.read() {
             Ok(s) => s,
+            Err(Error::NotReady) => return Conversion::Stale,
             Err(e) => return Conversion::Failed(e),
         };
         self.sum += i64::from(one.counts);

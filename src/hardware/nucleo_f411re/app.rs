@@ -116,10 +116,15 @@ mod app {
                 device.raise(Faults::ADC_ERROR);
             }
         }
+        // Edges latched during start-up (the converter runs from
+        // `setup` on; an erase above stalls for seconds): the first sample
+        // waits for the next one.
+        let mut acquisition = parts.acquisition;
+        acquisition.converter.data_ready_pin().clear_pending();
         (
             shared,
             Local {
-                acquisition: parts.acquisition,
+                acquisition,
                 encoder: parts.encoder,
                 tare: BootTare::new(MAX_BOOT_OFFSET_COUNTS),
                 serial: parts.serial,
@@ -162,7 +167,7 @@ mod app {
         shared.lock(|device, unarmed, seen, config, origin| {
             *seen = seen.wrapping_add(1);
             match conversion {
-                Conversion::Partial => {}
+                Conversion::Partial | Conversion::Stale => {}
                 Conversion::Failed(e) => {
                     defmt::error!("ADS1220: {}", defmt::Debug2Format(&e));
                     if let Some(d) = arm(device, unarmed, config, *origin) {

@@ -94,6 +94,12 @@ pub fn to_100mhz(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clocks {
         defmt::error!("PLL did not lock: running on HSI at 16 MHz");
         return HSI;
     }
+    // The regulator reaches scale 1 only once the PLL is on (RM0383
+    // §5.4.1: VOSRDY); 100 MHz before that would overclock scale 2.
+    if !wait_for(|| pwr.csr().read().vosrdy().bit_is_set()) {
+        defmt::error!("regulator not at scale 1: running on HSI at 16 MHz");
+        return HSI;
+    }
     // 3 wait states for 90–100 MHz at 2.7–3.6 V (RM0383 table 6), before
     // the clock rises; prefetch and caches make up for them.
     flash.acr().modify(|_, w| {
@@ -111,6 +117,8 @@ pub fn to_100mhz(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clocks {
     rcc.cfgr().modify(|_, w| w.sw().pll());
     if !wait_for(|| rcc.cfgr().read().sws().is_pll()) {
         defmt::error!("system clock did not switch to the PLL");
+        // Still on HSI: undivided again, as `HSI` says.
+        rcc.cfgr().modify(|_, w| w.ppre1().div1());
         return HSI;
     }
     PLL_100MHZ

@@ -12,7 +12,13 @@ impl Encoder {
     /// Counting from 0 (RM0383 §13.3.16: channels on TI1 and TI2, slave
     /// mode 3, the whole 32-bit range).
     pub fn new(tim: pac::TIM2) -> Self {
-        tim.ccmr1_input().write(|w| w.cc1s().ti1().cc2s().ti2());
+        // Each input filtered over 8 timer clocks (80 ns at 100 MHz): a
+        // glitch on a cable with only the pins' weak pull-ups is not a
+        // count; edges of a 1 MHz quadrature signal still are.
+        tim.ccmr1_input().write(|w| {
+            w.cc1s().ti1().cc2s().ti2();
+            w.ic1f().fck_int_n8().ic2f().fck_int_n8()
+        });
         tim.smcr().write(|w| w.sms().encoder_mode_3());
         // SAFETY: any value is a reload value.
         tim.arr().write(|w| unsafe { w.bits(u32::MAX) });

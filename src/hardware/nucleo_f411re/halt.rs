@@ -1,6 +1,8 @@
 //! The halt line: PA8, push-pull, active high (asserted: the robot must
-//! stop). It is driven high from reset until the device is armed, and a
-//! panic or HardFault drives it high and leaves it there.
+//! stop). Firmware drives it high from its first instructions until the
+//! device is armed (during reset and until then the pin floats: a pull-up
+//! on the line makes reset a stop too), and a panic or HardFault drives
+//! it high and leaves it there.
 
 use core::convert::Infallible;
 
@@ -57,6 +59,10 @@ fn stop(_code: i32) -> ! {
 
 #[panic_handler]
 fn panic(_info: &core::panic::PanicInfo) -> ! {
+    // Nothing else runs from here on: a task of higher priority than the
+    // one that panicked would otherwise go on, and arming releases the
+    // line.
+    cortex_m::interrupt::disable();
     assert_halt_raw();
     defmt::error!("panic: halt asserted");
     stop(101) // exit_code::PANIC

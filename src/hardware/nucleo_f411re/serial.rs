@@ -29,9 +29,11 @@ impl Usart2 {
         Self(usart)
     }
 
-    /// The next byte received, if any. A byte with a framing, noise or
-    /// parity error is dropped (the frame it belongs to then fails its
-    /// CRC, and the device says so); an overrun lost bytes the same way.
+    /// The next byte received, if any. A byte with a framing or parity
+    /// error is dropped (the frame it belongs to then fails its CRC, and
+    /// the device says so); an overrun lost bytes the same way. Noise
+    /// alone is a warning (the majority vote usually got the bit right),
+    /// and the CRC judges.
     pub fn read(&mut self) -> Option<u8> {
         loop {
             let sr = self.0.sr().read();
@@ -43,7 +45,7 @@ impl Usart2 {
                 return None;
             }
             let byte = self.0.dr().read().dr().bits() as u8;
-            if sr.fe().bit_is_clear() && sr.nf().bit_is_clear() && sr.pe().bit_is_clear() {
+            if sr.fe().bit_is_clear() && sr.pe().bit_is_clear() {
                 return Some(byte);
             }
         }

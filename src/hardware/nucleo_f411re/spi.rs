@@ -7,7 +7,7 @@ use embedded_hal::spi::{ErrorKind, ErrorType, SpiBus};
 use stm32f4::stm32f411 as pac;
 
 /// Polls of a status flag before the bus counts as stuck: a byte takes
-/// 16 APB2 clocks at the slowest setting here, far fewer polls.
+/// 8 × 16 = 128 APB2 clocks at the setting used, far fewer polls.
 const POLLS: u32 = 10_000;
 
 pub struct Spi1(pac::SPI1);
@@ -75,8 +75,26 @@ impl Spi1 {
         Err(Error::Timeout)
     }
 
+    /// Leave what an earlier error left: a late byte in DR (after a
+    /// timeout) would shift every read after it by one; a mode fault
+    /// clears SPE and MSTR.
+    fn recover(&mut self) {
+        let sr = self.0.sr().read();
+        if sr.rxne().bit_is_set() || sr.ovr().bit_is_set() {
+            let _ = self.0.dr().read();
+            let _ = self.0.sr().read();
+        }
+        if sr.modf().bit_is_set() {
+            // Reading SR (above) then writing CR1 clears it (RM0383 §20.4.8).
+            self.0
+                .cr1()
+                .modify(|_, w| w.mstr().master().spe().enabled());
+        }
+    }
+
     /// One byte out, one in.
     fn exchange(&mut self, out: u8) -> Result<u8, Error> {
+        self.recover();
         self.wait(|sr| sr.txe().bit_is_set())?;
         // SAFETY: any byte is data.
         self.0

@@ -89,7 +89,15 @@ impl Store {
                 w.ser().sector_erase()
             });
             flash.cr().modify(|_, w| w.strt().start());
-            Self::finished(flash)
+            let erased = Self::finished(flash);
+            // `open` read the sector through the data cache: those lines
+            // are stale now (RM0383 §3.4.3: reset with the cache off).
+            flash.acr().modify(|_, w| w.dcen().clear_bit());
+            flash.acr().modify(|_, w| w.dcrst().set_bit());
+            flash
+                .acr()
+                .modify(|_, w| w.dcrst().clear_bit().dcen().set_bit());
+            erased
         })
     }
 
