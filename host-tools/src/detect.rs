@@ -240,9 +240,14 @@ fn merge(total: &mut [KindScore], part: &[KindScore]) {
 
 /// Detect over a dataset; with truth.json, also score. Returns the JSON.
 pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
-    let truth: Option<Value> = match std::fs::read_to_string(dir.join("truth.json")) {
-        Ok(text) => Some(serde_json::from_str(&text).context("truth.json: not valid JSON")?),
-        Err(_) => None,
+    let truth_path = dir.join("truth.json");
+    let truth: Option<Value> = if truth_path.exists() {
+        let text = crate::input::read_small_text(&truth_path)?;
+        let json = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not valid JSON", truth_path.display()))?;
+        Some(json)
+    } else {
+        None
     };
     let kinds = ["contact", "puncture", "structure", "exit"];
     let mut total: Vec<KindScore> = score(&[], &[], 1.0, &kinds);

@@ -11,6 +11,7 @@ pub mod evaluate;
 pub mod firmware;
 pub mod fit;
 pub mod frames;
+pub mod input;
 pub mod link;
 pub mod plot;
 pub mod record;

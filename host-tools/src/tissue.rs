@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use needle_holder::model::params::{self, TissueParams};
 
 /// One library entry.
@@ -29,8 +29,7 @@ pub fn builtin() -> Vec<Tissue> {
 /// Read and check a library file. Errors name the file, the line and the
 /// entry; invalid values name the field.
 pub fn load(path: &Path) -> Result<Vec<Tissue>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = crate::input::read_small_text(path)?;
     parse(&text, path)
 }
 

@@ -81,11 +81,8 @@ pub fn every(values: &[f64], step: usize) -> Vec<f64> {
 /// `/dev/zero` made the reader allocate 4 GiB for a header that never
 /// ends, and aborted.
 fn open_csv(path: &Path) -> Result<csv::Reader<std::fs::File>> {
+    crate::input::regular_file(path)?;
     let shown = path.display();
-    let meta = std::fs::metadata(path).with_context(|| format!("{shown}: cannot open"))?;
-    if !meta.is_file() {
-        anyhow::bail!("{shown}: not a regular file (a device, directory or pipe is no trial)");
-    }
     csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_path(path)

@@ -214,6 +214,43 @@ fn a_csv_that_is_a_device_is_refused_not_read() {
 }
 
 #[test]
+fn a_truth_json_or_tissue_library_that_is_a_device_is_refused_not_read() {
+    // Row 14's kin: `truth.json` linked to /dev/zero made `detect`, and
+    // `--params /dev/zero` made `simulate`, `fit --params`… read without
+    // end, memory growing.
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let data_arg = data.to_str().unwrap();
+    assert!(needle(&["simulate", "--out", data_arg, "--trials", "2"])
+        .status
+        .success());
+    let truth = data.join("truth.json");
+    std::fs::remove_file(&truth).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", &truth).unwrap();
+    let out = needle(&["detect", data_arg]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("truth.json: not a regular file"), "{err}");
+    let out = needle(&["simulate", "--params", "/dev/zero", "--out", "x"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("/dev/zero: not a regular file"), "{err}");
+    // A library far larger than any is refused by size, unread.
+    let huge = dir.path().join("huge.toml");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(host_tools::input::MOST_TEXT_BYTES + 1)
+        .unwrap();
+    let out = needle(&["simulate", "--params", huge.to_str().unwrap(), "--out", "x"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("huge.toml: 16777217 bytes, more than"),
+        "{err}"
+    );
+}
+
+#[test]
 fn a_csv_that_cannot_be_written_is_named() {
     // Row 12 (in part): `needle decode cap.bin --csv /dev/full` failed
     // without saying which file.

@@ -425,7 +425,7 @@ fn plot_first_trial(dir: &Path, fit: &Value, toml: &str, path: &Path) -> Result<
     let first = fit["per_trial"][0]["file"]
         .as_str()
         .context("no fitted trial to plot")?;
-    let trial = crate::trial::read(&dir.join(first))?;
+    let trial = crate::trial::read_for_analysis(&dir.join(first), None)?.trial;
     let geometry = fit_trial(&trial)?;
     let params = crate::tissue::parse(toml, Path::new("fitted.toml"))?
         .remove(0)
