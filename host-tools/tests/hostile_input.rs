@@ -601,3 +601,18 @@ fn fit_and_diagnose_read_a_huge_trial_in_bounded_memory_and_say_so() {
         assert!(out["skipped"].as_array().unwrap().is_empty(), "{out}");
     }
 }
+
+#[test]
+fn decode_refuses_a_device_named_as_its_capture() {
+    // `needle decode /dev/zero` decoded zeros until stopped, and a serial
+    // port named as a capture was read without its baud rate.
+    let out = needle(&["decode", "/dev/zero"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains(
+            "/dev/zero: a device, not a capture file (a serial port is read with --port /dev/zero)"
+        ),
+        "{err}"
+    );
+}
