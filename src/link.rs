@@ -5,7 +5,7 @@
 //! that does not fit is refused whole, and the device counts it as
 //! dropped in its status frames.
 
-use heapless::spsc::Producer;
+use heapless::spsc::{Consumer, Producer};
 
 /// The sample's end of a byte queue of `N` bytes.
 pub struct QueueWriter<'a, const N: usize>(pub Producer<'a, u8, N>);
@@ -44,6 +44,22 @@ impl<const N: usize> embedded_io::Write for QueueWriter<'_, N> {
     }
 }
 
+/// The drain's side: hand queued bytes to `send` (a transmitter taking one
+/// byte if it has room now) until it refuses one; `true` when the queue is
+/// empty. Every board's drain is this loop over its own transmitter.
+pub fn drain<const N: usize>(
+    queue: &mut Consumer<'_, u8, N>,
+    mut send: impl FnMut(u8) -> bool,
+) -> bool {
+    while let Some(&byte) = queue.peek() {
+        if !send(byte) {
+            return false;
+        }
+        queue.dequeue();
+    }
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -60,5 +76,29 @@ mod tests {
         assert_eq!(consumer.len(), 5);
         while consumer.dequeue().is_some() {}
         assert_eq!(writer.write(&[6, 7, 8]), Ok(3));
+    }
+
+    #[test]
+    fn the_drain_stops_at_the_first_byte_refused_and_keeps_it() {
+        let mut queue: Queue<u8, 8> = Queue::new();
+        let (producer, mut consumer) = queue.split();
+        QueueWriter(producer).write(&[1, 2, 3]).unwrap();
+        let mut sent = std::vec::Vec::new();
+        let mut room = 2;
+        let empty = drain(&mut consumer, |byte| {
+            room > 0 && {
+                room -= 1;
+                sent.push(byte);
+                true
+            }
+        });
+        assert!(!empty);
+        assert_eq!(sent, [1, 2]);
+        assert_eq!(consumer.peek(), Some(&3));
+        assert!(drain(&mut consumer, |byte| {
+            sent.push(byte);
+            true
+        }));
+        assert_eq!(sent, [1, 2, 3]);
     }
 }

@@ -126,6 +126,7 @@ pub fn to_100mhz(rcc: &pac::RCC, flash: &pac::FLASH, pwr: &pac::PWR) -> Clocks {
 
 /// A busy wait in core cycles, as embedded-hal's delay (the converter's
 /// reset wait at start-up).
+#[derive(Clone, Copy)]
 pub struct CycleDelay {
     pub sysclk_hz: u32,
 }

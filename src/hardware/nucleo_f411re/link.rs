@@ -18,12 +18,7 @@ pub type QueueWriter = needle_holder::link::QueueWriter<'static, QUEUE_BYTES>;
 
 /// Send what the transmitter takes now, without waiting.
 pub fn send_waiting(serial: &mut Usart2, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {
-    while let Some(&byte) = queue.peek() {
-        if !serial.write(byte) {
-            break;
-        }
-        queue.dequeue();
-    }
+    needle_holder::link::drain(queue, |byte| serial.write(byte));
 }
 
 /// [`send_waiting`], then listen for transmit-empty while bytes wait and

@@ -48,7 +48,7 @@ pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
     pins::spi1(&dp.GPIOA, &dp.GPIOB);
     pins::data_ready(&dp.GPIOA, &dp.SYSCFG, &dp.EXTI);
     let spi = Spi1::new(dp.SPI1, clocks.pclk2_hz, SPI_MOST_HZ);
-    let delay = CycleDelay {
+    let mut delay = CycleDelay {
         sysclk_hz: clocks.sysclk_hz,
     };
     // Chip select is a push-pull pin: setting it cannot fail.
@@ -58,9 +58,6 @@ pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
     };
     let mut converter: Converter = Ads1220::new(device, DataReady::new());
     let (rate, per_sample) = rate_for(sample_rate_hz);
-    let mut delay = CycleDelay {
-        sysclk_hz: clocks.sysclk_hz,
-    };
     let converter_started = converter
         .start(&AdcConfig::bridge(rate), &mut delay)
         .map_err(|e| match e {

@@ -47,38 +47,37 @@ pub fn take_peripherals() -> (Uart0, HaltPin) {
 }
 
 impl Uart0 {
-    /// Move waiting bytes from `queue` into the transmit FIFO until it is
-    /// full; `true` when the queue is empty.
-    pub fn send_waiting<const N: usize>(&mut self, queue: &mut Consumer<'_, u8, N>) -> bool {
-        while let Some(&byte) = queue.peek() {
-            // SAFETY: UART0 flag and data registers; reading FR and writing
-            // DR have no side effects beyond sending the byte.
-            unsafe {
-                if read_volatile(UART0_FR) & FR_TXFF != 0 {
-                    return false;
-                }
-                write_volatile(UART0_DR, byte as u32);
+    /// Put `byte` in the transmit FIFO if it has room.
+    fn try_send(&mut self, byte: u8) -> bool {
+        // SAFETY: UART0 flag and data registers; reading FR and writing DR
+        // have no side effects beyond sending the byte.
+        unsafe {
+            if read_volatile(UART0_FR) & FR_TXFF != 0 {
+                return false;
             }
-            queue.dequeue();
+            write_volatile(UART0_DR, byte as u32);
         }
         true
     }
 
+    /// The next byte in the receive FIFO, if any.
+    fn try_receive(&mut self) -> Option<u8> {
+        // SAFETY: UART0 flag and data registers; reading DR takes the byte
+        // out of the receive FIFO.
+        unsafe { (read_volatile(UART0_FR) & FR_RXFE == 0).then(|| read_volatile(UART0_DR) as u8) }
+    }
+
+    /// Move waiting bytes from `queue` into the transmit FIFO until it is
+    /// full; `true` when the queue is empty.
+    pub fn send_waiting<const N: usize>(&mut self, queue: &mut Consumer<'_, u8, N>) -> bool {
+        needle_holder::link::drain(queue, |byte| self.try_send(byte))
+    }
+
     /// Bytes the host sent that wait in the receive FIFO, into `buf`.
     pub fn received(&mut self, buf: &mut [u8]) -> usize {
-        let mut n = 0;
-        for slot in buf.iter_mut() {
-            // SAFETY: UART0 flag and data registers; reading DR takes the
-            // byte out of the receive FIFO.
-            unsafe {
-                if read_volatile(UART0_FR) & FR_RXFE != 0 {
-                    break;
-                }
-                *slot = read_volatile(UART0_DR) as u8;
-            }
-            n += 1;
-        }
-        n
+        buf.iter_mut()
+            .map_while(|slot| self.try_receive().map(|byte| *slot = byte))
+            .count()
     }
 }
 
@@ -89,12 +88,7 @@ impl embedded_io::ErrorType for Uart0 {
 impl embedded_io::Write for Uart0 {
     fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
         for &byte in buf {
-            // SAFETY: UART0 flag and data registers; reading FR and writing
-            // DR have no side effects beyond sending the byte.
-            unsafe {
-                while read_volatile(UART0_FR) & FR_TXFF != 0 {}
-                write_volatile(UART0_DR, byte as u32);
-            }
+            while !self.try_send(byte) {}
         }
         Ok(buf.len())
     }

@@ -42,37 +42,38 @@ pub fn take_peripherals() -> (Uart0, HaltPin) {
 }
 
 impl Uart0 {
-    /// Move waiting bytes from `queue` into the transmitter until it is
-    /// busy; `true` when the queue is empty.
-    pub fn send_waiting<const N: usize>(&mut self, queue: &mut Consumer<'_, u8, N>) -> bool {
-        while let Some(&byte) = queue.peek() {
-            // SAFETY: UART0 state and data registers.
-            unsafe {
-                if read_volatile(UART_STATE) & STATE_TX_FULL != 0 {
-                    return false;
-                }
-                write_volatile(UART_DATA, byte as u32);
+    /// Put `byte` in the transmitter if it is free.
+    fn try_send(&mut self, byte: u8) -> bool {
+        // SAFETY: UART0 state and data registers.
+        unsafe {
+            if read_volatile(UART_STATE) & STATE_TX_FULL != 0 {
+                return false;
             }
-            queue.dequeue();
+            write_volatile(UART_DATA, byte as u32);
         }
         true
     }
 
+    /// The byte in the receive buffer, if any.
+    fn try_receive(&mut self) -> Option<u8> {
+        // SAFETY: UART0 state and data registers; reading DATA takes the
+        // byte.
+        unsafe {
+            (read_volatile(UART_STATE) & STATE_RX_FULL != 0).then(|| read_volatile(UART_DATA) as u8)
+        }
+    }
+
+    /// Move waiting bytes from `queue` into the transmitter until it is
+    /// busy; `true` when the queue is empty.
+    pub fn send_waiting<const N: usize>(&mut self, queue: &mut Consumer<'_, u8, N>) -> bool {
+        needle_holder::link::drain(queue, |byte| self.try_send(byte))
+    }
+
     /// Bytes the host sent that wait in the receive buffer, into `buf`.
     pub fn received(&mut self, buf: &mut [u8]) -> usize {
-        let mut n = 0;
-        for slot in buf.iter_mut() {
-            // SAFETY: UART0 state and data registers; reading DATA takes
-            // the byte.
-            unsafe {
-                if read_volatile(UART_STATE) & STATE_RX_FULL == 0 {
-                    break;
-                }
-                *slot = read_volatile(UART_DATA) as u8;
-            }
-            n += 1;
-        }
-        n
+        buf.iter_mut()
+            .map_while(|slot| self.try_receive().map(|byte| *slot = byte))
+            .count()
     }
 }
 
@@ -83,11 +84,7 @@ impl embedded_io::ErrorType for Uart0 {
 impl embedded_io::Write for Uart0 {
     fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
         for &byte in buf {
-            // SAFETY: UART0 state and data registers.
-            unsafe {
-                while read_volatile(UART_STATE) & STATE_TX_FULL != 0 {}
-                write_volatile(UART_DATA, byte as u32);
-            }
+            while !self.try_send(byte) {}
         }
         Ok(buf.len())
     }
