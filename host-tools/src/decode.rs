@@ -108,32 +108,12 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
     out.finish(&stats)
 }
 
-/// A capture is a file or a pipe. A device named as one is refused: a
-/// serial port read as a file has no baud rate set (`--port` sets it), and
-/// `/dev/zero` would be decoded until stopped.
-fn refuse_a_device(path: &Path) -> Result<()> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        let kind = std::fs::metadata(path)
-            .with_context(|| format!("{}: cannot read", path.display()))?
-            .file_type();
-        if kind.is_char_device() || kind.is_block_device() {
-            bail!(
-                "{0}: a device, not a capture file (a serial port is read with --port {0})",
-                path.display()
-            );
-        }
-    }
-    Ok(())
-}
-
 /// Read a capture a block at a time into `each` (memory bounded whatever
 /// the capture's size, time linear in it), with a progress line on stderr
 /// every second while it lasts.
 fn read_blocks(path: &Path, mut each: impl FnMut(&[u8]) -> Result<()>) -> Result<()> {
     let shown = path.display();
-    refuse_a_device(path)?;
+    crate::input::not_a_device(path)?;
     let mut file = std::fs::File::open(path).with_context(|| format!("{shown}: cannot read"))?;
     let total = file.metadata().map_or(0, |m| m.len());
     let mut block = vec![0u8; 1 << 16];

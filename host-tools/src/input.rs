@@ -2,7 +2,7 @@
 //! (a `.csv` or `truth.json` linked to `/dev/zero`, or a `--params` naming
 //! a device, would be read without end), and for the inputs read whole —
 //! a tissue library, a dataset's `truth.json` — a size no such file
-//! reaches.
+//! reaches; a capture may also be a pipe, but not a device.
 
 use std::path::Path;
 
@@ -31,4 +31,25 @@ pub fn read_small_text(path: &Path) -> Result<String> {
         bail!("{shown}: {size} bytes, more than the {MOST_TEXT_BYTES} such a file may have");
     }
     std::fs::read_to_string(path).with_context(|| format!("{shown}: cannot read"))
+}
+
+/// A capture (`needle decode FILE`) is a file or a pipe, read as it
+/// streams. A device named as one is refused: a serial port read as a
+/// file has no baud rate set (`--port` sets it), and `/dev/zero` would be
+/// decoded until stopped.
+pub fn not_a_device(path: &Path) -> Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let kind = std::fs::metadata(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?
+            .file_type();
+        if kind.is_char_device() || kind.is_block_device() {
+            bail!(
+                "{0}: a device, not a capture file (a serial port is read with --port {0})",
+                path.display()
+            );
+        }
+    }
+    Ok(())
 }

@@ -10,6 +10,14 @@ fn needle(args: &[&str]) -> std::process::Output {
         .expect("run needle")
 }
 
+/// Run needle with `args`, which must fail: its stderr.
+fn refused(args: &[&str]) -> String {
+    let out = needle(args);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "needle {args:?} succeeded: {err}");
+    err
+}
+
 #[test]
 fn diagnose_rejects_an_unknown_tissue() {
     // Row 9: `needle diagnose DIR --tissue nope` was accepted and ignored.
@@ -17,9 +25,7 @@ fn diagnose_rejects_an_unknown_tissue() {
     let d = dir.path().to_str().unwrap();
     let sim = needle(&["simulate", "--out", d, "--trials", "2", "--seed", "1"]);
     assert!(sim.status.success());
-    let out = needle(&["diagnose", d, "--tissue", "nope"]);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = refused(&["diagnose", d, "--tissue", "nope"]);
     assert!(err.contains("nope"), "{err}");
 }
 
@@ -30,9 +36,7 @@ fn decode_rejects_seconds_that_are_not_a_duration() {
     // opened, so /dev/null stands in for one.
     for bad in ["inf", "1e30", "-1", "NaN", "0"] {
         let seconds = format!("--seconds={bad}");
-        let out = needle(&["decode", "--port", "/dev/null", &seconds]);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "--seconds {bad} accepted");
+        let err = refused(&["decode", "--port", "/dev/null", &seconds]);
         assert!(err.contains("--seconds"), "--seconds {bad}: {err}");
         assert!(!err.contains("panicked"), "--seconds {bad}: {err}");
     }
@@ -50,9 +54,7 @@ fn decode_never_writes_over_the_capture_it_reads() {
     let link = dir.path().join("link.bin");
     std::os::unix::fs::symlink(&capture, &link).unwrap();
     for csv in [path, link.to_str().unwrap()] {
-        let out = needle(&["decode", path, "--csv", csv]);
-        assert!(!out.status.success(), "--csv {csv} accepted");
-        let err = String::from_utf8_lossy(&out.stderr);
+        let err = refused(&["decode", path, "--csv", csv]);
         assert!(err.contains("capture"), "{err}");
         assert_eq!(
             std::fs::read(&capture).unwrap(),
@@ -69,7 +71,7 @@ fn decode_rejects_a_zero_sample_rate() {
     let capture = dir.path().join("cap.bin");
     std::fs::write(&capture, b"").unwrap();
     let csv = dir.path().join("o.csv");
-    let out = needle(&[
+    let err = refused(&[
         "decode",
         capture.to_str().unwrap(),
         "--rate-hz",
@@ -77,8 +79,7 @@ fn decode_rejects_a_zero_sample_rate() {
         "--csv",
         csv.to_str().unwrap(),
     ]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--rate-hz"));
+    assert!(err.contains("--rate-hz"), "{err}");
     assert!(!csv.exists(), "no CSV is written for a refused command");
 }
 
@@ -156,14 +157,13 @@ fn evaluate_rejects_rates_and_noises_it_cannot_simulate() {
     }
     // simulate holds the same line.
     let dir = tempfile::tempdir().unwrap();
-    let out = needle(&[
+    refused(&[
         "simulate",
         "--out",
         dir.path().to_str().unwrap(),
         "--rate-hz",
         "99.5",
     ]);
-    assert!(!out.status.success());
 }
 
 #[test]
@@ -190,9 +190,8 @@ fn a_second_simulation_replaces_the_first_and_never_deletes_real_trials() {
     // A directory of someone's recordings is refused, and left as it was.
     let real = tempfile::tempdir().unwrap();
     std::fs::write(real.path().join("rig_07.csv"), "t_s,x_m,f_n\n0,0,0\n").unwrap();
-    let out = needle(&["simulate", "--out", real.path().to_str().unwrap()]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("rig_07.csv"));
+    let err = refused(&["simulate", "--out", real.path().to_str().unwrap()]);
+    assert!(err.contains("rig_07.csv"), "{err}");
     assert_eq!(std::fs::read_dir(real.path()).unwrap().count(), 1);
 }
 
@@ -203,9 +202,7 @@ fn a_csv_that_is_a_device_is_refused_not_read() {
     let dir = tempfile::tempdir().unwrap();
     std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.csv")).unwrap();
     for command in ["fit", "detect", "diagnose"] {
-        let out = needle(&[command, dir.path().to_str().unwrap()]);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "{command}: {err}");
+        let err = refused(&[command, dir.path().to_str().unwrap()]);
         assert!(
             err.contains("zero.csv") && err.contains("not a regular file"),
             "{command}: {err}"
@@ -227,13 +224,9 @@ fn a_truth_json_or_tissue_library_that_is_a_device_is_refused_not_read() {
     let truth = data.join("truth.json");
     std::fs::remove_file(&truth).unwrap();
     std::os::unix::fs::symlink("/dev/zero", &truth).unwrap();
-    let out = needle(&["detect", data_arg]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    let err = refused(&["detect", data_arg]);
     assert!(err.contains("truth.json: not a regular file"), "{err}");
-    let out = needle(&["simulate", "--params", "/dev/zero", "--out", "x"]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    let err = refused(&["simulate", "--params", "/dev/zero", "--out", "x"]);
     assert!(err.contains("/dev/zero: not a regular file"), "{err}");
     // A library far larger than any is refused by size, unread.
     let huge = dir.path().join("huge.toml");
@@ -241,9 +234,7 @@ fn a_truth_json_or_tissue_library_that_is_a_device_is_refused_not_read() {
         .unwrap()
         .set_len(host_tools::input::MOST_TEXT_BYTES + 1)
         .unwrap();
-    let out = needle(&["simulate", "--params", huge.to_str().unwrap(), "--out", "x"]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    let err = refused(&["simulate", "--params", huge.to_str().unwrap(), "--out", "x"]);
     assert!(
         err.contains("huge.toml: 16777217 bytes, more than"),
         "{err}"
@@ -262,9 +253,7 @@ fn a_csv_that_cannot_be_written_is_named() {
     let replay = std::fs::read(dir.path().join("trial_000.replay")).unwrap();
     let capture = dir.path().join("cap.bin");
     std::fs::write(&capture, host_tools::twin::run(&replay).frames).unwrap();
-    let out = needle(&["decode", capture.to_str().unwrap(), "--csv", "/dev/full"]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = refused(&["decode", capture.to_str().unwrap(), "--csv", "/dev/full"]);
     assert!(err.contains("/dev/full"), "{err}");
 }
 
@@ -401,12 +390,7 @@ fn one_bad_file_among_good_ones_is_left_out_by_every_command_naming_file_and_lin
     let bad_only = tempfile::tempdir().unwrap();
     std::fs::write(bad_only.path().join("a.csv"), "t_s,x_m\n0,0\n").unwrap();
     for command in ["fit", "detect", "diagnose"] {
-        let out = needle(&[command, bad_only.path().to_str().unwrap()]);
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            !out.status.success(),
-            "{command} accepted a dataset of bad files"
-        );
+        let err = refused(&[command, bad_only.path().to_str().unwrap()]);
         assert!(err.contains("a.csv:1: no `f_n` column"), "{command}: {err}");
     }
 }
@@ -606,9 +590,7 @@ fn fit_and_diagnose_read_a_huge_trial_in_bounded_memory_and_say_so() {
 fn decode_refuses_a_device_named_as_its_capture() {
     // `needle decode /dev/zero` decoded zeros until stopped, and a serial
     // port named as a capture was read without its baud rate.
-    let out = needle(&["decode", "/dev/zero"]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    let err = refused(&["decode", "/dev/zero"]);
     assert!(
         err.contains(
             "/dev/zero: a device, not a capture file (a serial port is read with --port /dev/zero)"
