@@ -54,9 +54,13 @@ impl Stiffness {
                 if den_q32 <= 0 {
                     return MicroNewtons::MAX;
                 }
-                // d < 2^31, so d·2^32 < 2^63: no overflow.
+                // d < 2^31, so d·2^32 < 2^63: no overflow. Rounded half up
+                // from the remainder, because `num + den/2` overflows for a
+                // deformation within den/2^33 of i32::MAX.
                 let num = (d.0 as i64) << 32;
-                MicroNewtons(saturate_i32((num + den_q32 / 2) / den_q32))
+                let (quotient, remainder) = (num / den_q32, num % den_q32);
+                let round_up = remainder >= den_q32 - remainder;
+                MicroNewtons(saturate_i32(quotient + round_up as i64))
             }
         }
     }
@@ -76,5 +80,37 @@ impl Stiffness {
             }
         }
         Nanometres(lo)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Found by CI's proptest: at the largest deformation the rounding
+    /// addition overflowed. The quotient must still round half up.
+    #[test]
+    fn a_rational_law_at_the_largest_deformation_rounds_without_overflow() {
+        let law = Stiffness::Rational {
+            a_q48: 1 << 34,
+            b_q32: 1 << 42,
+        };
+        let f = law.force(Nanometres(i32::MAX));
+        // den = 2^42 + (i64::MAX >> 16) = 2^42 + 2^47 - 1: f = d·2^32/den rounded.
+        let den = (1i128 << 42) + (i64::MAX as i128 >> 16);
+        let exact = ((i32::MAX as i128) << 32) as f64 / den as f64;
+        assert_eq!(f.0, exact.round() as i32);
+        let small = Stiffness::Rational {
+            a_q48: 0,
+            b_q32: 3 << 32,
+        };
+        // 7/3 = 2.33 → 2, 8/3 = 2.67 → 3.
+        assert_eq!(small.force(Nanometres(7)).0, 2);
+        assert_eq!(small.force(Nanometres(8)).0, 3);
+        let two = Stiffness::Rational {
+            a_q48: 0,
+            b_q32: 2 << 32,
+        };
+        assert_eq!(two.force(Nanometres(3)).0, 2, "1.5 rounds half up");
     }
 }
