@@ -56,6 +56,14 @@ impl AssistModes {
         (Self::SPEED_LIMIT, "speed-limit"),
     ];
 
+    /// Every mode this firmware knows.
+    pub const ALL: Self = Self((1 << Self::NAMES.len()) - 1);
+
+    /// True when no bit names a mode this firmware does not know.
+    pub const fn is_known(self) -> bool {
+        self.0 & !Self::ALL.0 == 0
+    }
+
     /// Union of two sets.
     pub const fn union(self, other: Self) -> Self {
         Self(self.0 | other.0)
@@ -65,6 +73,16 @@ impl AssistModes {
     pub const fn contains(self, other: Self) -> bool {
         self.0 & other.0 == other.0
     }
+}
+
+/// Shallowest target depth a command (or a saved setting) may set.
+pub const MIN_TARGET_DEPTH: Nanometres = Nanometres::from_m(0.0001);
+/// Deepest target depth a command (or a saved setting) may set.
+pub const MAX_TARGET_DEPTH: Nanometres = Nanometres::from_m(0.1);
+
+/// True for a target depth within [`MIN_TARGET_DEPTH`]..=[`MAX_TARGET_DEPTH`].
+pub const fn target_depth_is_valid(depth: Nanometres) -> bool {
+    depth.0 >= MIN_TARGET_DEPTH.0 && depth.0 <= MAX_TARGET_DEPTH.0
 }
 
 /// Assist configuration.

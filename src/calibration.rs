@@ -102,8 +102,9 @@ impl BootTare {
 
 /// The load cell's recent zero for a tare on command: an exponential
 /// average of the raw counts with a time constant of 128 samples (a
-/// quarter second at 500 Hz), in Q4 counts (counts are clamped to ±2^26,
-/// beyond any 24-bit converter, so the average fits `i32`).
+/// quarter second at 500 Hz), in Q4 counts. Counts are clamped to
+/// ±(2^26 − 1), beyond any 24-bit converter, so that the average and the
+/// difference between a reading and it (at most 2^31 − 32) fit `i32`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ZeroTracker {
     mean_q4: i32,
@@ -114,7 +115,8 @@ impl ZeroTracker {
     /// Fold in one reading.
     #[inline]
     pub fn add(&mut self, counts: i32) {
-        let c_q4 = counts.clamp(-(1 << 26), 1 << 26) << 4;
+        const LIMIT: i32 = (1 << 26) - 1;
+        let c_q4 = counts.clamp(-LIMIT, LIMIT) << 4;
         if !self.primed {
             self.mean_q4 = c_q4;
             self.primed = true;
@@ -201,5 +203,23 @@ mod tests {
         let mut tare = BootTare::new(50_000);
         let full = (0..BootTare::SAMPLES).map(|_| tare.add(i32::MIN)).last();
         assert_eq!(full, Some(TareResult::Loaded(i32::MIN)));
+    }
+
+    /// A reading at one end of `i32` after one at the other: the step
+    /// toward it (once 2^31, past `i32`) stays in range, and the mean
+    /// heads for the clamp without wrapping.
+    #[test]
+    fn the_zero_tracker_takes_readings_from_end_to_end_of_i32() {
+        let mut zero = ZeroTracker::default();
+        zero.add(i32::MIN);
+        assert_eq!(zero.mean_counts(), Some(-((1 << 26) - 1)));
+        let mut last = i32::MIN;
+        for _ in 0..4000 {
+            zero.add(i32::MAX);
+            let mean = zero.mean_counts().unwrap();
+            assert!(mean >= last && mean < (1 << 26), "{last} then {mean}");
+            last = mean;
+        }
+        assert!(last > (1 << 26) - 64, "{last}");
     }
 }

@@ -5,7 +5,6 @@
 use embedded_hal::digital::OutputPin;
 use embedded_io::Write;
 
-use crate::assist::AssistModes;
 use crate::calibration::ZeroTracker;
 use crate::config::{DeviceConfig, TissueModel, DEFAULT_TISSUE, LIBRARY_MODELS};
 use crate::faults::Faults;
@@ -25,11 +24,6 @@ use crate::units::{MicroNewtons, Nanometres};
 /// Samples between two config frames sent unasked, for a host that
 /// joined mid-stream: every eighth status (4 s at 500 Hz).
 const CONFIG_PERIOD_SAMPLES: u32 = 8 * STATUS_PERIOD_SAMPLES;
-
-/// Deepest target depth a command may set.
-const MAX_TARGET_DEPTH: Nanometres = Nanometres::from_m(0.1);
-/// Shallowest target depth a command may set.
-const MIN_TARGET_DEPTH: Nanometres = Nanometres::from_m(0.0001);
 
 /// The halt line is active high: `set_high` asserts it (robot must stop).
 /// Wire it through an inverting stage if the robot's input must fail safe
@@ -137,7 +131,8 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         };
         let out = self.config.step(&mut self.state, raw);
         self.samples = self.samples.saturating_add(1);
-        if let Some(adc) = raw.adc {
+        // A late conversion's counts are not a reading of this sample.
+        if let Some(adc) = raw.adc.filter(|a| !a.overrun) {
             self.zero.add(adc.counts);
         }
         self.last = Some((out.sample, out.faults));
@@ -262,11 +257,10 @@ impl<W: Write, H: OutputPin> Device<W, H> {
                 modes,
                 target_depth,
             } => {
-                let known = AssistModes::NAMES.iter().fold(0, |m, (mode, _)| m | mode.0);
-                if modes.0 & !known != 0 {
+                if !modes.is_known() {
                     return Err(CommandError::out_of_range("modes"));
                 }
-                if !(MIN_TARGET_DEPTH..=MAX_TARGET_DEPTH).contains(&target_depth) {
+                if !crate::assist::target_depth_is_valid(target_depth) {
                     return Err(CommandError::out_of_range("target_depth"));
                 }
                 self.config.assist.modes = modes;

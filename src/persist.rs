@@ -67,6 +67,21 @@ pub struct Settings {
     pub target_depth: Nanometres,
 }
 
+impl Settings {
+    /// The checks a command's settings pass, made again on what flash
+    /// held: a record whose CRC holds can still come from another build
+    /// (a `TissueModel` laid out differently under the same format
+    /// version) or a debug probe, and the model's arithmetic relies on
+    /// the signs and ranges [`TissueModel::check`] guarantees.
+    pub fn is_valid(&self) -> bool {
+        self.model.check().is_ok()
+            && self.assist_modes.is_known()
+            && crate::assist::target_depth_is_valid(self.target_depth)
+            && self.load_cell.gain_q16 != 0
+            && self.load_cell.full_scale_counts > 0
+    }
+}
+
 /// What a region held.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
@@ -143,11 +158,12 @@ pub fn load(region: &[u8]) -> Load {
         };
         let body = covered.get(HEAD..).unwrap_or(&[]);
         match postcard::from_bytes::<Settings>(body) {
-            Ok(settings) if CRC32.checksum(covered) == stored => {
+            Ok(settings) if CRC32.checksum(covered) == stored && settings.is_valid() => {
                 latest = Some(settings);
                 torn = false;
             }
-            // Its length was readable: go on past it.
+            // Damaged, or settings this firmware would not take: its
+            // length was readable, so go on past it.
             _ => torn = true,
         }
         at += len;
@@ -203,7 +219,7 @@ mod tests {
             model: LIBRARY_MODELS[usize::from(i)],
             load_cell: LoadCell::TEN_NEWTON_24_BIT,
             assist_modes: AssistModes(i),
-            target_depth: Nanometres(1_000_000 * i32::from(i)),
+            target_depth: Nanometres(1_000_000 * (i32::from(i) + 1)),
         }
     }
 
@@ -258,6 +274,27 @@ mod tests {
             (got.loaded, got.settings),
             (Loaded::SavedBeforeTorn, Some(settings(0)))
         );
+    }
+
+    #[test]
+    fn a_whole_record_of_settings_no_command_could_give_is_passed_over() {
+        let mut tissue = settings(1);
+        tissue.model.model.friction.half_band.0 = i32::MIN;
+        let mut modes = settings(1);
+        modes.assist_modes = AssistModes(0x80);
+        let mut depth = settings(1);
+        depth.target_depth = Nanometres(0);
+        let mut gain = settings(1);
+        gain.load_cell.gain_q16 = 0;
+        for bad in [tissue, modes, depth, gain] {
+            assert!(!bad.is_valid());
+            let got = load(&region(4096, &[settings(0), bad]));
+            assert_eq!(
+                (got.loaded, got.settings),
+                (Loaded::SavedBeforeTorn, Some(settings(0)))
+            );
+        }
+        assert!(settings(2).is_valid());
     }
 
     #[test]

@@ -71,7 +71,7 @@ impl Friction {
         if v.0 >= self.half_band.0 {
             state.last_sliding = MicroNewtons(affine_times(self.cp, self.bp, v.0, l));
             state.last_sliding
-        } else if v.0 <= -self.half_band.0 {
+        } else if v.0 <= self.half_band.0.saturating_neg() {
             state.last_sliding = MicroNewtons(affine_times(self.cn, self.bn, v.0, l));
             state.last_sliding
         } else {

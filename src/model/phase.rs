@@ -79,7 +79,7 @@ impl PhaseConfig {
     /// by `force` (see the module notes).
     fn dragged(&self, s: &PhaseState, x: Nanometres, force: MicroNewtons) -> bool {
         let furthest = s.surface.sub(s.puncture.sub(s.surface));
-        force.0 < -self.hold_force.0 && x > furthest
+        force.0 < self.hold_force.0.saturating_neg() && x > furthest
     }
 
     /// Advance by one sample. `event` is what the detectors fired this
@@ -114,7 +114,9 @@ impl PhaseConfig {
                     Phase::Out
                 }
             }
-            (Phase::Inserted, _) if v.0 <= -self.withdrawal_speed.0 => s.phase = Phase::Withdrawal,
+            (Phase::Inserted, _) if v.0 <= self.withdrawal_speed.0.saturating_neg() => {
+                s.phase = Phase::Withdrawal
+            }
             (Phase::Withdrawal, _) if v.0 >= self.withdrawal_speed.0 => s.phase = Phase::Inserted,
             _ => {}
         }
