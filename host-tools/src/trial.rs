@@ -77,16 +77,76 @@ pub fn every(values: &[f64], step: usize) -> Vec<f64> {
     values.iter().step_by(step.max(1)).copied().collect()
 }
 
+/// The longest line a trial CSV may have: a row of a few numbers is tens
+/// of bytes; a 1 GB line made the reader hold 3 GB.
+pub const MOST_LINE_BYTES: usize = 64 << 10;
+
+/// A reader that fails at a line longer than [`MOST_LINE_BYTES`], naming
+/// the file and line, so that the CSV reader's buffer stays bounded.
+struct LineLimit<R> {
+    inner: R,
+    path: std::path::PathBuf,
+    line: u64,
+    in_line: usize,
+}
+
+impl<R: std::io::Read> std::io::Read for LineLimit<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        for &b in &buf[..n] {
+            if b == b'\n' {
+                self.line += 1;
+                self.in_line = 0;
+            } else {
+                self.in_line += 1;
+                if self.in_line > MOST_LINE_BYTES {
+                    return Err(std::io::Error::other(format!(
+                        "{}:{}: a line longer than {MOST_LINE_BYTES} bytes: no trial CSV has one",
+                        self.path.display(),
+                        self.line
+                    )));
+                }
+            }
+        }
+        Ok(n)
+    }
+}
+
 /// A CSV reader on `path`, which must be a regular file: a `.csv` link to
 /// `/dev/zero` made the reader allocate 4 GiB for a header that never
 /// ends, and aborted.
-fn open_csv(path: &Path) -> Result<csv::Reader<std::fs::File>> {
+fn open_csv(path: &Path) -> Result<csv::Reader<LineLimit<std::fs::File>>> {
     crate::input::regular_file(path)?;
     let shown = path.display();
-    csv::ReaderBuilder::new()
+    let file = std::fs::File::open(path).with_context(|| format!("{shown}: cannot open"))?;
+    let limited = LineLimit {
+        inner: file,
+        path: path.to_path_buf(),
+        line: 1,
+        in_line: 0,
+    };
+    Ok(csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
-        .from_path(path)
-        .with_context(|| format!("{shown}: cannot open"))
+        .from_reader(limited))
+}
+
+/// A CSV reader's error as said to a user: an I/O error (a line too long)
+/// already names file and line.
+fn csv_error(path: &Path, line: u64, e: csv::Error) -> anyhow::Error {
+    let line = e.position().map_or(line, |p| p.line());
+    match e.kind() {
+        csv::ErrorKind::Io(io) => anyhow::anyhow!("{io}"),
+        _ => anyhow::anyhow!("{}:{line}: malformed CSV: {e}", path.display()),
+    }
+}
+
+/// A value quoted in a message, cut to 40 characters (a 10 MB field was
+/// echoed whole to stderr and into the JSON's `skipped`).
+fn quoted(text: &str) -> String {
+    match text.char_indices().nth(40) {
+        Some((cut, _)) => format!("{:?}…", &text[..cut]),
+        None => format!("{text:?}"),
+    }
 }
 
 /// Each row of a trial CSV in one pass, as the values of `columns` (the
@@ -100,9 +160,7 @@ fn each_row(
 ) -> Result<usize> {
     let shown = path.display();
     let mut reader = open_csv(path)?;
-    let headers = reader
-        .headers()
-        .with_context(|| format!("{shown}:1: cannot read the header"))?;
+    let headers = reader.headers().map_err(|e| csv_error(path, 1, e))?;
     let at = columns
         .iter()
         .map(|name| {
@@ -122,17 +180,17 @@ fn each_row(
     let mut record = csv::StringRecord::new();
     while reader
         .read_record(&mut record)
-        .with_context(|| format!("{shown}: malformed CSV"))?
+        .map_err(|e| csv_error(path, rows as u64 + 2, e))?
     {
         let line = record.position().map_or(0, |p| p.line());
         let mut values = [0.0_f64; 4];
         for ((value, &i), name) in values.iter_mut().zip(&at).zip(columns) {
             let text = record.get(i).unwrap_or("");
             *value = text.parse().map_err(|_| {
-                anyhow::anyhow!("{shown}:{line}: `{name}` is not a number: {text:?}")
+                anyhow::anyhow!("{shown}:{line}: `{name}` is not a number: {}", quoted(text))
             })?;
             if !value.is_finite() {
-                bail!("{shown}:{line}: `{name}` is not finite: {text:?}");
+                bail!("{shown}:{line}: `{name}` is not finite: {}", quoted(text));
             }
         }
         let t = values[0];
@@ -173,6 +231,12 @@ pub const ANALYSIS_MOST_HZ: f64 = 2000.0;
 /// insertion. A longer recording is thinned further, by halves, so that
 /// memory stays bounded whatever the file's length.
 pub const ANALYSIS_MOST_SAMPLES: usize = 1 << 19;
+
+/// The fastest sample rate a trial may have: a median time step below a
+/// microsecond is no load-cell recording (more likely times in another
+/// unit), and a step of 1e-310 s made the rate infinite and the thinning
+/// keep one sample.
+pub const FASTEST_TRIAL_HZ: f64 = 1e6;
 
 /// Rows read before the first is dropped: the rate is the median step of
 /// these, which one late sample or a gap does not move.
@@ -215,6 +279,8 @@ struct Thinner {
     rows: usize,
     /// 0 until the probe has set it.
     step: usize,
+    /// The probe's rate, Hz, when above [`FASTEST_TRIAL_HZ`].
+    too_fast_hz: Option<f64>,
 }
 
 impl Thinner {
@@ -223,6 +289,7 @@ impl Thinner {
             kept: Vec::with_capacity(PROBE_ROWS),
             rows: 0,
             step: 0,
+            too_fast_hz: None,
         }
     }
 
@@ -245,7 +312,12 @@ impl Thinner {
 
     fn set_step(&mut self) {
         let t_s: Vec<f64> = self.kept.iter().map(|r| r[0]).collect();
-        self.step = step_to(median_rate_hz(&t_s), ANALYSIS_MOST_HZ);
+        let rate_hz = median_rate_hz(&t_s);
+        // Infinite (a step of 1e-310 s) is beyond the bound too.
+        if rate_hz.is_nan() || rate_hz > FASTEST_TRIAL_HZ {
+            self.too_fast_hz = Some(rate_hz);
+        }
+        self.step = step_to(rate_hz, ANALYSIS_MOST_HZ);
         self.keep_every(self.step);
     }
 
@@ -257,11 +329,21 @@ impl Thinner {
         });
     }
 
-    fn finish(mut self) -> (Vec<[f64; 4]>, usize, usize) {
+    /// The kept rows, the rows read and the step; an error naming `path`
+    /// when the rate is beyond any rig's.
+    fn finish(mut self, path: &Path) -> Result<(Vec<[f64; 4]>, usize, usize)> {
         if self.step == 0 {
             self.set_step();
         }
-        (self.kept, self.rows, self.step)
+        if let Some(rate_hz) = self.too_fast_hz {
+            bail!(
+                "{}:2-{}: the median time step is {:e} s ({rate_hz:.3e} Hz), faster than any rig ({FASTEST_TRIAL_HZ:e} Hz at most): is t_s in seconds?",
+                path.display(),
+                self.rows.min(PROBE_ROWS) + 1,
+                1.0 / rate_hz,
+            );
+        }
+        Ok((self.kept, self.rows, self.step))
     }
 }
 
@@ -270,7 +352,7 @@ impl Thinner {
 pub fn read_for_analysis(path: &Path, progress: Option<&mut Progress>) -> Result<Analysed> {
     let mut thinner = Thinner::new();
     each_row(path, &TRIAL, progress, |row| thinner.push(row))?;
-    let (kept, rows, step) = thinner.finish();
+    let (kept, rows, step) = thinner.finish(path)?;
     let mut trial = Trial::default();
     for [t, x, f, _] in kept {
         trial.push(t, x, f);
@@ -284,7 +366,7 @@ pub fn read_for_analysis(path: &Path, progress: Option<&mut Progress>) -> Result
 pub fn read_column_for_analysis(path: &Path, name: &str) -> Result<Vec<f64>> {
     let mut thinner = Thinner::new();
     each_row(path, &["t_s", name], None, |row| thinner.push(row))?;
-    Ok(thinner.finish().0.iter().map(|r| r[1]).collect())
+    Ok(thinner.finish(path)?.0.iter().map(|r| r[1]).collect())
 }
 
 /// Write a trial CSV (`t_s,x_m,f_n`; µs, nm and µN resolution).
@@ -295,6 +377,14 @@ pub fn write(path: &Path, trial: &Trial) -> Result<()> {
     let mut out = std::io::BufWriter::new(file);
     writeln!(out, "t_s,x_m,f_n")?;
     for i in 0..trial.len() {
+        let row = [trial.t_s[i], trial.x_m[i], trial.f_n[i]];
+        if !row.iter().all(|v| v.is_finite()) {
+            bail!(
+                "{}:{}: a value is not finite ({row:?}): not written",
+                path.display(),
+                i + 2
+            );
+        }
         writeln!(
             out,
             "{:.6},{:.9},{:.6}",
@@ -404,7 +494,7 @@ pub fn dataset_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot read directory", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "csv"))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")))
         .collect();
     files.sort();
     if files.is_empty() {
@@ -505,5 +595,32 @@ mod tests {
             assert_eq!(column, read.trial.f_n);
             assert_eq!(read.thinning_note(&path).is_some(), step > 1);
         }
+    }
+
+    /// Time steps of 1e-310 s (any trial's times scaled by 1e-308) made
+    /// the rate infinite, the thinning keep one sample, and `fit` panic.
+    #[test]
+    fn a_trial_faster_than_any_rig_is_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        for scale in [1e-308, 1e-9] {
+            let text: String = std::iter::once("t_s,x_m,f_n\n".to_owned())
+                .chain((0..3000).map(|i| format!("{:e},0,{i}\n", i as f64 * scale / 500.0)))
+                .collect();
+            let path = write(&dir, &text);
+            let err = read_for_analysis(&path, None).unwrap_err().to_string();
+            assert!(
+                err.contains(&format!("{}:2-1025: the median time step", path.display())),
+                "{err}"
+            );
+            assert!(err.contains("is t_s in seconds?"), "{err}");
+        }
+        // A 1 MHz recording is thinned, not refused.
+        let text: String = std::iter::once("t_s,x_m,f_n\n".to_owned())
+            .chain((0..3000).map(|i| format!("{:e},0,{i}\n", i as f64 * 1e-6)))
+            .collect();
+        assert_eq!(
+            read_for_analysis(&write(&dir, &text), None).unwrap().step,
+            500
+        );
     }
 }

@@ -310,7 +310,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let contact_x_m = fitted_contact_x_m.max(2.0 * unloaded_x_m - x[j0]);
 
     let rate = trial.rate_hz();
-    let after = |s: f64| (ip + (s * rate) as usize).min(trial.len() - 1);
+    let after = |s: f64| ip.saturating_add((s * rate) as usize).min(trial.len() - 1);
     let drop_window = &f[after(0.02)..after(0.1).max(after(0.02) + 1)];
     let puncture_drop_to_n = drop_window.iter().sum::<f64>() / drop_window.len() as f64;
 
@@ -328,7 +328,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     // such sample tilts the insertion line (a slope of −110 N/m at 100 Hz).
     let ahead = ((0.01 * rate).ceil() as usize).max(1);
     let advances_after = |i: usize| {
-        x[i + 1..(i + 1 + ahead).min(trial.len())]
+        x[i + 1..(i + 1).saturating_add(ahead).min(trial.len())]
             .iter()
             .any(|&xj| xj > x[i])
     };
