@@ -56,6 +56,23 @@ pub fn parse(text: &str, path: &Path) -> Result<Vec<Tissue>> {
             ),
             None => None,
         };
+        // Each value's type first, so that an error names its key and
+        // line (the deserialiser names neither for a string in place of
+        // a number).
+        for (key, value) in &entry {
+            let number = matches!(value, toml::Value::Float(_) | toml::Value::Integer(_));
+            let (ok, wanted) = match key.as_str() {
+                "stiffness_law" => (value.is_str(), "a string"),
+                _ => (number, "a number"),
+            };
+            if !ok {
+                bail!(
+                    "{shown}:{}: [{name}] `{key}` must be {wanted}, not {}",
+                    key_line(text, Some(&name), key),
+                    value.type_str()
+                );
+            }
+        }
         let params: TissueParams =
             toml::Value::Table(entry)
                 .try_into()

@@ -94,6 +94,13 @@ impl TissueParams {
     /// firmware's compiled-in library is checked at compile time.
     pub const fn validate(&self) -> Result<(), ParamError> {
         const NOT_FINITE: &str = "is not a finite number";
+        const Q26: &str = "is not within the device's ±32 000 N/m";
+        const Q48: &str = "is not within the device's ±7.6e6";
+        const FORCE: &str = "is not within the device's ±2000 N";
+        const LENGTH: &str = "is not within the device's 2 m";
+        const SPEED: &str = "is not within the device's 2 m/s";
+        const RATIONAL_A: &str = "is not within the device's ±3e10 1/N";
+        const RATIONAL_B: &str = "is not within the device's ±2e6 m/N";
         let p = self;
         let fields: [(f64, &str); 17] = [
             (p.a1_n_per_m, "a1_n_per_m"),
@@ -117,6 +124,38 @@ impl TissueParams {
         let mut i = 0;
         while i < fields.len() {
             check_all!(check(fields[i].0.is_finite(), fields[i].1, NOT_FINITE));
+            i += 1;
+        }
+        // What the device's fixed point holds (see `fixed.rs` and
+        // `units.rs`): a value past it would be saturated, silently
+        // becoming another tissue on the device than on the host.
+        let ranges: [(f64, f64, &str, &str); 16] = [
+            (p.a1_n_per_m, 32_000.0, "a1_n_per_m", Q26),
+            (p.cp_n_per_m, 32_000.0, "cp_n_per_m", Q26),
+            (p.cn_n_per_m, 32_000.0, "cn_n_per_m", Q26),
+            (p.dp_n_per_m, 32_000.0, "dp_n_per_m", Q26),
+            (p.dn_n_per_m, 32_000.0, "dn_n_per_m", Q26),
+            (p.a2_n_per_m2, 7.6e6, "a2_n_per_m2", Q48),
+            (p.bp_ns_per_m2, 7.6e6, "bp_ns_per_m2", Q48),
+            (p.bn_ns_per_m2, 7.6e6, "bn_ns_per_m2", Q48),
+            (p.puncture_force_n, 2000.0, "puncture_force_n", FORCE),
+            (p.puncture_drop_to_n, 2000.0, "puncture_drop_to_n", FORCE),
+            (p.cutting_force_n, 2000.0, "cutting_force_n", FORCE),
+            (p.contact_force_n, 2000.0, "contact_force_n", FORCE),
+            (p.puncture_depth_m, 2.0, "puncture_depth_m", LENGTH),
+            (p.half_band_mps, 2.0, "half_band_mps", SPEED),
+            (p.rational_a_per_n, 3.0e10, "rational_a_per_n", RATIONAL_A),
+            (
+                p.rational_b_m_per_n,
+                2.0e6,
+                "rational_b_m_per_n",
+                RATIONAL_B,
+            ),
+        ];
+        let mut i = 0;
+        while i < ranges.len() {
+            let (v, most, name, why) = ranges[i];
+            check_all!(check(v.abs() < most, name, why));
             i += 1;
         }
         check_all!(
@@ -225,7 +264,7 @@ mod tests {
     #[test]
     fn invalid_parameters_are_rejected_naming_the_field() {
         type Spoil = fn(&mut TissueParams);
-        let cases: [(Spoil, &str); 7] = [
+        let cases: [(Spoil, &str); 11] = [
             (|p| p.a1_n_per_m = f64::NAN, "a1_n_per_m"),
             (|p| p.a2_n_per_m2 = -1.0, "a2_n_per_m2"),
             (|p| p.dp_n_per_m = -0.1, "dp_n_per_m"),
@@ -233,6 +272,11 @@ mod tests {
             (|p| p.half_band_mps = 0.0, "half_band_mps"),
             (|p| p.relaxation = 1.5, "relaxation"),
             (|p| p.bp_ns_per_m2 = f64::INFINITY, "bp_ns_per_m2"),
+            // Past the fixed point: saturated, they made another tissue.
+            (|p| p.a1_n_per_m = 32_000.0, "a1_n_per_m"),
+            (|p| p.puncture_force_n = 5000.0, "puncture_force_n"),
+            (|p| p.cutting_force_n = 1e300, "cutting_force_n"),
+            (|p| p.cn_n_per_m = -1e6, "cn_n_per_m"),
         ];
         for (spoil, field) in cases {
             let mut p = LIVER1;
