@@ -36,48 +36,35 @@ pub struct DecodeArgs {
 /// How long to read the port for: a finite, positive number of seconds
 /// that a `Duration` holds (`inf` panicked converting; `-1`, `NaN` and `0`
 /// read nothing and exited 0).
-fn read_for(seconds: Option<f64>) -> Result<Option<Duration>> {
+pub fn read_for(seconds: Option<f64>) -> Result<Option<Duration>> {
     let Some(s) = seconds else { return Ok(None) };
     if !(s.is_finite() && s > 0.0) {
-        bail!("--seconds {s}: must be a number of seconds above 0 (leave it out to read until the port closes)");
+        bail!("--seconds {s:?}: must be a number of seconds above 0 (leave it out to read until the port closes)");
     }
     Duration::try_from_secs_f64(s)
         .map(Some)
-        .map_err(|_| anyhow::anyhow!("--seconds {s}: too long to wait for"))
-}
-
-/// Whether `a` and `b` name one file (the same path, a link, or the same
-/// inode); a path that does not exist is no file.
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
-        (Ok(x), Ok(y)) if x == y => true,
-        #[cfg(unix)]
-        (Ok(x), Ok(y)) => {
-            use std::os::unix::fs::MetadataExt;
-            match (std::fs::metadata(x), std::fs::metadata(y)) {
-                (Ok(m), Ok(n)) => m.dev() == n.dev() && m.ino() == n.ino(),
-                _ => false,
-            }
-        }
-        _ => false,
-    }
+        .map_err(|_| anyhow::anyhow!("--seconds {s:?}: too long to wait for"))
 }
 
 pub fn run(args: &DecodeArgs) -> Result<()> {
     let read_for = read_for(args.seconds)?;
+    crate::link::check_baud(args.baud)?;
     if args.rate_hz == Some(0) {
         bail!("--rate-hz 0: the sample rate must be at least 1 Hz");
     }
     // Opening the CSV truncates it: it must not be the capture being read.
     if let (Some(input), Some(csv)) = (&args.file, &args.csv) {
-        if same_file(input, csv) {
+        if crate::input::same_file(input, csv) {
             bail!(
                 "{}: --csv names the capture being decoded; writing it would empty it first",
                 csv.display()
             );
         }
     }
-    let mut out = Output::new(args.csv.as_deref(), args.rate_hz)?;
+    if let Some(csv) = &args.csv {
+        remove_stale_segments(csv, args.file.as_deref())?;
+    }
+    let mut out = Output::new(args.csv.as_deref(), args.file.as_deref(), args.rate_hz)?;
     let mut decoder = StreamDecoder::new();
     let feed = |bytes: &[u8], decoder: &mut StreamDecoder, out: &mut Output| -> Result<()> {
         let mut items = Vec::new();
@@ -105,7 +92,19 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
     let mut tail = Vec::new();
     let stats = decoder.finish(|item| tail.push(item));
     tail.into_iter().try_for_each(|item| out.item(item))?;
-    out.finish(&stats)
+    out.finish(&stats)?;
+    if stats.frames == 0 {
+        let source = match (&args.file, &args.port) {
+            (Some(file), _) => file.display().to_string(),
+            (None, Some(port)) => port.clone(),
+            (None, None) => "the input".into(),
+        };
+        bail!(
+            "{source}: no frame of the device's in {} bytes: not a capture of its serial output (a trial CSV or a replay file is none), or the wrong baud rate",
+            stats.bytes
+        );
+    }
+    Ok(())
 }
 
 /// Read a capture a block at a time into `each` (memory bounded whatever
@@ -161,6 +160,31 @@ fn segment_path(base: &Path, segment: u32) -> PathBuf {
     base.with_file_name(format!("{stem}-{}{ext}", segment + 1))
 }
 
+/// An earlier decode's segment files beside `base` (`NAME-2.csv`, …) are
+/// removed, so that no stale segment of another capture stays beside the
+/// new CSV for `fit` to read as a trial; a file there that is not one (its
+/// header is not decode's), or is the capture, is refused.
+fn remove_stale_segments(base: &Path, capture: Option<&Path>) -> Result<()> {
+    for segment in 1.. {
+        let path = segment_path(base, segment);
+        if !path.exists() {
+            return Ok(());
+        }
+        let shown = path.display();
+        let is_capture = capture.is_some_and(|c| crate::input::same_file(c, &path));
+        let header = std::fs::File::open(&path)
+            .ok()
+            .and_then(|f| std::io::BufRead::lines(std::io::BufReader::new(f)).next())
+            .and_then(|l| l.ok());
+        if is_capture || header.as_deref() != Some(CSV_HEADER.join(",").as_str()) {
+            bail!("{shown}: is where segment {} of --csv {} would go, and is no earlier decode's segment: move it, or name another --csv", segment + 1, base.display());
+        }
+        std::fs::remove_file(&path).with_context(|| format!("{shown}: cannot remove"))?;
+        eprintln!("removed {shown} (a segment of an earlier decode to the same --csv)");
+    }
+    Ok(())
+}
+
 /// A trial CSV with its header line.
 pub fn create_csv(path: &Path) -> Result<csv::Writer<std::fs::File>> {
     let mut w = csv::Writer::from_path(path)
@@ -177,15 +201,19 @@ struct Output {
     csv_path: Option<PathBuf>,
     /// The path `--csv` named; later segments go beside it.
     csv_base: Option<PathBuf>,
+    /// The capture being read, which no segment may write over.
+    capture: Option<PathBuf>,
     /// Segments begun after the first (the index went back).
     segment: u32,
+    /// Samples written to each CSV, in order.
+    written: Vec<(PathBuf, u64)>,
     rate_hz: Option<u16>,
     /// Samples that arrived before the sample rate was known.
     pending: Vec<Sample>,
 }
 
 impl Output {
-    fn new(csv_path: Option<&Path>, rate_hz: Option<u16>) -> Result<Self> {
+    fn new(csv_path: Option<&Path>, capture: Option<&Path>, rate_hz: Option<u16>) -> Result<Self> {
         let csv = csv_path.map(create_csv).transpose()?;
         let text = std::io::BufWriter::new(std::io::stdout());
         Ok(Self {
@@ -193,7 +221,9 @@ impl Output {
             csv,
             csv_path: csv_path.map(Path::to_path_buf),
             csv_base: csv_path.map(Path::to_path_buf),
+            capture: capture.map(Path::to_path_buf),
             segment: 0,
+            written: csv_path.map(|p| (p.to_path_buf(), 0)).into_iter().collect(),
             rate_hz,
             pending: Vec::new(),
         })
@@ -230,23 +260,42 @@ impl Output {
 
     /// The index went back: samples from here on go to a new CSV
     /// (`NAME-2.csv`, `NAME-3.csv`, …), so no file's time goes back.
+    /// A segment with no sample yet goes on in its own file.
     fn restart(&mut self, last: u32) -> Result<()> {
-        self.segment += 1;
+        const WHY: &str =
+            "the index went back (a device restart, or a stretch of the stream twice)";
         let Some(base) = self.csv_base.clone() else {
-            writeln!(self.text, "restart after sample {last}: the index went back (a device restart, or a stretch of the stream twice); a new segment")?;
+            self.segment += 1;
+            writeln!(
+                self.text,
+                "restart after sample {last}: {WHY}; a new segment"
+            )?;
             return Ok(());
         };
+        if let Some((path, 0)) = self.written.last() {
+            writeln!(self.text, "restart after sample {last}: {WHY}; {} has no sample yet and takes the new segment", path.display())?;
+            return Ok(());
+        }
+        self.segment += 1;
         if let Some(mut w) = self.csv.take() {
             w.flush().with_context(|| self.csv_context())?;
         }
         let path = segment_path(&base, self.segment);
+        if let Some(capture) = self
+            .capture
+            .as_deref()
+            .filter(|c| crate::input::same_file(c, &path))
+        {
+            bail!("{}: segment {} of --csv {} would be written over the capture being decoded: name another --csv", capture.display(), self.segment + 1, base.display());
+        }
         writeln!(
             self.text,
-            "restart after sample {last}: the index went back (a device restart, or a stretch of the stream twice); segment {} goes to {}",
+            "restart after sample {last}: {WHY}; segment {} goes to {}",
             self.segment + 1,
             path.display()
         )?;
         self.csv = Some(create_csv(&path)?);
+        self.written.push((path.clone(), 0));
         self.csv_path = Some(path);
         Ok(())
     }
@@ -268,6 +317,9 @@ impl Output {
         };
         w.write_record(csv_row(&s, 0, rate))
             .with_context(|| self.csv_context())?;
+        if let Some((_, n)) = self.written.last_mut() {
+            *n += 1;
+        }
         Ok(())
     }
 
@@ -290,16 +342,16 @@ impl Output {
         }
         if let Some(mut w) = self.csv.take() {
             w.flush().with_context(|| self.csv_context())?;
-            if let Some(path) = &self.csv_base {
-                let more = match self.segment {
-                    0 => String::new(),
-                    n => format!(" and {n} more segment files beside it"),
-                };
-                eprintln!(
-                    "wrote {} samples to {}{more}",
-                    stats.samples,
-                    path.display()
-                );
+            let total: u64 = self.written.iter().map(|(_, n)| n).sum();
+            match self.written.as_slice() {
+                [(path, _)] => eprintln!("wrote {total} samples to {}", path.display()),
+                files => {
+                    let each: Vec<String> = files
+                        .iter()
+                        .map(|(p, n)| format!("{n} to {}", p.display()))
+                        .collect();
+                    eprintln!("wrote {total} samples: {}", each.join(", "));
+                }
             }
         }
         eprintln!("{}", summary_line(stats));

@@ -11,7 +11,7 @@ use needle_holder::hal::LoadCellAdc;
 use needle_holder::pipeline::{PipelineState, RawSample};
 use needle_holder::replay::ReplayAdc;
 use needle_holder::units::Nanometres;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::decode::{event_name, halt_reason_name};
@@ -238,17 +238,68 @@ fn merge(total: &mut [KindScore], part: &[KindScore]) {
     }
 }
 
+/// A dataset's `truth.json` as scoring reads it: each trial's file and
+/// its events' kinds and times (the simulator's other fields are not
+/// read). Typed, so that an event of no known kind or without a time is
+/// refused by line, not dropped: a dropped event was scored as a false
+/// alarm.
+#[derive(Debug, Deserialize)]
+struct Truth {
+    trials: Vec<TruthTrial>,
+}
+
+#[derive(Debug, Deserialize)]
+struct TruthTrial {
+    file: String,
+    events: Vec<TruthEvent>,
+}
+
+#[derive(Debug, Deserialize)]
+struct TruthEvent {
+    kind: TruthKind,
+    t_s: f64,
+}
+
+#[derive(Debug, Deserialize, Clone, Copy)]
+#[serde(rename_all = "snake_case")]
+enum TruthKind {
+    Contact,
+    Puncture,
+    Structure,
+    Exit,
+}
+
+impl TruthKind {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Contact => "contact",
+            Self::Puncture => "puncture",
+            Self::Structure => "structure",
+            Self::Exit => "exit",
+        }
+    }
+}
+
+/// `dir/truth.json`, if there is one.
+fn read_truth(dir: &Path) -> Result<Option<Truth>> {
+    let path = dir.join("truth.json");
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = crate::input::read_small_text(&path)?;
+    serde_json::from_str(&text).map(Some).map_err(|e| {
+        anyhow::anyhow!(
+            "{}:{}: {} (a truth.json lists trials, each with its file and events of kind contact, puncture, structure or exit at t_s)",
+            path.display(),
+            e.line(),
+            e
+        )
+    })
+}
+
 /// Detect over a dataset; with truth.json, also score. Returns the JSON.
 pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
-    let truth_path = dir.join("truth.json");
-    let truth: Option<Value> = if truth_path.exists() {
-        let text = crate::input::read_small_text(&truth_path)?;
-        let json = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not valid JSON", truth_path.display()))?;
-        Some(json)
-    } else {
-        None
-    };
+    let truth = read_truth(dir)?;
     let kinds = ["contact", "puncture", "structure", "exit"];
     let mut total: Vec<KindScore> = score(&[], &[], 1.0, &kinds);
     let mut trials = Vec::new();
@@ -265,14 +316,12 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
             .unwrap_or_default();
         if let Some(t) = truth
             .as_ref()
-            .and_then(|t| t["trials"].as_array())
-            .and_then(|ts| ts.iter().find(|t| t["file"] == name.as_str()))
+            .and_then(|t| t.trials.iter().find(|t| t.file == name))
         {
-            let true_events: Vec<(String, f64)> = t["events"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(|e| Some((e["kind"].as_str()?.to_owned(), e["t_s"].as_f64()?)))
+            let true_events: Vec<(String, f64)> = t
+                .events
+                .iter()
+                .map(|e| (e.kind.name().to_owned(), e.t_s))
                 .collect();
             let found: Vec<(String, f64)> =
                 events.iter().map(|e| (e.kind.to_owned(), e.t_s)).collect();
@@ -301,16 +350,12 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
 /// trials without truth go unscored, truth without a trial counts nothing.
 fn warn_if_truth_disagrees(
     dir: &Path,
-    truth: &Value,
+    truth: &Truth,
     dataset: &[(std::path::PathBuf, crate::trial::Trial)],
     unreadable: &[crate::trial::Unreadable],
 ) {
-    let listed: std::collections::BTreeSet<&str> = truth["trials"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(|t| t["file"].as_str())
-        .collect();
+    let listed: std::collections::BTreeSet<&str> =
+        truth.trials.iter().map(|t| t.file.as_str()).collect();
     let present: std::collections::BTreeSet<String> = dataset
         .iter()
         .map(|(f, _)| f)
@@ -331,6 +376,10 @@ fn warn_if_truth_disagrees(
 }
 
 pub fn run(args: &DetectArgs) -> Result<()> {
+    if let Some(json) = &args.json {
+        let inputs = crate::input::dataset_inputs(&args.dir, args.params.as_deref());
+        crate::input::check_outputs(&[("--json", json)], &inputs)?;
+    }
     let tissue = crate::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
     let mut config = DeviceConfig::for_tissue(&tissue.params)
         .map_err(|e| anyhow::anyhow!("tissue `{}`: {e}", tissue.name))?

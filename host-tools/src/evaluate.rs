@@ -4,7 +4,7 @@
 //! device's detectors over them and prints one table row per cell: misses,
 //! false alarms and latency per event kind.
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use needle_holder::config::DeviceConfig;
 use serde_json::Value;
 
@@ -120,6 +120,9 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
     for &noise in &args.noise_n {
         crate::sim::check_noise_n("--noise-n", noise)?;
     }
+    if let Some(json) = &args.json {
+        crate::input::check_outputs(&[("--json", json)], &[])?;
+    }
     crate::stdout::write(
         "| rate | noise | structures | contact latency mean | puncture | structure | exit |\n\
          |---|---|---|---|---|---|---|\n",
@@ -137,11 +140,18 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
                     args.seed,
                 )?;
                 let contact = kind(&c, "contact");
+                // No contact found has no latency (it printed 0 ms).
+                let latency = match count(contact, "true_events") - count(contact, "misses") {
+                    0 => "–".to_owned(),
+                    _ => format!(
+                        "{:.0} ms",
+                        contact["latency_ms_mean"].as_f64().unwrap_or(0.0)
+                    ),
+                };
                 crate::stdout::write(&format!(
-                    "| {rate:.0} Hz | {:.0} mN | {} | {:.0} ms | {} | {} | {} |\n",
+                    "| {rate:.0} Hz | {:.0} mN | {} | {latency} | {} | {} | {} |\n",
                     noise * 1e3,
                     if structures { "yes" } else { "no" },
-                    contact["latency_ms_mean"].as_f64().unwrap_or(0.0),
                     summary(&c, "puncture"),
                     summary(&c, "structure"),
                     summary(&c, "exit"),
@@ -151,7 +161,8 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
         }
     }
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&cells)? + "\n")?;
+        std::fs::write(path, serde_json::to_string_pretty(&cells)? + "\n")
+            .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     Ok(())
 }

@@ -2,9 +2,12 @@
 //! (a `.csv` or `truth.json` linked to `/dev/zero`, or a `--params` naming
 //! a device, would be read without end), and for the inputs read whole —
 //! a tissue library, a dataset's `truth.json` — a size no such file
-//! reaches; a capture may also be a pipe, but not a device.
+//! reaches; a capture may also be a pipe, but not a device. And the
+//! checks every output passes before anything is read or written: it is
+//! none of the command's inputs, no two outputs are one file, and its
+//! directory exists.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
@@ -52,4 +55,69 @@ pub fn not_a_device(path: &Path) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Whether `a` and `b` name one file (the same path, a link, or the same
+/// inode); a path that does not exist is no file.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) if x == y => true,
+        #[cfg(unix)]
+        (Ok(x), Ok(y)) => {
+            use std::os::unix::fs::MetadataExt;
+            match (std::fs::metadata(x), std::fs::metadata(y)) {
+                (Ok(m), Ok(n)) => m.dev() == n.dev() && m.ino() == n.ino(),
+                _ => false,
+            }
+        }
+        _ => false,
+    }
+}
+
+/// Whether two output paths, which may not exist yet, name one file.
+fn same_output(a: &Path, b: &Path) -> bool {
+    same_file(a, b)
+        || matches!(
+            (std::path::absolute(a), std::path::absolute(b)),
+            (Ok(x), Ok(y)) if x == y
+        )
+}
+
+/// Check the files a command will write (`(flag, path)`), before it reads
+/// or writes anything: none may be one of `inputs` (`needle fit d --json
+/// d/trial_000.csv` emptied the trial it fitted, and `detect d --json
+/// d/truth.json` replaced the truth it scores against), no two may be one
+/// file (`diagnose --report r.svg` wrote its HTML over its own figure),
+/// and each must be a file in a directory that exists (found after the
+/// work, `--json /nodir/x.json` cost the whole evaluation).
+pub fn check_outputs(outputs: &[(&str, &Path)], inputs: &[PathBuf]) -> Result<()> {
+    for (k, &(flag, path)) in outputs.iter().enumerate() {
+        let shown = path.display();
+        if let Some(input) = inputs.iter().find(|i| same_file(i, path)) {
+            bail!(
+                "{shown}: {flag} names an input ({}); writing it would destroy what is read",
+                input.display()
+            );
+        }
+        if let Some((other, _)) = outputs[..k].iter().find(|(_, p)| same_output(p, path)) {
+            bail!("{shown}: {flag} and {other} name the same file");
+        }
+        if path.is_dir() {
+            bail!("{shown}: {flag} names a directory, not a file");
+        }
+        let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
+        if let Some(dir) = dir.filter(|d| !d.is_dir()) {
+            bail!("{shown}: cannot write: no directory {}", dir.display());
+        }
+    }
+    Ok(())
+}
+
+/// The files a dataset command reads in `dir`: its trial CSVs and its
+/// `truth.json`, and a `--params` library.
+pub fn dataset_inputs(dir: &Path, params: Option<&Path>) -> Vec<PathBuf> {
+    let mut inputs = crate::trial::dataset_files(dir).unwrap_or_default();
+    inputs.push(dir.join("truth.json"));
+    inputs.extend(params.map(Path::to_path_buf));
+    inputs
 }

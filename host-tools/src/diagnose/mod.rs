@@ -1037,7 +1037,26 @@ fn residual_tests(data: &[Prepared]) -> Value {
     })
 }
 
+/// The outputs asked for, checked before any work: `--report` also writes
+/// its figure beside it (`REPORT.svg`).
+fn check_outputs(args: &DiagnoseArgs) -> Result<()> {
+    let figure = args.report.as_ref().map(|r| r.with_extension("svg"));
+    let outputs = [
+        ("--json", args.json.as_deref()),
+        ("--residuals", args.residuals.as_deref()),
+        ("--report", args.report.as_deref()),
+        ("--report's figure", figure.as_deref()),
+    ];
+    let outputs: Vec<(&str, &Path)> = outputs
+        .into_iter()
+        .filter_map(|(flag, p)| p.map(|p| (flag, p)))
+        .collect();
+    let inputs = crate::input::dataset_inputs(&args.dir, args.params.as_deref());
+    crate::input::check_outputs(&outputs, &inputs)
+}
+
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
+    check_outputs(args)?;
     let params = match (&args.params, &args.tissue) {
         (None, None) => None,
         (file, tissue) => Some(crate::tissue::resolve(tissue.as_deref(), file.as_deref())?.params),

@@ -402,6 +402,16 @@ pub fn to_toml(fit: &Value) -> String {
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
+    let outputs = [
+        ("--json", &args.json),
+        ("--toml", &args.toml),
+        ("--plot", &args.plot),
+    ];
+    let outputs: Vec<(&str, &Path)> = outputs
+        .iter()
+        .filter_map(|(flag, p)| p.as_deref().map(|p| (*flag, p)))
+        .collect();
+    crate::input::check_outputs(&outputs, &crate::input::dataset_inputs(&args.dir, None))?;
     let fit = fit_dataset(&args.dir)?;
     let text = serde_json::to_string_pretty(&fit)?;
     match &args.json {
