@@ -97,6 +97,9 @@ pub fn command_of(action: &Action) -> Result<Command> {
             if !(depth_mm.is_finite() && (0.1..=100.0).contains(depth_mm)) {
                 bail!("--depth-mm {depth_mm}: must be between 0.1 and 100 mm");
             }
+            if modes.trim().is_empty() {
+                bail!("assist: name the modes, or `none` to turn them all off");
+            }
             Command::SetAssist {
                 modes: crate::detect::parse_assist(modes)?,
                 target_depth: Nanometres::from_m(depth_mm / 1e3),

@@ -41,6 +41,7 @@ pub struct Link {
 impl Link {
     /// Open `port` at `baud`.
     pub fn open(port: &str, baud: u32) -> Result<Self> {
+        check_baud(baud)?;
         let serial = serialport::new(port, baud)
             .timeout(Duration::from_millis(50))
             .open()
@@ -211,4 +212,15 @@ impl Link {
 fn fresh_seq() -> u32 {
     use rand::Rng;
     rand::thread_rng().gen_range(1..1 << 30)
+}
+
+/// A baud rate a port can be set to: 0 means "hang up" to a tty, and no
+/// UART runs above 12 Mbd.
+pub fn check_baud(baud: u32) -> Result<()> {
+    if !(50..=12_000_000).contains(&baud) {
+        anyhow::bail!(
+            "--baud {baud}: must be within 50..=12000000 (the Nucleo-F411RE's is 921600)"
+        );
+    }
+    Ok(())
 }

@@ -38,13 +38,14 @@ pub struct RecordArgs {
 }
 
 pub fn run(args: &RecordArgs) -> Result<()> {
-    let until = match args.seconds {
-        None => None,
-        Some(s) if s.is_finite() && s > 0.0 => {
-            Some(Instant::now() + Duration::from_secs_f64(s.min(1e9)))
-        }
-        Some(s) => bail!("--seconds {s}: must be a number of seconds above 0"),
-    };
+    crate::link::check_baud(args.baud)?;
+    let until = crate::decode::read_for(args.seconds)?
+        .map(|d| {
+            Instant::now()
+                .checked_add(d)
+                .context("--seconds: too long to wait for")
+        })
+        .transpose()?;
     prepare_dir(&args.out)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();

@@ -112,6 +112,10 @@ impl Effect {
     }
 }
 
+/// The strongest effect a simulation takes, in times its standard size:
+/// `tissue_motion=1e300` wrote `inf` into trial CSVs.
+pub const MOST_STRENGTH: f64 = 10.0;
+
 /// Parse `e1,e2,…` (optionally `name=strength`) into effects.
 pub fn parse_list(list: &str) -> Result<Vec<Effect>> {
     list.split(',')
@@ -122,8 +126,8 @@ pub fn parse_list(list: &str) -> Result<Vec<Effect>> {
                 let s: f64 = strength.parse().map_err(|_| {
                     anyhow::anyhow!("effect `{name}`: strength `{strength}` is not a number")
                 })?;
-                if !(s.is_finite() && s >= 0.0) {
-                    bail!("effect `{name}`: strength must be a finite number ≥ 0");
+                if !(0.0..=MOST_STRENGTH).contains(&s) {
+                    bail!("effect `{name}`: strength {strength} must be within 0..={MOST_STRENGTH} (times the effect's standard size)");
                 }
                 Effect::named(name, s)
             }

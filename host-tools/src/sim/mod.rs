@@ -884,10 +884,14 @@ pub fn check_rate_hz(flag: &str, rate_hz: f64) -> Result<()> {
     Ok(())
 }
 
-/// A force noise a simulation can be made with: finite and ≥ 0 N.
+/// The largest force noise or tare offset a simulation takes: the device's
+/// load-cell full scale (±10 N); 1e308 N wrote `inf` into trial CSVs.
+pub const MOST_NOISE_N: f64 = 10.0;
+
+/// A force noise a simulation can be made with: within 0..=10 N.
 pub fn check_noise_n(flag: &str, noise_n: f64) -> Result<()> {
-    if !(noise_n.is_finite() && noise_n >= 0.0) {
-        bail!("{flag} {noise_n}: the noise must be a finite number of newtons ≥ 0");
+    if !(0.0..=MOST_NOISE_N).contains(&noise_n) {
+        bail!("{flag} {noise_n:?}: the noise must be a number of newtons within 0..={MOST_NOISE_N} (the load cell's full scale)");
     }
     Ok(())
 }
@@ -896,9 +900,7 @@ pub fn check_noise_n(flag: &str, noise_n: f64) -> Result<()> {
 pub fn run(args: &SimulateArgs) -> Result<()> {
     check_rate_hz("--rate-hz", args.rate_hz)?;
     check_noise_n("--noise-n", args.noise_n)?;
-    if !(args.tare_n.is_finite() && args.tare_n >= 0.0) {
-        bail!("--tare-n must be a finite number ≥ 0");
-    }
+    check_noise_n("--tare-n", args.tare_n)?;
     if args.layers > 3 {
         bail!("--layers must be within 0..=3");
     }
