@@ -42,7 +42,7 @@ cargo fw-f411 --target-dir target/f411
 
 step "tests (host, QEMU, twin comparison)"
 log=$(mktemp)
-cargo test --workspace 2>&1 | tee "$log"
+cargo test --workspace --no-fail-fast 2>&1 | tee "$log"
 # One closing line over all suites (cargo ends with the doc-test suite, which
 # may hold no test, and that last line is not the whole story).
 awk '/^test result:/ { p += $4; f += $6 } END { printf "\ntotal: %d passed, %d failed\n", p, f }' "$log"

@@ -358,3 +358,79 @@ proptest! {
         }
     }
 }
+
+/// What the sensors and a host can put to the device between two samples.
+#[derive(Clone, Debug)]
+enum Input {
+    /// A reading: counts (or a bus error), saturated, overrun, encoder.
+    Reading(Option<i32>, bool, bool, u16),
+    /// Bytes on the command line, whatever they are.
+    Bytes(Vec<u8>),
+    /// A well-formed command: sequence number, which, a value, and for an
+    /// upload a library tissue with one byte of its wire form changed.
+    Command(u32, u8, i32, usize, usize, u8),
+}
+
+fn input() -> impl Strategy<Value = Input> {
+    prop_oneof![
+        8 => (any::<Option<i32>>(), any::<bool>(), any::<bool>(), any::<u16>())
+            .prop_map(|(c, s, o, e)| Input::Reading(c, s, o, e)),
+        1 => prop::collection::vec(any::<u8>(), 0..64).prop_map(Input::Bytes),
+        2 => (any::<u32>(), 0u8..7, any::<i32>(), any::<usize>(), any::<usize>(), any::<u8>())
+            .prop_map(|(q, w, v, t, at, b)| Input::Command(q, w, v, t, at, b)),
+    ]
+}
+
+/// A well-formed command, an upload's tissue with one byte of its wire
+/// form changed.
+fn any_command(which: u8, value: i32, entry: usize, at: usize, byte: u8) -> protocol::Command {
+    use needle_holder::config::{TissueModel, LIBRARY_MODELS};
+    use protocol::Command;
+    let base = LIBRARY_MODELS[entry % LIBRARY_MODELS.len()];
+    let mut buf = [0u8; 512];
+    let wire = postcard::to_slice(&base, &mut buf).unwrap();
+    let at = at % wire.len();
+    wire[at] = byte;
+    let tissue: TissueModel = postcard::from_bytes(wire).unwrap_or(base);
+    match which {
+        0 => Command::Tare,
+        1 => Command::SelectTissue(value as u8),
+        2 => Command::UploadTissue(tissue),
+        3 => Command::SetAssist {
+            modes: needle_holder::assist::AssistModes(value as u8),
+            target_depth: needle_holder::units::Nanometres(value),
+        },
+        4 => Command::Rearm,
+        5 => Command::Stream(value % 2 == 0),
+        _ => Command::ReadConfig,
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Any readings (any counts, errors, saturation, overruns, any encoder
+    /// count), garbage and well-formed commands (uploads of damaged
+    /// tissues among them) in any order: no panic — in this debug build
+    /// an overflow is a panic, so none wraps on the device either — and
+    /// a sample for every tick.
+    #[test]
+    fn the_device_takes_any_readings_and_any_commands(inputs in prop::collection::vec(input(), 1..600)) {
+        let mut sink = Vec::new();
+        let mut device = Device::new(DeviceConfig::default(), &mut sink, RecordingPin::default());
+        let mut ticks = 0u32;
+        for input in inputs {
+            match input {
+                Input::Reading(counts, saturated, overrun, encoder) => {
+                    let adc = counts.map(|counts| AdcSample { counts, saturated, overrun }).ok_or(());
+                    device.tick(&mut Adc(adc), &mut Enc(encoder));
+                    ticks += 1;
+                }
+                Input::Bytes(bytes) => device.receive(&bytes),
+                Input::Command(q, w, v, t, at, b) => device.receive(&command_bytes(q, any_command(w, v, t, at, b))),
+            }
+            prop_assert!(device.config().tissue_model().check().is_ok(), "the device runs a tissue that fails its own check");
+        }
+        prop_assert_eq!(device.finish().samples, ticks);
+    }
+}

@@ -16,7 +16,7 @@ fn needle(args: &[&std::ffi::OsStr]) -> std::process::Output {
 }
 
 #[test]
-fn random_bytes_are_reported_as_skipped_never_a_panic() {
+fn random_bytes_are_reported_as_skipped_and_refused_never_a_panic() {
     let dir = tempfile::tempdir().unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(42);
     for round in 0..20 {
@@ -26,8 +26,13 @@ fn random_bytes_are_reported_as_skipped_never_a_panic() {
         std::fs::write(&path, &bytes).unwrap();
         let out = needle(&["decode".as_ref(), path.as_os_str()]);
         let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(out.status.success(), "round {round}: {stderr}");
+        // Refused as no capture (exit 1), never a panic (101).
+        assert_eq!(out.status.code(), Some(1), "round {round}: {stderr}");
         assert!(stderr.contains("bytes skipped"), "round {round}: {stderr}");
+        assert!(
+            stderr.contains("no frame of the device's"),
+            "round {round}: {stderr}"
+        );
         assert!(!stderr.contains("panicked"), "round {round}: {stderr}");
     }
 }
