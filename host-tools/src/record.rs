@@ -46,7 +46,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
                 .context("--seconds: too long to wait for")
         })
         .transpose()?;
-    prepare_dir(&args.out)?;
+    check_dir(&args.out)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
@@ -60,6 +60,10 @@ pub fn run(args: &RecordArgs) -> Result<()> {
             command_error(&e)
         );
     }
+    // Created once a device has answered: a port with no device behind
+    // it left an empty directory.
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("{}: cannot create", args.out.display()))?;
     eprintln!(
         "recording from {} into {} (Ctrl-C stops)",
         args.port,
@@ -88,10 +92,18 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     Ok(())
 }
 
-/// The output directory: created, and without trial CSVs that the new
-/// ones would mix with.
-fn prepare_dir(dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+/// The output directory, if it exists: a directory without trial CSVs
+/// that the new ones would mix with.
+fn check_dir(dir: &Path) -> Result<()> {
+    if !dir.exists() {
+        return Ok(());
+    }
+    if !dir.is_dir() {
+        bail!(
+            "{}: is a file, not a directory (--out names the directory the trials go to)",
+            dir.display()
+        );
+    }
     let existing = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot read", dir.display()))?
         .filter_map(|e| e.ok())

@@ -705,6 +705,21 @@ fn outputs_that_cannot_be_written_name_their_path_in_words() {
 }
 
 #[test]
+fn needle_record_on_a_port_with_no_device_leaves_no_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("trials");
+    let err = refused(&[
+        "record",
+        "--port",
+        "/dev/null",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(err.contains("/dev/null: cannot open serial port"), "{err}");
+    assert!(!out.exists(), "an empty directory was left");
+}
+
+#[test]
 fn needle_device_checks_its_arguments_before_the_port() {
     // The library listing needs no device; every other action names the
     // port it lacks; bad numbers and names are refused before any byte
