@@ -397,9 +397,7 @@ pub fn load_reporting(
                     "needle diagnose: {}: cannot find its geometry: {e:#} (left out)",
                     file.display()
                 );
-                skipped.push(
-                    json!({ "file": file.display().to_string(), "reason": format!("{e:#}") }),
-                );
+                skipped.push(crate::trial::skipped(&file, &format!("{e:#}")));
             }
         }
     }
@@ -677,8 +675,8 @@ pub fn heldout_rms_with_displacement(data: &[Prepared], shifts: &[TissueShift]) 
 /// `needle fit`'s estimates over per-trial fits, as tissue parameters.
 fn nominal_params(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Result<TissueParams> {
     let text = crate::fit::to_toml(&crate::fit::summarise(fits, skipped));
-    let tissues = crate::tissue::parse(&text, Path::new("<needle fit>"))?;
-    Ok(tissues.first().context("needle fit gave no tissue")?.params)
+    crate::fit::fitted_tissue(&text)
+        .map_err(|e| anyhow::anyhow!("{e}: pass the tissue with --params or --tissue"))
 }
 
 /// Where the nominal model came from, which decides what a backfit may
@@ -1037,6 +1035,41 @@ fn residual_tests(data: &[Prepared]) -> Value {
     })
 }
 
+/// The trials with the device's own model (`model_n`, from `needle decode
+/// --csv` or `needle record`) as the nominal; a trial without it is left
+/// out by the one rule for bad files, not the end of the run.
+fn with_device_model(
+    dir: &Path,
+    data: Vec<Prepared>,
+    skipped: &mut Vec<Value>,
+) -> Result<Vec<Prepared>> {
+    let mut kept = Vec::new();
+    for mut p in data {
+        let path = dir.join(&p.file);
+        let used = crate::trial::read_column_for_analysis(&path, "model_n").and_then(|model_n| {
+            p.use_nominal(model_n)
+                .with_context(|| format!("{}: `model_n`", path.display()))
+        });
+        match used {
+            Ok(()) => kept.push(p),
+            Err(e) => {
+                eprintln!(
+                    "needle diagnose: {e:#} (left out: --device-model needs the device's model_n)"
+                );
+                skipped.push(crate::trial::skipped(&path, &format!("{e:#}")));
+            }
+        }
+    }
+    if kept.len() < 2 {
+        bail!(
+            "{}: --device-model needs at least 2 trials with the device's model_n, found {}",
+            dir.display(),
+            kept.len()
+        );
+    }
+    Ok(kept)
+}
+
 /// The outputs asked for, checked before any work: `--report` also writes
 /// its figure beside it (`REPORT.svg`).
 fn check_outputs(args: &DiagnoseArgs) -> Result<()> {
@@ -1070,14 +1103,9 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         }
     };
     progress("reading and fitting the trials");
-    let (_, mut data, skipped) = load_reporting(&args.dir, params.as_ref())?;
+    let (_, mut data, mut skipped) = load_reporting(&args.dir, params.as_ref())?;
     if args.device_model {
-        for p in &mut data {
-            let path = args.dir.join(&p.file);
-            let model_n = crate::trial::read_column_for_analysis(&path, "model_n")?;
-            p.use_nominal(model_n)
-                .with_context(|| format!("{}: `model_n`", path.display()))?;
-        }
+        data = with_device_model(&args.dir, data, &mut skipped)?;
     }
     let nominal = match (args.device_model, &params) {
         (true, _) => Nominal::Device,

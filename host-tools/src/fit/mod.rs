@@ -10,6 +10,7 @@ pub mod trial;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use needle_holder::model::params::TissueParams;
 use serde_json::{json, Value};
 
 pub use self::trial::{fit_trial, TrialFit};
@@ -99,7 +100,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
     let mut fits = Vec::new();
     let mut skipped: Vec<Value> = unreadable
         .iter()
-        .map(|u| json!({ "file": name_of(&u.file), "reason": u.reason }))
+        .map(crate::trial::Unreadable::to_json)
         .collect();
     let mut progress = crate::trial::Progress::new("fit");
     for (k, (file, trial)) in trials.iter().enumerate() {
@@ -115,7 +116,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
             Ok(fit) => fits.push((file.clone(), fit)),
             Err(err) => {
                 eprintln!("needle fit: {err:#} (left out)");
-                skipped.push(json!({ "file": name_of(file), "reason": format!("{err:#}") }));
+                skipped.push(crate::trial::skipped(file, &format!("{err:#}")));
             }
         }
     }
@@ -335,6 +336,15 @@ fn name_of(path: &Path) -> String {
     )
 }
 
+/// The tissue in `fit --toml`'s text, as `--params` would load it; an
+/// error naming the key when the fitted values are no tissue the device
+/// can run (beyond its fixed point, say).
+pub fn fitted_tissue(toml: &str) -> Result<TissueParams> {
+    let tissues = crate::tissue::parse(toml, Path::new("fitted"))
+        .context("the parameters fitted from these trials are no tissue the device can run")?;
+    Ok(tissues.first().context("needle fit gave no tissue")?.params)
+}
+
 /// The estimates as a tissue-library entry (keys of `TissueParams`).
 pub fn to_toml(fit: &Value) -> String {
     let get = |key: &str| fit.get(key).and_then(value_of);
@@ -421,6 +431,8 @@ pub fn run(args: &FitArgs) -> Result<()> {
     }
     let toml = to_toml(&fit);
     if let Some(path) = &args.toml {
+        // Never a file its own loader refuses.
+        fitted_tissue(&toml).with_context(|| format!("{}: not written", path.display()))?;
         std::fs::write(path, &toml).with_context(|| format!("{}: cannot write", path.display()))?;
     }
     if let Some(path) = &args.plot {
@@ -437,9 +449,7 @@ fn plot_first_trial(dir: &Path, fit: &Value, toml: &str, path: &Path) -> Result<
         .context("no fitted trial to plot")?;
     let trial = crate::trial::read_for_analysis(&dir.join(first), None)?.trial;
     let geometry = fit_trial(&trial)?;
-    let params = crate::tissue::parse(toml, Path::new("fitted.toml"))?
-        .remove(0)
-        .params;
+    let params = fitted_tissue(toml)?;
     let model = predict::predict(&params, &geometry, &trial);
     let measured: Vec<(f64, f64)> = trial
         .x_m

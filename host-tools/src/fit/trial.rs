@@ -208,11 +208,39 @@ fn r_squared(data: &[(f64, f64)], predict: impl Fn(f64) -> f64) -> (f64, f64) {
     ((sse / n).sqrt(), 1.0 - sse / sst.max(f64::MIN_POSITIVE))
 }
 
+/// The fastest a needle drive moves: 1 m/s, ten times the device's own
+/// encoder-jump limit. A step of more than [`MOST_GLITCH_M`] faster than
+/// this is no insertion: positions in millimetres (a 3 mm/s insertion
+/// read as 3 m/s), or an encoder glitch of metres, which once gave a
+/// fitted puncture depth of 20 m.
+pub const FASTEST_DRIVE_MPS: f64 = 1.0;
+/// A step below this is noise or quantisation whatever its speed (two
+/// samples a few µs apart on a jittered clock).
+pub const MOST_GLITCH_M: f64 = 0.001;
+
+/// Refuse a trial whose needle moves faster than any drive, saying where.
+fn check_drive_speed(trial: &Trial) -> Result<()> {
+    let (t, x) = (&trial.t_s, &trial.x_m);
+    for i in 1..trial.len() {
+        let dx = x[i] - x[i - 1];
+        let dt = t[i] - t[i - 1];
+        if dx.abs() > MOST_GLITCH_M && dx.abs() > FASTEST_DRIVE_MPS * dt {
+            bail!(
+                "x_m moves {dx:.4} m in {dt:.6} s at t = {:.6} s ({:.3} m/s, faster than any needle drive's {FASTEST_DRIVE_MPS} m/s): is x_m in metres, or the encoder glitching?",
+                t[i],
+                dx / dt
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Estimate everything one trial can tell.
 pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     if trial.len() < 50 {
         bail!("only {} samples", trial.len());
     }
+    check_drive_speed(trial)?;
     let (x, f) = (&trial.x_m, &trial.f_n);
     let v = velocity(trial);
     let noise_n = noise(f);
