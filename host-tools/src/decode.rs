@@ -62,6 +62,12 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         }
     }
     if let Some(csv) = &args.csv {
+        if crate::input::is_stdout(csv) {
+            bail!(
+                "{}: --csv names standard output, where the text goes too: name a file",
+                csv.display()
+            );
+        }
         remove_stale_segments(csv, args.file.as_deref())?;
     }
     let mut out = Output::new(args.csv.as_deref(), args.file.as_deref(), args.rate_hz)?;
@@ -207,10 +213,20 @@ struct Output {
     segment: u32,
     /// Samples written to each CSV, in order.
     written: Vec<(PathBuf, u64)>,
+    /// The rate the stream gave (header, status), or `--rate-hz` once it
+    /// had to stand in for one.
     rate_hz: Option<u16>,
+    /// `--rate-hz`: for a stream that gives no rate. The stream's own
+    /// wins (it once silently rebuilt a 500 Hz capture's times at 65 kHz).
+    fallback_hz: Option<u16>,
     /// Samples that arrived before the sample rate was known.
     pending: Vec<Sample>,
 }
+
+/// Samples held back waiting for the stream to give its rate: a status
+/// frame comes every 250 samples, so a stream this long without one gives
+/// none, and `--rate-hz` (or an error) decides.
+const MOST_PENDING: usize = 1 << 16;
 
 impl Output {
     fn new(csv_path: Option<&Path>, capture: Option<&Path>, rate_hz: Option<u16>) -> Result<Self> {
@@ -224,7 +240,8 @@ impl Output {
             capture: capture.map(Path::to_path_buf),
             segment: 0,
             written: csv_path.map(|p| (p.to_path_buf(), 0)).into_iter().collect(),
-            rate_hz,
+            rate_hz: None,
+            fallback_hz: rate_hz,
             pending: Vec::new(),
         })
     }
@@ -232,7 +249,11 @@ impl Output {
     fn item(&mut self, item: Item) -> Result<()> {
         match item {
             Item::Sample(s) if self.csv.is_some() => self.sample_to_csv(s)?,
-            Item::Sample(s) => writeln!(self.text, "{}", describe_sample(&s, self.rate_hz))?,
+            Item::Sample(s) => writeln!(
+                self.text,
+                "{}",
+                describe_sample(&s, self.rate_hz.or(self.fallback_hz))
+            )?,
             // Snapshots are for the decoder; a status line says the same.
             Item::Frame(Message::Snapshot(_)) => {}
             Item::Frame(frame) => {
@@ -242,7 +263,11 @@ impl Output {
                 if let Message::Status(s) = &frame {
                     self.learn_rate(s.sample_rate_hz)?;
                 }
-                writeln!(self.text, "{}", describe(&frame, self.rate_hz))?;
+                writeln!(
+                    self.text,
+                    "{}",
+                    describe(&frame, self.rate_hz.or(self.fallback_hz))
+                )?;
             }
             Item::Skipped { bytes, reason } => {
                 writeln!(self.text, "skipped {bytes} bytes ({reason})")?
@@ -301,11 +326,20 @@ impl Output {
     }
 
     fn learn_rate(&mut self, rate_hz: u16) -> Result<()> {
-        if self.rate_hz.is_none() && rate_hz > 0 {
-            self.rate_hz = Some(rate_hz);
-            for s in std::mem::take(&mut self.pending) {
-                self.sample_to_csv(s)?;
-            }
+        if rate_hz == 0 || self.rate_hz.is_some() {
+            return Ok(());
+        }
+        if let Some(given) = self.fallback_hz.filter(|&g| g != rate_hz) {
+            eprintln!("decode: the stream says {rate_hz} Hz; --rate-hz {given} is for a stream that says nothing, and is not used");
+        }
+        self.use_rate(rate_hz)
+    }
+
+    /// Times from here on at `rate_hz`, the samples held back first.
+    fn use_rate(&mut self, rate_hz: u16) -> Result<()> {
+        self.rate_hz = Some(rate_hz);
+        for s in std::mem::take(&mut self.pending) {
+            self.sample_to_csv(s)?;
         }
         Ok(())
     }
@@ -313,6 +347,12 @@ impl Output {
     fn sample_to_csv(&mut self, s: Sample) -> Result<()> {
         let (Some(w), Some(rate)) = (self.csv.as_mut(), self.rate_hz) else {
             self.pending.push(s);
+            if self.pending.len() >= MOST_PENDING {
+                match self.fallback_hz {
+                    Some(given) => self.use_rate(given)?,
+                    None => bail!("{MOST_PENDING} samples and no header or status frame gave the sample rate: pass --rate-hz"),
+                }
+            }
             return Ok(());
         };
         w.write_record(csv_row(&s, 0, rate))
@@ -334,6 +374,9 @@ impl Output {
 
     fn finish(mut self, stats: &StreamStats) -> Result<()> {
         self.text.flush()?;
+        if let (false, Some(given)) = (self.pending.is_empty(), self.fallback_hz) {
+            self.use_rate(given)?;
+        }
         if !self.pending.is_empty() {
             bail!(
                 "{} samples but no header or status frame gave the sample rate: pass --rate-hz",

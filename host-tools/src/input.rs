@@ -74,6 +74,20 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// Whether `path` is this process's standard output (a file, a pipe or a
+/// terminal), which the command's text already goes to: `decode --csv
+/// /dev/stdout > f` wrote both into `f` over each other.
+pub fn is_stdout(path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(m), Ok(out)) = (std::fs::metadata(path), std::fs::metadata("/dev/stdout")) {
+            return m.dev() == out.dev() && m.ino() == out.ino();
+        }
+    }
+    false
+}
+
 /// Whether two output paths, which may not exist yet, name one file.
 fn same_output(a: &Path, b: &Path) -> bool {
     same_file(a, b)
