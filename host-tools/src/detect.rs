@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use needle_holder::assist::AssistModes;
+use needle_holder::assist::{target_depth_is_valid, AssistModes};
 use needle_holder::config::DeviceConfig;
 use needle_holder::hal::LoadCellAdc;
 use needle_holder::pipeline::{PipelineState, RawSample};
@@ -384,10 +384,16 @@ pub fn run(args: &DetectArgs) -> Result<()> {
     let mut config = DeviceConfig::for_tissue(&tissue.params)
         .map_err(|e| anyhow::anyhow!("tissue `{}`: {e}", tissue.name))?
         .with_assist(parse_assist(&args.assist)?);
-    if !(args.target_depth_mm.is_finite() && args.target_depth_mm > 0.0) {
-        anyhow::bail!("--target-depth-mm must be a positive number");
+    // The device's own range (`needle device assist --depth-mm`): 1e308 mm
+    // meant no halt at all, 1e-320 a halt at contact.
+    let depth = Nanometres::from_m(args.target_depth_mm * 1e-3);
+    if !(args.target_depth_mm.is_finite() && target_depth_is_valid(depth)) {
+        anyhow::bail!(
+            "--target-depth-mm {:?}: must be between 0.1 and 100 mm, as on the device",
+            args.target_depth_mm
+        );
     }
-    config.assist.target_depth = Nanometres::from_m(args.target_depth_mm * 1e-3);
+    config.assist.target_depth = depth;
     let out = detect_dataset(&args.dir, &config)?;
     if let Some(eval) = out.get("evaluation").and_then(Value::as_array) {
         eprintln!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");

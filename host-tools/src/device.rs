@@ -95,7 +95,7 @@ pub fn command_of(action: &Action) -> Result<Command> {
         Action::Tissues => bail!("`tissues` sends nothing"),
         Action::Assist { modes, depth_mm } => {
             if !(depth_mm.is_finite() && (0.1..=100.0).contains(depth_mm)) {
-                bail!("--depth-mm {depth_mm}: must be between 0.1 and 100 mm");
+                bail!("--depth-mm {depth_mm:?}: must be between 0.1 and 100 mm");
             }
             if modes.trim().is_empty() {
                 bail!("assist: name the modes, or `none` to turn them all off");

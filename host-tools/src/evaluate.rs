@@ -12,10 +12,11 @@ use crate::sim::{effects, Dataset, Sensor};
 
 #[derive(Debug, clap::Args)]
 pub struct EvaluateArgs {
-    /// Insertions per cell.
+    /// Insertions per cell (at most 1000: each is simulated to a
+    /// temporary directory, ~2 MB at 2 kHz).
     #[arg(long, default_value_t = 200)]
     pub trials: usize,
-    /// Sample rates, Hz, comma-separated.
+    /// Sample rates, Hz, comma-separated (the device's: 50..=2000).
     #[arg(long, default_value = "500,1000,2000", value_delimiter = ',')]
     pub rates_hz: Vec<f64>,
     /// Force noise levels, N, comma-separated.
@@ -30,6 +31,9 @@ pub struct EvaluateArgs {
     #[arg(long)]
     pub json: Option<std::path::PathBuf>,
 }
+
+/// The most insertions per cell.
+pub const MOST_TRIALS: usize = 1000;
 
 /// One cell of the grid.
 #[derive(Debug, serde::Serialize)]
@@ -49,7 +53,8 @@ pub fn cell(
     trials: usize,
     seed: u64,
 ) -> Result<Cell> {
-    let dir = tempfile::tempdir()?;
+    let dir =
+        tempfile::tempdir().context("cannot create a temporary directory (is TMPDIR one?)")?;
     let mut list = effects::parse_list(extra)?;
     if with_structures {
         list.push(effects::Effect::named("internal_structures", 1.0)?);
@@ -109,13 +114,21 @@ fn summary(cell: &Cell, name: &str) -> String {
 }
 
 pub fn run(args: &EvaluateArgs) -> Result<()> {
-    if args.trials == 0 {
-        bail!("--trials must be at least 1");
+    if !(1..=MOST_TRIALS).contains(&args.trials) {
+        bail!("--trials {}: must be within 1..={MOST_TRIALS} (each is simulated to a temporary directory first)", args.trials);
     }
     // Every value up front: a bad one in the middle of a run named a temp
     // file, and 1e9 Hz grew to 24 GB before anything said no.
     for &rate in &args.rates_hz {
         crate::sim::check_rate_hz("--rates-hz", rate)?;
+        // Faster trials were thinned to 2 kHz by the reader, and their
+        // rows labelled with a rate the detectors never ran at.
+        if rate > crate::trial::ANALYSIS_MOST_HZ {
+            bail!(
+                "--rates-hz {rate}: the detectors run at the device's rates, at most {} Hz (the ADS1220's fastest)",
+                crate::trial::ANALYSIS_MOST_HZ
+            );
+        }
     }
     for &noise in &args.noise_n {
         crate::sim::check_noise_n("--noise-n", noise)?;

@@ -54,12 +54,14 @@ impl Trial {
 /// Sample rate, Hz, from the median step of increasing times; 0 for fewer
 /// than two.
 fn median_rate_hz(t_s: &[f64]) -> f64 {
+    median_step_s(t_s).map_or(0.0, |dt| 1.0 / dt)
+}
+
+/// The median step of the times; `None` for fewer than two.
+fn median_step_s(t_s: &[f64]) -> Option<f64> {
     let mut dt: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    if dt.is_empty() {
-        return 0.0;
-    }
     let mid = dt.len() / 2;
-    1.0 / *dt.select_nth_unstable_by(mid, f64::total_cmp).1
+    (!dt.is_empty()).then(|| *dt.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
 /// The thinning step that brings `rate_hz` to `most_hz` or below.
@@ -279,8 +281,9 @@ struct Thinner {
     rows: usize,
     /// 0 until the probe has set it.
     step: usize,
-    /// The probe's rate, Hz, when above [`FASTEST_TRIAL_HZ`].
-    too_fast_hz: Option<f64>,
+    /// The probe's median time step, s, when faster than
+    /// [`FASTEST_TRIAL_HZ`].
+    too_fast_step_s: Option<f64>,
 }
 
 impl Thinner {
@@ -289,7 +292,7 @@ impl Thinner {
             kept: Vec::with_capacity(PROBE_ROWS),
             rows: 0,
             step: 0,
-            too_fast_hz: None,
+            too_fast_step_s: None,
         }
     }
 
@@ -312,12 +315,10 @@ impl Thinner {
 
     fn set_step(&mut self) {
         let t_s: Vec<f64> = self.kept.iter().map(|r| r[0]).collect();
-        let rate_hz = median_rate_hz(&t_s);
-        // Infinite (a step of 1e-310 s) is beyond the bound too.
-        if rate_hz.is_nan() || rate_hz > FASTEST_TRIAL_HZ {
-            self.too_fast_hz = Some(rate_hz);
-        }
-        self.step = step_to(rate_hz, ANALYSIS_MOST_HZ);
+        let step_s = median_step_s(&t_s);
+        // A step of 1e-310 s (an infinite rate) is below the bound too.
+        self.too_fast_step_s = step_s.filter(|&dt| dt < 1.0 / FASTEST_TRIAL_HZ);
+        self.step = step_to(step_s.map_or(0.0, |dt| 1.0 / dt), ANALYSIS_MOST_HZ);
         self.keep_every(self.step);
     }
 
@@ -335,12 +336,11 @@ impl Thinner {
         if self.step == 0 {
             self.set_step();
         }
-        if let Some(rate_hz) = self.too_fast_hz {
+        if let Some(step_s) = self.too_fast_step_s {
             bail!(
-                "{}:2-{}: the median time step is {:e} s ({rate_hz:.3e} Hz), faster than any rig ({FASTEST_TRIAL_HZ:e} Hz at most): is t_s in seconds?",
+                "{}:2-{}: the median time step is {step_s:e} s, faster than any rig ({FASTEST_TRIAL_HZ:e} Hz at most): is t_s in seconds?",
                 path.display(),
                 self.rows.min(PROBE_ROWS) + 1,
-                1.0 / rate_hz,
             );
         }
         Ok((self.kept, self.rows, self.step))
@@ -375,7 +375,8 @@ pub fn write(path: &Path, trial: &Trial) -> Result<()> {
     let file = std::fs::File::create(path)
         .with_context(|| format!("{}: cannot create", path.display()))?;
     let mut out = std::io::BufWriter::new(file);
-    writeln!(out, "t_s,x_m,f_n")?;
+    let failed = || format!("{}: cannot write", path.display());
+    writeln!(out, "t_s,x_m,f_n").with_context(failed)?;
     for i in 0..trial.len() {
         let row = [trial.t_s[i], trial.x_m[i], trial.f_n[i]];
         if !row.iter().all(|v| v.is_finite()) {
@@ -385,14 +386,10 @@ pub fn write(path: &Path, trial: &Trial) -> Result<()> {
                 i + 2
             );
         }
-        writeln!(
-            out,
-            "{:.6},{:.9},{:.6}",
-            trial.t_s[i], trial.x_m[i], trial.f_n[i]
-        )?;
+        let [t, x, f] = row;
+        writeln!(out, "{t:.6},{x:.9},{f:.6}").with_context(failed)?;
     }
-    out.flush()
-        .with_context(|| format!("{}: cannot write", path.display()))
+    out.flush().with_context(failed)
 }
 
 /// A progress line on stderr for work that lasts: nothing for the first
@@ -432,6 +429,16 @@ impl Progress {
 /// A dataset's trials that could be read, with their files.
 pub type Dataset = Vec<(PathBuf, Trial)>;
 
+/// An entry of a command's JSON `skipped` list: the file's name in the
+/// dataset and why it was left out.
+pub fn skipped(file: &Path, reason: &str) -> serde_json::Value {
+    let name = file.file_name().map_or_else(
+        || file.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    serde_json::json!({ "file": name, "reason": reason })
+}
+
 /// A dataset's trial that could not be read, and why (file and line).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Unreadable {
@@ -440,9 +447,10 @@ pub struct Unreadable {
 }
 
 impl Unreadable {
-    /// As it goes into a command's JSON `skipped` list.
+    /// As it goes into a command's JSON `skipped` list: the file by its
+    /// name in the dataset, as the JSON's trials name theirs.
     pub fn to_json(&self) -> serde_json::Value {
-        serde_json::json!({ "file": self.file.display().to_string(), "reason": self.reason })
+        skipped(&self.file, &self.reason)
     }
 }
 

@@ -787,3 +787,173 @@ fn decode_refuses_a_device_named_as_its_capture() {
         "{err}"
     );
 }
+
+/// `trial_000.csv` of `from` rewritten into `to/name` with `t` and `x`
+/// scaled.
+fn scaled_copy(from: &std::path::Path, to: &std::path::Path, name: &str, t_by: f64, x_by: f64) {
+    let text = std::fs::read_to_string(from.join("trial_000.csv")).unwrap();
+    let mut lines = text.lines();
+    let mut out = format!("{}\n", lines.next().unwrap());
+    for l in lines {
+        let v: Vec<f64> = l.split(',').map(|c| c.parse().unwrap()).collect();
+        out += &format!("{:e},{:e},{}\n", v[0] * t_by, v[1] * x_by, v[2]);
+    }
+    std::fs::write(to.join(name), out).unwrap();
+}
+
+#[test]
+fn fit_leaves_out_what_no_needle_drive_could_do_and_writes_no_tissue_it_would_refuse() {
+    // Positions in millimetres (a 3 mm/s insertion read as 3 m/s) were
+    // fitted without a word into a puncture depth of metres, and the
+    // TOML written was one `--params` then refused.
+    let dir = simulated(2, 1);
+    let d = dir.path().to_str().unwrap();
+    scaled_copy(dir.path(), dir.path(), "mm.csv", 1.0, 1000.0);
+    let json = dir.path().join("fit.json");
+    let out = needle(&["fit", d, "--json", json.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("mm.csv: cannot fit: x_m moves")
+            && err.contains("faster than any needle drive's 1 m/s"),
+        "{err}"
+    );
+    let value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(value["skipped"][0]["file"], "mm.csv", "{value}");
+    // At the speed of a drive but 200 times as deep: a fit, and a tissue
+    // past the device's 2 m, which is not written.
+    let deep = tempfile::tempdir().unwrap();
+    for k in 0..2 {
+        let one = simulated(1, k + 5);
+        scaled_copy(one.path(), deep.path(), &format!("t{k}.csv"), 200.0, 200.0);
+    }
+    let toml = deep.path().join("fit.toml");
+    let err = refused(&[
+        "fit",
+        deep.path().to_str().unwrap(),
+        "--toml",
+        toml.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("fit.toml: not written") && err.contains("puncture_depth_m"),
+        "{err}"
+    );
+    assert!(!toml.exists());
+}
+
+#[test]
+fn decode_takes_the_streams_rate_over_rate_hz_and_never_writes_to_its_stdout() {
+    // --rate-hz 65535 rebuilt a 500 Hz capture's times at 65 kHz; --csv
+    // /dev/stdout wrote the CSV and the text over each other.
+    let dir = tempfile::tempdir().unwrap();
+    let cap = dir.path().join("cap.bin");
+    std::fs::write(&cap, twin_capture(3.0)).unwrap();
+    let csv = dir.path().join("cap.csv");
+    let out = needle(&[
+        "decode",
+        cap.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+        "--rate-hz",
+        "65535",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("the stream says 500 Hz; --rate-hz 65535"),
+        "{err}"
+    );
+    assert_eq!(times(&csv)[1], 0.002);
+    let err = refused(&["decode", cap.to_str().unwrap(), "--csv", "/dev/stdout"]);
+    assert!(err.contains("--csv names standard output"), "{err}");
+}
+
+#[test]
+fn detect_and_evaluate_take_only_what_the_device_does() {
+    // A target depth the device refuses was used (1e308 mm: never a halt);
+    // 65 kHz trials were thinned to 2 kHz and the row labelled 65535 Hz.
+    let dir = simulated(1, 2);
+    let d = dir.path().to_str().unwrap();
+    for depth in ["1e308", "100.0001", "0.09999"] {
+        let err = refused(&["detect", d, "--assist", "depth", "--target-depth-mm", depth]);
+        assert!(
+            err.contains("must be between 0.1 and 100 mm"),
+            "{depth}: {err}"
+        );
+    }
+    let err = refused(&["evaluate", "--trials", "1", "--rates-hz", "65535"]);
+    assert!(err.contains("at most 2000 Hz"), "{err}");
+    let err = refused(&["evaluate", "--trials", "1001"]);
+    assert!(err.contains("--trials 1001"), "{err}");
+}
+
+#[test]
+fn a_stopped_simulation_leaves_the_earlier_one_whole_and_the_next_run_goes_on() {
+    // Stopped half-way, simulate had already deleted the earlier
+    // truth.json; the next run refused its own leftovers as another's.
+    let dir = simulated(2, 1);
+    let d = dir.path().to_str().unwrap();
+    let truth = std::fs::read(dir.path().join("truth.json")).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args([
+            "simulate",
+            "--out",
+            d,
+            "--trials",
+            "50",
+            "--rate-hz",
+            "20000",
+            "--seed",
+            "9",
+        ])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(400));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert_eq!(std::fs::read(dir.path().join("truth.json")).unwrap(), truth);
+    assert!(!dir.path().join("trial_002.csv").exists());
+    let out = needle(&["simulate", "--out", d, "--trials", "1", "--seed", "3"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!dir.path().join(".simulating").exists());
+    assert!(!dir.path().join("trial_001.csv").exists());
+}
+
+#[test]
+fn a_simulated_load_cell_reads_no_more_than_its_full_scale() {
+    // Every effect at ten times its size wrote 483 N for a 10 N cell.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    let all = "viscoelasticity=10,rate_dependent_friction=10,presliding_hysteresis=10,internal_structures=10,depth_dependent_cutting=10,holder_inertia=10,sensor_drift=10,tissue_motion=10";
+    let out = needle(&[
+        "simulate",
+        "--out",
+        d,
+        "--trials",
+        "1",
+        "--effects",
+        all,
+        "--tare-n",
+        "10",
+        "--noise-n",
+        "10",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(dir.path().join("trial_000.csv")).unwrap();
+    let most = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap().parse::<f64>().unwrap().abs())
+        .fold(0.0, f64::max);
+    assert!(most <= 10.0 && most > 9.9, "{most} N");
+}

@@ -21,7 +21,10 @@ pub fn headline(out: &Value) -> String {
         "unexplained" if !closest.is_empty() => {
             format!("unexplained (closest: {})", closest.join(" + "))
         }
-        effect => format!("{effect} (+ {})", v["second"].as_str().unwrap_or("none")),
+        effect => match v["second"].as_str().filter(|&s| s != "none") {
+            Some(second) => format!("{effect} (+ {second})"),
+            None => effect.to_owned(),
+        },
     };
     format!(
         "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {named}, shrink {:.0} %{}",

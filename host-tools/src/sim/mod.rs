@@ -328,6 +328,8 @@ pub fn simulate_trial_in(
     };
     let s1 = protocol.surface_x_m;
     let noise = Normal::new(0.0, sensor.noise_n.max(0.0)).unwrap_or(Normal::new(0.0, 0.0).unwrap());
+    let cell = needle_holder::calibration::LoadCell::TEN_NEWTON_24_BIT;
+    let full_scale_n = cell.force(cell.full_scale_counts).as_n();
     let deepest_planned = m.x_m.iter().copied().fold(0.0, f64::max);
     let mut truth = TrialTruth {
         protocol: protocol.clone(),
@@ -618,7 +620,11 @@ pub fn simulate_trial_in(
         f += protocol.tare_n;
         prev_p = p;
         let x_counts = (x / sensor.encoder_m).round() * sensor.encoder_m;
-        trial.push(t, x_counts, f + noise.sample(rng));
+        // The load cell reads no more than its full scale (every effect at
+        // ten times its size once wrote 483 N for a 10 N cell, while the
+        // trial's replay said saturated).
+        let measured_n = (f + noise.sample(rng)).clamp(-full_scale_n, full_scale_n);
+        trial.push(t, x_counts, measured_n);
     }
     (trial, truth)
 }
@@ -835,13 +841,13 @@ struct TruthTrial<'a> {
     truth: &'a TrialTruth,
 }
 
-/// Make `dir` ready for a new simulation: an earlier one's files (its
-/// `truth.json`, `trial_*.csv`, `trial_*.replay`) go, so no stale trial
+/// The files of an earlier simulation in `dir`, which the new one replaces
+/// (its `truth.json`, `trial_*.csv`, `trial_*.replay`), so no stale trial
 /// from another seed or count stays beside the new ones (a second run with
 /// fewer trials left the rest, and `fit` mixed two seeds). Trials that are
 /// not a simulation's (CSVs with no `truth.json`) are never deleted: the
 /// directory is refused.
-fn clear_previous(dir: &Path) -> Result<()> {
+fn previous_simulation(dir: &Path) -> Result<Vec<PathBuf>> {
     let entries: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot list", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -867,11 +873,14 @@ fn clear_previous(dir: &Path) -> Result<()> {
             csv.display()
         );
     }
-    for path in entries.iter().filter(|p| simulated && ours(p)) {
-        std::fs::remove_file(path).with_context(|| format!("{}: cannot remove", path.display()))?;
-    }
-    Ok(())
+    Ok(entries
+        .into_iter()
+        .filter(|p| simulated && ours(p))
+        .collect())
 }
+
+/// Where a simulation is written before it replaces the one in `--out`.
+const STAGING: &str = ".simulating";
 
 /// A sample rate a simulation can be made at: 50 Hz (the slowest rigs the
 /// analysis commands take, DESIGN.md §1) to 65 535 Hz (the replay header's
@@ -977,6 +986,45 @@ impl Dataset<'_> {
     /// Write trial CSVs, firmware replays and truth.json into `dir`. Same
     /// seed, same bytes.
     pub fn write(&self, dir: &Path) -> Result<usize> {
+        if dir.exists() && !dir.is_dir() {
+            bail!(
+                "{}: is a file, not a directory (--out names the directory the trials go to)",
+                dir.display()
+            );
+        }
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let previous = previous_simulation(dir)?;
+        // Written beside, then moved in: a run stopped half-way (Ctrl-C, a
+        // full disk) left trials without a truth.json, which the next run
+        // then refused as another's, and the earlier simulation gone.
+        let staging = dir.join(STAGING);
+        if staging.exists() {
+            std::fs::remove_dir_all(&staging)
+                .with_context(|| format!("{}: cannot remove", staging.display()))?;
+        }
+        std::fs::create_dir(&staging)
+            .with_context(|| format!("{}: cannot create", staging.display()))?;
+        let written = self.write_into(&staging)?;
+        for path in previous {
+            std::fs::remove_file(&path)
+                .with_context(|| format!("{}: cannot remove", path.display()))?;
+        }
+        for entry in std::fs::read_dir(&staging)
+            .with_context(|| format!("{}: cannot list", staging.display()))?
+        {
+            let from = entry?.path();
+            let to = dir.join(from.file_name().unwrap_or_default());
+            std::fs::rename(&from, &to)
+                .with_context(|| format!("{}: cannot move to {}", from.display(), to.display()))?;
+        }
+        std::fs::remove_dir(&staging)
+            .with_context(|| format!("{}: cannot remove", staging.display()))?;
+        Ok(written)
+    }
+
+    /// Write the trials, replays and truth.json into `dir`.
+    fn write_into(&self, dir: &Path) -> Result<usize> {
         let Dataset {
             tissue_name,
             tissue,
@@ -988,15 +1036,6 @@ impl Dataset<'_> {
             form,
             rig,
         } = *self;
-        if dir.exists() && !dir.is_dir() {
-            bail!(
-                "{}: is a file, not a directory (--out names the directory the trials go to)",
-                dir.display()
-            );
-        }
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create", dir.display()))?;
-        clear_previous(dir)?;
         let config = needle_holder::config::DeviceConfig::default();
         let mut truths = Vec::new();
         for k in 0..trials {
@@ -1032,7 +1071,9 @@ impl Dataset<'_> {
                 &config.load_cell,
                 &config.encoder,
             );
-            std::fs::write(dir.join(format!("{name}.replay")), replay)?;
+            let path = dir.join(format!("{name}.replay"));
+            std::fs::write(&path, replay)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
             truths.push((name, truth));
         }
         let file = TruthFile {
@@ -1053,7 +1094,9 @@ impl Dataset<'_> {
                 .collect(),
         };
         let json = serde_json::to_string_pretty(&file)?;
-        std::fs::write(dir.join("truth.json"), json + "\n")?;
+        let path = dir.join("truth.json");
+        std::fs::write(&path, json + "\n")
+            .with_context(|| format!("{}: cannot write", path.display()))?;
         Ok(trials)
     }
 }
