@@ -68,9 +68,9 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
                 csv.display()
             );
         }
-        remove_stale_segments(csv, args.file.as_deref())?;
+        crate::input::check_outputs(&[("--csv", csv)], &[])?;
     }
-    let mut out = Output::new(args.csv.as_deref(), args.file.as_deref(), args.rate_hz)?;
+    let mut out = Output::new(args.csv.as_deref(), args.file.as_deref(), args.rate_hz);
     let mut decoder = StreamDecoder::new();
     let feed = |bytes: &[u8], decoder: &mut StreamDecoder, out: &mut Output| -> Result<()> {
         let mut items = Vec::new();
@@ -168,21 +168,27 @@ fn segment_path(base: &Path, segment: u32) -> PathBuf {
 
 /// An earlier decode's segment files beside `base` (`NAME-2.csv`, …) are
 /// removed, so that no stale segment of another capture stays beside the
-/// new CSV for `fit` to read as a trial; a file there that is not one (its
-/// header is not decode's), or is the capture, is refused.
-fn remove_stale_segments(base: &Path, capture: Option<&Path>) -> Result<()> {
+/// new CSV for `fit` to read as a trial; a file there that is not one (not
+/// a regular file, or its header is not decode's) is refused.
+fn remove_stale_segments(base: &Path) -> Result<()> {
+    let header = CSV_HEADER.join(",");
     for segment in 1.. {
         let path = segment_path(base, segment);
         if !path.exists() {
             return Ok(());
         }
         let shown = path.display();
-        let is_capture = capture.is_some_and(|c| crate::input::same_file(c, &path));
-        let header = std::fs::File::open(&path)
-            .ok()
-            .and_then(|f| std::io::BufRead::lines(std::io::BufReader::new(f)).next())
-            .and_then(|l| l.ok());
-        if is_capture || header.as_deref() != Some(CSV_HEADER.join(",").as_str()) {
+        // A few bytes only: the name may be a link to a device or a pipe.
+        let mut first = String::new();
+        if crate::input::regular_file(&path).is_ok() {
+            let file =
+                std::fs::File::open(&path).with_context(|| format!("{shown}: cannot read"))?;
+            let _ = std::io::Read::read_to_string(
+                &mut std::io::Read::take(file, header.len() as u64 + 2),
+                &mut first,
+            );
+        }
+        if first.lines().next() != Some(header.as_str()) {
             bail!("{shown}: is where segment {} of --csv {} would go, and is no earlier decode's segment: move it, or name another --csv", segment + 1, base.display());
         }
         std::fs::remove_file(&path).with_context(|| format!("{shown}: cannot remove"))?;
@@ -200,27 +206,111 @@ pub fn create_csv(path: &Path) -> Result<csv::Writer<std::fs::File>> {
     Ok(w)
 }
 
+/// Samples to `--csv`, a file per segment (`NAME.csv`, `NAME-2.csv`, …),
+/// each created at its first sample: a decode that finds no sample leaves
+/// an earlier decode's files as they were.
+struct SegmentedCsv {
+    base: PathBuf,
+    /// The capture being read, which no segment may write over.
+    capture: Option<PathBuf>,
+    /// The segment being written, and its writer.
+    open: Option<(u32, csv::Writer<std::fs::File>)>,
+    /// Samples written to each file created, in order.
+    written: Vec<(PathBuf, u64)>,
+}
+
+impl SegmentedCsv {
+    fn new(base: &Path, capture: Option<&Path>) -> Self {
+        Self {
+            base: base.to_path_buf(),
+            capture: capture.map(Path::to_path_buf),
+            open: None,
+            written: Vec::new(),
+        }
+    }
+
+    /// Sample `s` of segment `segment` (from 0), its time at `rate_hz`.
+    fn write(&mut self, segment: u32, s: &Sample, rate_hz: u16) -> Result<()> {
+        if self.open.as_ref().map(|(k, _)| *k) != Some(segment) {
+            self.start(segment)?;
+        }
+        let failed = self.failed();
+        if let (Some((_, w)), Some((_, n))) = (self.open.as_mut(), self.written.last_mut()) {
+            w.write_record(csv_row(s, 0, rate_hz))
+                .with_context(|| failed)?;
+            *n += 1;
+        }
+        Ok(())
+    }
+
+    fn start(&mut self, segment: u32) -> Result<()> {
+        self.close()?;
+        if self.written.is_empty() {
+            remove_stale_segments(&self.base)?;
+        }
+        let path = segment_path(&self.base, segment);
+        if let Some(capture) = self
+            .capture
+            .as_deref()
+            .filter(|c| crate::input::same_file(c, &path))
+        {
+            bail!("{}: segment {} of --csv {} would be written over the capture being decoded: name another --csv", capture.display(), segment + 1, self.base.display());
+        }
+        self.open = Some((segment, create_csv(&path)?));
+        self.written.push((path, 0));
+        Ok(())
+    }
+
+    fn close(&mut self) -> Result<()> {
+        let failed = self.failed();
+        match self.open.take() {
+            Some((_, mut w)) => w.flush().with_context(|| failed),
+            None => Ok(()),
+        }
+    }
+
+    /// What a failed write says: the file's name.
+    fn failed(&self) -> String {
+        let name = self.written.last().map_or(&self.base, |(p, _)| p);
+        format!("{}: cannot write", name.display())
+    }
+
+    /// Close the file in hand and say what went where.
+    fn finish(&mut self) -> Result<()> {
+        self.close()?;
+        let total: u64 = self.written.iter().map(|(_, n)| n).sum();
+        match self.written.as_slice() {
+            [] => eprintln!("no sample to write: {} not written", self.base.display()),
+            [(path, _)] => eprintln!("wrote {total} samples to {}", path.display()),
+            files => {
+                let each: Vec<String> = files
+                    .iter()
+                    .map(|(p, n)| format!("{n} to {}", p.display()))
+                    .collect();
+                eprintln!("wrote {total} samples: {}", each.join(", "));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Where decoded items go: text lines, and samples to CSV when asked.
 struct Output {
     text: std::io::BufWriter<std::io::Stdout>,
-    csv: Option<csv::Writer<std::fs::File>>,
-    csv_path: Option<PathBuf>,
-    /// The path `--csv` named; later segments go beside it.
-    csv_base: Option<PathBuf>,
-    /// The capture being read, which no segment may write over.
-    capture: Option<PathBuf>,
+    csv: Option<SegmentedCsv>,
     /// Segments begun after the first (the index went back).
     segment: u32,
-    /// Samples written to each CSV, in order.
-    written: Vec<(PathBuf, u64)>,
+    /// Samples of the segment in hand, written or held back.
+    in_segment: u64,
     /// The rate the stream gave (header, status), or `--rate-hz` once it
     /// had to stand in for one.
     rate_hz: Option<u16>,
     /// `--rate-hz`: for a stream that gives no rate. The stream's own
     /// wins (it once silently rebuilt a 500 Hz capture's times at 65 kHz).
     fallback_hz: Option<u16>,
-    /// Samples that arrived before the sample rate was known.
-    pending: Vec<Sample>,
+    /// Samples (and their segments) that arrived before the sample rate
+    /// was known.
+    pending: Vec<(u32, Sample)>,
 }
 
 /// Samples held back waiting for the stream to give its rate: a status
@@ -229,21 +319,16 @@ struct Output {
 const MOST_PENDING: usize = 1 << 16;
 
 impl Output {
-    fn new(csv_path: Option<&Path>, capture: Option<&Path>, rate_hz: Option<u16>) -> Result<Self> {
-        let csv = csv_path.map(create_csv).transpose()?;
-        let text = std::io::BufWriter::new(std::io::stdout());
-        Ok(Self {
-            text,
-            csv,
-            csv_path: csv_path.map(Path::to_path_buf),
-            csv_base: csv_path.map(Path::to_path_buf),
-            capture: capture.map(Path::to_path_buf),
+    fn new(csv_path: Option<&Path>, capture: Option<&Path>, rate_hz: Option<u16>) -> Self {
+        Self {
+            text: std::io::BufWriter::new(std::io::stdout()),
+            csv: csv_path.map(|p| SegmentedCsv::new(p, capture)),
             segment: 0,
-            written: csv_path.map(|p| (p.to_path_buf(), 0)).into_iter().collect(),
+            in_segment: 0,
             rate_hz: None,
             fallback_hz: rate_hz,
             pending: Vec::new(),
-        })
+        }
     }
 
     fn item(&mut self, item: Item) -> Result<()> {
@@ -284,44 +369,29 @@ impl Output {
     }
 
     /// The index went back: samples from here on go to a new CSV
-    /// (`NAME-2.csv`, `NAME-3.csv`, …), so no file's time goes back.
-    /// A segment with no sample yet goes on in its own file.
+    /// (`NAME-2.csv`, `NAME-3.csv`, …), so no file's time goes back. A
+    /// segment with no sample yet goes on.
     fn restart(&mut self, last: u32) -> Result<()> {
         const WHY: &str =
             "the index went back (a device restart, or a stretch of the stream twice)";
-        let Some(base) = self.csv_base.clone() else {
-            self.segment += 1;
-            writeln!(
-                self.text,
-                "restart after sample {last}: {WHY}; a new segment"
-            )?;
-            return Ok(());
-        };
-        if let Some((path, 0)) = self.written.last() {
-            writeln!(self.text, "restart after sample {last}: {WHY}; {} has no sample yet and takes the new segment", path.display())?;
+        if self.in_segment == 0 {
+            writeln!(self.text, "restart after sample {last}: {WHY}; the segment in hand has no sample yet and goes on")?;
             return Ok(());
         }
         self.segment += 1;
-        if let Some(mut w) = self.csv.take() {
-            w.flush().with_context(|| self.csv_context())?;
-        }
-        let path = segment_path(&base, self.segment);
-        if let Some(capture) = self
-            .capture
-            .as_deref()
-            .filter(|c| crate::input::same_file(c, &path))
-        {
-            bail!("{}: segment {} of --csv {} would be written over the capture being decoded: name another --csv", capture.display(), self.segment + 1, base.display());
-        }
+        self.in_segment = 0;
+        let goes = match &self.csv {
+            Some(csv) => format!(
+                "goes to {}",
+                segment_path(&csv.base, self.segment).display()
+            ),
+            None => "begins".into(),
+        };
         writeln!(
             self.text,
-            "restart after sample {last}: {WHY}; segment {} goes to {}",
-            self.segment + 1,
-            path.display()
+            "restart after sample {last}: {WHY}; segment {} {goes}",
+            self.segment + 1
         )?;
-        self.csv = Some(create_csv(&path)?);
-        self.written.push((path.clone(), 0));
-        self.csv_path = Some(path);
         Ok(())
     }
 
@@ -335,41 +405,31 @@ impl Output {
         self.use_rate(rate_hz)
     }
 
-    /// Times from here on at `rate_hz`, the samples held back first.
+    /// Times from here on at `rate_hz`, the samples held back first, each
+    /// to its own segment's file.
     fn use_rate(&mut self, rate_hz: u16) -> Result<()> {
         self.rate_hz = Some(rate_hz);
-        for s in std::mem::take(&mut self.pending) {
-            self.sample_to_csv(s)?;
+        if let Some(csv) = self.csv.as_mut() {
+            for (segment, s) in std::mem::take(&mut self.pending) {
+                csv.write(segment, &s, rate_hz)?;
+            }
         }
         Ok(())
     }
 
     fn sample_to_csv(&mut self, s: Sample) -> Result<()> {
-        let (Some(w), Some(rate)) = (self.csv.as_mut(), self.rate_hz) else {
-            self.pending.push(s);
-            if self.pending.len() >= MOST_PENDING {
-                match self.fallback_hz {
-                    Some(given) => self.use_rate(given)?,
-                    None => bail!("{MOST_PENDING} samples and no header or status frame gave the sample rate: pass --rate-hz"),
-                }
+        self.in_segment += 1;
+        if let (Some(csv), Some(rate)) = (self.csv.as_mut(), self.rate_hz) {
+            return csv.write(self.segment, &s, rate);
+        }
+        self.pending.push((self.segment, s));
+        if self.pending.len() >= MOST_PENDING {
+            match self.fallback_hz {
+                Some(given) => self.use_rate(given)?,
+                None => bail!("{MOST_PENDING} samples and no header or status frame gave the sample rate: pass --rate-hz"),
             }
-            return Ok(());
-        };
-        w.write_record(csv_row(&s, 0, rate))
-            .with_context(|| self.csv_context())?;
-        if let Some((_, n)) = self.written.last_mut() {
-            *n += 1;
         }
         Ok(())
-    }
-
-    /// What a failed CSV write says: the file's name.
-    fn csv_context(&self) -> String {
-        let name = self
-            .csv_path
-            .as_deref()
-            .map_or_else(|| "the CSV".into(), |p| p.display().to_string());
-        format!("{name}: cannot write")
     }
 
     fn finish(mut self, stats: &StreamStats) -> Result<()> {
@@ -383,19 +443,8 @@ impl Output {
                 self.pending.len()
             );
         }
-        if let Some(mut w) = self.csv.take() {
-            w.flush().with_context(|| self.csv_context())?;
-            let total: u64 = self.written.iter().map(|(_, n)| n).sum();
-            match self.written.as_slice() {
-                [(path, _)] => eprintln!("wrote {total} samples to {}", path.display()),
-                files => {
-                    let each: Vec<String> = files
-                        .iter()
-                        .map(|(p, n)| format!("{n} to {}", p.display()))
-                        .collect();
-                    eprintln!("wrote {total} samples: {}", each.join(", "));
-                }
-            }
+        if let Some(csv) = self.csv.as_mut() {
+            csv.finish()?;
         }
         eprintln!("{}", summary_line(stats));
         Ok(())
