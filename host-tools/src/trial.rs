@@ -87,7 +87,6 @@ pub const MOST_LINE_BYTES: usize = 64 << 10;
 /// the file and line, so that the CSV reader's buffer stays bounded.
 struct LineLimit<R> {
     inner: R,
-    path: std::path::PathBuf,
     line: u64,
     in_line: usize,
 }
@@ -96,23 +95,37 @@ impl<R: std::io::Read> std::io::Read for LineLimit<R> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         let n = self.inner.read(buf)?;
         for &b in &buf[..n] {
-            if b == b'\n' {
-                self.line += 1;
+            // A bare `\r` ends a line too (old exporters), for the length.
+            if b == b'\n' || b == b'\r' {
+                self.line += u64::from(b == b'\n');
                 self.in_line = 0;
             } else {
                 self.in_line += 1;
                 if self.in_line > MOST_LINE_BYTES {
-                    return Err(std::io::Error::other(format!(
-                        "{}:{}: a line longer than {MOST_LINE_BYTES} bytes: no trial CSV has one",
-                        self.path.display(),
-                        self.line
-                    )));
+                    return Err(std::io::Error::other(LineTooLong { line: self.line }));
                 }
             }
         }
         Ok(n)
     }
 }
+
+/// The error [`LineLimit`] stops at.
+#[derive(Debug)]
+struct LineTooLong {
+    line: u64,
+}
+
+impl std::fmt::Display for LineTooLong {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "a line longer than {MOST_LINE_BYTES} bytes: no trial CSV has one"
+        )
+    }
+}
+
+impl std::error::Error for LineTooLong {}
 
 /// A CSV reader on `path`, which must be a regular file: a `.csv` link to
 /// `/dev/zero` made the reader allocate 4 GiB for a header that never
@@ -123,7 +136,6 @@ fn open_csv(path: &Path) -> Result<csv::Reader<LineLimit<std::fs::File>>> {
     let file = std::fs::File::open(path).with_context(|| format!("{shown}: cannot open"))?;
     let limited = LineLimit {
         inner: file,
-        path: path.to_path_buf(),
         line: 1,
         in_line: 0,
     };
@@ -132,13 +144,19 @@ fn open_csv(path: &Path) -> Result<csv::Reader<LineLimit<std::fs::File>>> {
         .from_reader(limited))
 }
 
-/// A CSV reader's error as said to a user: an I/O error (a line too long)
-/// already names file and line.
+/// A CSV reader's error as said to a user, with file and line: a line
+/// too long knows its own line.
 fn csv_error(path: &Path, line: u64, e: csv::Error) -> anyhow::Error {
     let line = e.position().map_or(line, |p| p.line());
+    let shown = path.display();
     match e.kind() {
-        csv::ErrorKind::Io(io) => anyhow::anyhow!("{io}"),
-        _ => anyhow::anyhow!("{}:{line}: malformed CSV: {e}", path.display()),
+        csv::ErrorKind::Io(io) => {
+            match io.get_ref().and_then(|i| i.downcast_ref::<LineTooLong>()) {
+                Some(long) => anyhow::anyhow!("{shown}:{}: {long}", long.line),
+                None => anyhow::anyhow!("{shown}:{line}: cannot read: {io}"),
+            }
+        }
+        _ => anyhow::anyhow!("{shown}:{line}: malformed CSV: {e}"),
     }
 }
 
@@ -158,7 +176,7 @@ fn each_row(
     path: &Path,
     columns: &[&str],
     mut progress: Option<&mut Progress>,
-    mut row: impl FnMut([f64; 4]),
+    mut row: impl FnMut([f64; 4]) -> Result<()>,
 ) -> Result<usize> {
     let shown = path.display();
     let mut reader = open_csv(path)?;
@@ -200,7 +218,7 @@ fn each_row(
             bail!("{shown}:{line}: time does not increase ({t} s after {last} s)");
         }
         last_t_s = Some(t);
-        row(values);
+        row(values)?;
         rows += 1;
         if rows.is_multiple_of(1 << 16) {
             if let Some(p) = progress.as_deref_mut() {
@@ -219,7 +237,10 @@ const TRIAL: [&str; 3] = ["t_s", "x_m", "f_n"];
 /// Read a whole trial, checking columns, numbers and time order.
 pub fn read(path: &Path) -> Result<Trial> {
     let mut trial = Trial::default();
-    each_row(path, &TRIAL, None, |[t, x, f, _]| trial.push(t, x, f))?;
+    each_row(path, &TRIAL, None, |[t, x, f, _]| {
+        trial.push(t, x, f);
+        Ok(())
+    })?;
     Ok(trial)
 }
 
@@ -276,33 +297,34 @@ impl Analysed {
 /// kept when `i % step == 0`; when the kept rows reach the bound, the
 /// step doubles and every other kept row goes, which keeps exactly the
 /// rows of the new step. One pass, linear time.
-struct Thinner {
+struct Thinner<'a> {
+    /// The file, for the message when its rate is beyond any rig's.
+    path: &'a Path,
     kept: Vec<[f64; 4]>,
     rows: usize,
     /// 0 until the probe has set it.
     step: usize,
-    /// The probe's median time step, s, when faster than
-    /// [`FASTEST_TRIAL_HZ`].
-    too_fast_step_s: Option<f64>,
 }
 
-impl Thinner {
-    fn new() -> Self {
+impl<'a> Thinner<'a> {
+    fn new(path: &'a Path) -> Self {
         Self {
+            path,
             kept: Vec::with_capacity(PROBE_ROWS),
             rows: 0,
             step: 0,
-            too_fast_step_s: None,
         }
     }
 
-    fn push(&mut self, row: [f64; 4]) {
+    /// Take one row; an error as soon as the probe finds the rate beyond
+    /// any rig's, before the rest of the file is read.
+    fn push(&mut self, row: [f64; 4]) -> Result<()> {
         let i = self.rows;
         self.rows += 1;
         if self.step == 0 {
             self.kept.push(row);
             if self.kept.len() == PROBE_ROWS {
-                self.set_step();
+                self.set_step()?;
             }
         } else if i.is_multiple_of(self.step) {
             self.kept.push(row);
@@ -311,15 +333,23 @@ impl Thinner {
                 self.keep_every(2);
             }
         }
+        Ok(())
     }
 
-    fn set_step(&mut self) {
+    fn set_step(&mut self) -> Result<()> {
         let t_s: Vec<f64> = self.kept.iter().map(|r| r[0]).collect();
         let step_s = median_step_s(&t_s);
         // A step of 1e-310 s (an infinite rate) is below the bound too.
-        self.too_fast_step_s = step_s.filter(|&dt| dt < 1.0 / FASTEST_TRIAL_HZ);
+        if let Some(dt) = step_s.filter(|&dt| dt < 1.0 / FASTEST_TRIAL_HZ) {
+            bail!(
+                "{}:2-{}: the median time step is {dt:e} s, faster than any rig ({FASTEST_TRIAL_HZ:e} Hz at most): is t_s in seconds?",
+                self.path.display(),
+                self.kept.len() + 1,
+            );
+        }
         self.step = step_to(step_s.map_or(0.0, |dt| 1.0 / dt), ANALYSIS_MOST_HZ);
         self.keep_every(self.step);
+        Ok(())
     }
 
     fn keep_every(&mut self, n: usize) {
@@ -330,18 +360,10 @@ impl Thinner {
         });
     }
 
-    /// The kept rows, the rows read and the step; an error naming `path`
-    /// when the rate is beyond any rig's.
-    fn finish(mut self, path: &Path) -> Result<(Vec<[f64; 4]>, usize, usize)> {
+    /// The kept rows, the rows read and the step.
+    fn finish(mut self) -> Result<(Vec<[f64; 4]>, usize, usize)> {
         if self.step == 0 {
-            self.set_step();
-        }
-        if let Some(step_s) = self.too_fast_step_s {
-            bail!(
-                "{}:2-{}: the median time step is {step_s:e} s, faster than any rig ({FASTEST_TRIAL_HZ:e} Hz at most): is t_s in seconds?",
-                path.display(),
-                self.rows.min(PROBE_ROWS) + 1,
-            );
+            self.set_step()?;
         }
         Ok((self.kept, self.rows, self.step))
     }
@@ -350,9 +372,9 @@ impl Thinner {
 /// Read a trial for analysis, in one pass and bounded memory (see
 /// [`ANALYSIS_MOST_HZ`], [`ANALYSIS_MOST_SAMPLES`]).
 pub fn read_for_analysis(path: &Path, progress: Option<&mut Progress>) -> Result<Analysed> {
-    let mut thinner = Thinner::new();
+    let mut thinner = Thinner::new(path);
     each_row(path, &TRIAL, progress, |row| thinner.push(row))?;
-    let (kept, rows, step) = thinner.finish(path)?;
+    let (kept, rows, step) = thinner.finish()?;
     let mut trial = Trial::default();
     for [t, x, f, _] in kept {
         trial.push(t, x, f);
@@ -364,29 +386,32 @@ pub fn read_for_analysis(path: &Path, progress: Option<&mut Progress>) -> Result
 /// decode --csv`), with the checks of [`read`], at the rows
 /// [`read_for_analysis`] keeps of the same file.
 pub fn read_column_for_analysis(path: &Path, name: &str) -> Result<Vec<f64>> {
-    let mut thinner = Thinner::new();
+    let mut thinner = Thinner::new(path);
     each_row(path, &["t_s", name], None, |row| thinner.push(row))?;
-    Ok(thinner.finish(path)?.0.iter().map(|r| r[1]).collect())
+    Ok(thinner.finish()?.0.iter().map(|r| r[1]).collect())
 }
 
-/// Write a trial CSV (`t_s,x_m,f_n`; µs, nm and µN resolution).
+/// Write a trial CSV (`t_s,x_m,f_n`; µs, nm and µN resolution); a trial
+/// with a value that is not finite is refused before the file is touched.
 pub fn write(path: &Path, trial: &Trial) -> Result<()> {
     use std::io::Write;
+    let rows = || (0..trial.len()).map(|i| [trial.t_s[i], trial.x_m[i], trial.f_n[i]]);
+    if let Some((i, row)) = rows()
+        .enumerate()
+        .find(|(_, r)| !r.iter().all(|v| v.is_finite()))
+    {
+        bail!(
+            "{}:{}: a value is not finite ({row:?}): not written",
+            path.display(),
+            i + 2
+        );
+    }
     let file = std::fs::File::create(path)
         .with_context(|| format!("{}: cannot create", path.display()))?;
     let mut out = std::io::BufWriter::new(file);
     let failed = || format!("{}: cannot write", path.display());
     writeln!(out, "t_s,x_m,f_n").with_context(failed)?;
-    for i in 0..trial.len() {
-        let row = [trial.t_s[i], trial.x_m[i], trial.f_n[i]];
-        if !row.iter().all(|v| v.is_finite()) {
-            bail!(
-                "{}:{}: a value is not finite ({row:?}): not written",
-                path.display(),
-                i + 2
-            );
-        }
-        let [t, x, f] = row;
+    for [t, x, f] in rows() {
         writeln!(out, "{t:.6},{x:.9},{f:.6}").with_context(failed)?;
     }
     out.flush().with_context(failed)
@@ -429,14 +454,25 @@ impl Progress {
 /// A dataset's trials that could be read, with their files.
 pub type Dataset = Vec<(PathBuf, Trial)>;
 
+/// A trial's name in its dataset (its file name), as the commands' JSON
+/// names it.
+pub fn name_of(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+/// Whether `path` is named as a trial CSV (`*.csv`, in any case).
+pub fn is_trial_csv(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+}
+
 /// An entry of a command's JSON `skipped` list: the file's name in the
 /// dataset and why it was left out.
 pub fn skipped(file: &Path, reason: &str) -> serde_json::Value {
-    let name = file.file_name().map_or_else(
-        || file.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    );
-    serde_json::json!({ "file": name, "reason": reason })
+    serde_json::json!({ "file": name_of(file), "reason": reason })
 }
 
 /// A dataset's trial that could not be read, and why (file and line).
@@ -502,7 +538,7 @@ pub fn dataset_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot read directory", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")))
+        .filter(|p| is_trial_csv(p))
         .collect();
     files.sort();
     if files.is_empty() {
