@@ -42,7 +42,10 @@ cargo fw-f411 --target-dir target/f411
 
 step "tests (host, QEMU, twin comparison)"
 log=$(mktemp)
-cargo test --workspace --no-fail-fast 2>&1 | tee "$log"
+status=0
+cargo test --workspace --no-fail-fast 2>&1 | tee "$log" || status=$?
 # One closing line over all suites (cargo ends with the doc-test suite, which
-# may hold no test, and that last line is not the whole story).
+# may hold no test, and that last line is not the whole story), printed
+# whether or not a suite failed.
 awk '/^test result:/ { p += $4; f += $6 } END { printf "\ntotal: %d passed, %d failed\n", p, f }' "$log"
+exit "$status"

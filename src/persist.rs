@@ -74,7 +74,12 @@ impl Settings {
     /// version) or a debug probe, and the model's arithmetic relies on
     /// the signs and ranges [`TissueModel::check`] guarantees.
     pub fn is_valid(&self) -> bool {
-        self.model.check().is_ok()
+        let library = match self.tissue {
+            TissueSource::Library(i) => usize::from(i) < crate::config::LIBRARY_MODELS.len(),
+            TissueSource::Uploaded => true,
+        };
+        library
+            && self.model.check().is_ok()
             && self.assist_modes.is_known()
             && crate::assist::target_depth_is_valid(self.target_depth)
             && self.load_cell.gain_q16 != 0

@@ -310,10 +310,7 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
     for (file, trial) in dataset {
         let detection = detect_trial(&trial, config);
         let events = &detection.events;
-        let name = file
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let name = crate::trial::name_of(&file);
         if let Some(t) = truth
             .as_ref()
             .and_then(|t| t.trials.iter().find(|t| t.file == name))
@@ -360,7 +357,7 @@ fn warn_if_truth_disagrees(
         .iter()
         .map(|(f, _)| f)
         .chain(unreadable.iter().map(|u| &u.file))
-        .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .map(|f| crate::trial::name_of(f))
         .collect();
     let untold: Vec<&String> = present
         .iter()

@@ -94,15 +94,17 @@ pub fn command_of(action: &Action) -> Result<Command> {
         Action::Tissue { tissue, name } => tissue_command(tissue, name.as_deref())?,
         Action::Tissues => bail!("`tissues` sends nothing"),
         Action::Assist { modes, depth_mm } => {
-            if !(depth_mm.is_finite() && (0.1..=100.0).contains(depth_mm)) {
+            let target_depth = Nanometres::from_m(depth_mm / 1e3);
+            if !(depth_mm.is_finite() && needle_holder::assist::target_depth_is_valid(target_depth))
+            {
                 bail!("--depth-mm {depth_mm:?}: must be between 0.1 and 100 mm");
             }
-            if modes.trim().is_empty() {
+            if modes.split(',').all(|m| m.trim().is_empty()) {
                 bail!("assist: name the modes, or `none` to turn them all off");
             }
             Command::SetAssist {
                 modes: crate::detect::parse_assist(modes)?,
-                target_depth: Nanometres::from_m(depth_mm / 1e3),
+                target_depth,
             }
         }
         Action::Rearm => Command::Rearm,

@@ -107,7 +107,7 @@ fn check_dir(dir: &Path) -> Result<()> {
     let existing = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot read", dir.display()))?
         .filter_map(|e| e.ok())
-        .any(|e| e.path().extension().is_some_and(|x| x == "csv"));
+        .any(|e| crate::trial::is_trial_csv(&e.path()));
     if existing {
         bail!(
             "{}: already holds CSV files; record into an empty directory",

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Result};
-use needle_holder::model::params::{self, TissueParams};
+use needle_holder::model::params::{self, TissueParams, NUMBER_KEYS};
 
 /// One library entry.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,14 +56,15 @@ pub fn parse(text: &str, path: &Path) -> Result<Vec<Tissue>> {
             ),
             None => None,
         };
-        // Each value's type first, so that an error names its key and
-        // line (the deserialiser names neither for a string in place of
-        // a number).
+        // Each known value's type first, so that an error names its key
+        // and line (the deserialiser names neither for a string in place
+        // of a number); an unknown key is the deserialiser's to name.
         for (key, value) in &entry {
             let number = matches!(value, toml::Value::Float(_) | toml::Value::Integer(_));
             let (ok, wanted) = match key.as_str() {
                 "stiffness_law" => (value.is_str(), "a string"),
-                _ => (number, "a number"),
+                k if NUMBER_KEYS.contains(&k) => (number, "a number"),
+                _ => continue,
             };
             if !ok {
                 bail!(

@@ -335,6 +335,9 @@ fn a_csv_with_a_line_without_end_is_left_out_in_bounded_memory_and_quoted_short(
     std::fs::write(dir.path().join("long.csv"), long).unwrap();
     let wide = format!("t_s,x_m,f_n\n0,0,0\n1,0,{}\n", "x".repeat(60_000));
     std::fs::write(dir.path().join("wide.csv"), wide).unwrap();
+    // Lines ended by a bare CR (old exporters) are lines, not one long one.
+    let trial = std::fs::read_to_string(dir.path().join("trial_000.csv")).unwrap();
+    std::fs::write(dir.path().join("cr.csv"), trial.replace('\n', "\r")).unwrap();
     let out = needle(&["detect", d]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
@@ -346,6 +349,7 @@ fn a_csv_with_a_line_without_end_is_left_out_in_bounded_memory_and_quoted_short(
         err.contains("wide.csv:3: `f_n` is not a number: \"xxxxxxxx"),
         "{err}"
     );
+    assert!(!err.contains("cr.csv:"), "{err}");
     assert!(err.len() < 4000, "{} bytes on stderr", err.len());
     assert!(
         out.stdout.len() < 100_000,
@@ -567,7 +571,13 @@ fn decode_segments_never_write_over_the_capture_or_stay_stale() {
     assert!(out.status.success(), "{err}");
     assert!(!at("o-2.csv").exists() && !at("o-3.csv").exists(), "{err}");
     assert!(err.contains("removed") && err.contains("o-2.csv"), "{err}");
-    // Bytes that hold no frame are no capture: an error, not an empty CSV.
+    // Bytes that hold no frame are no capture: an error, not an empty CSV,
+    // and the earlier decode's CSV is left as it was.
+    let good = std::fs::read(at("o.csv")).unwrap();
+    std::fs::write(at("junk.bin"), vec![0x55u8; 3000]).unwrap();
+    let err = refused(&["decode", &s(&at("junk.bin")), "--csv", &s(&at("o.csv"))]);
+    assert!(err.contains("no frame of the device's"), "{err}");
+    assert_eq!(std::fs::read(at("o.csv")).unwrap(), good);
     std::fs::write(
         at("noise.bin"),
         (0..5000u32)
@@ -910,9 +920,20 @@ fn a_stopped_simulation_leaves_the_earlier_one_whole_and_the_next_run_goes_on() 
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(400));
+    // Stopped once it has begun writing (10 s at most on a loaded machine).
+    let staging = dir.path().join(".simulating");
+    for _ in 0..1000 {
+        if staging.join("trial_000.csv").exists() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
     child.kill().unwrap();
     child.wait().unwrap();
+    assert!(
+        staging.join("trial_000.csv").exists(),
+        "stopped before it wrote anything"
+    );
     assert_eq!(std::fs::read(dir.path().join("truth.json")).unwrap(), truth);
     assert!(!dir.path().join("trial_002.csv").exists());
     let out = needle(&["simulate", "--out", d, "--trials", "1", "--seed", "3"]);

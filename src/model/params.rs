@@ -59,6 +59,28 @@ pub struct TissueParams {
     pub contact_force_n: f64,
 }
 
+/// The keys of [`TissueParams`] that hold numbers, as in the TOML file
+/// (`stiffness_law` holds a name).
+pub const NUMBER_KEYS: [&str; 17] = [
+    "a1_n_per_m",
+    "a2_n_per_m2",
+    "rational_a_per_n",
+    "rational_b_m_per_n",
+    "puncture_force_n",
+    "puncture_depth_m",
+    "puncture_drop_to_n",
+    "relaxation",
+    "cutting_force_n",
+    "cp_n_per_m",
+    "cn_n_per_m",
+    "bp_ns_per_m2",
+    "bn_ns_per_m2",
+    "dp_n_per_m",
+    "dn_n_per_m",
+    "half_band_mps",
+    "contact_force_n",
+];
+
 /// A parameter that cannot be used, and why.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ParamError {

@@ -437,10 +437,7 @@ pub fn load_reporting(
         .into_iter()
         .zip(velocities)
         .map(|((file, trial, fit), v)| {
-            let name = file
-                .file_name()
-                .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-            prepare(name, trial, fit, &params, v)
+            prepare(crate::trial::name_of(&file), trial, fit, &params, v)
         })
         .collect();
     Ok((params, data, skipped))
@@ -1070,10 +1067,15 @@ fn with_device_model(
     Ok(kept)
 }
 
+/// The figure a `--report` page shows, written beside it.
+fn report_figure(report: &Path) -> PathBuf {
+    report.with_extension("svg")
+}
+
 /// The outputs asked for, checked before any work: `--report` also writes
-/// its figure beside it (`REPORT.svg`).
+/// its figure beside it ([`report_figure`]).
 fn check_outputs(args: &DiagnoseArgs) -> Result<()> {
-    let figure = args.report.as_ref().map(|r| r.with_extension("svg"));
+    let figure = args.report.as_deref().map(report_figure);
     let outputs = [
         ("--json", args.json.as_deref()),
         ("--residuals", args.residuals.as_deref()),
@@ -1121,7 +1123,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     }
     if let Some(path) = &args.report {
         let (augmented, label) = withheld_overlay(&data, &out);
-        let svg = path.with_extension("svg");
+        let svg = report_figure(path);
         figure::draw(&svg, &data[0], &augmented, &label)?;
         report::write(path, &svg, &out)?;
     }

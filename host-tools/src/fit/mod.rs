@@ -247,7 +247,7 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
         "layers": layers,
         "noise_n": estimate(&col(|t| t.noise_n)),
         "per_trial": fits.iter().map(|(file, t)| json!({
-            "file": name_of(file),
+            "file": crate::trial::name_of(file),
             "contact_x_m": t.contact_x_m,
             "puncture_x_m": t.puncture_x_m,
             "puncture_force_n": t.puncture_force_n,
@@ -327,13 +327,6 @@ fn rational_mean_holds(all: &[&TrialFit]) -> bool {
     let (depth_m, force_n) = (mean(|t| t.puncture_depth_m), mean(|t| t.puncture_force_n));
     let den = a * depth_m + b;
     den > 0.0 && ((depth_m / den) - force_n).abs() <= 0.1 * force_n.abs()
-}
-
-fn name_of(path: &Path) -> String {
-    path.file_name().map_or_else(
-        || path.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    )
 }
 
 /// The tissue in `fit --toml`'s text, as `--params` would load it; an
@@ -423,16 +416,18 @@ pub fn run(args: &FitArgs) -> Result<()> {
         .collect();
     crate::input::check_outputs(&outputs, &crate::input::dataset_inputs(&args.dir, None))?;
     let fit = fit_dataset(&args.dir)?;
+    let toml = to_toml(&fit);
+    if let Some(path) = &args.toml {
+        // Never a file its own loader refuses; said before any output.
+        fitted_tissue(&toml).with_context(|| format!("{}: not written", path.display()))?;
+    }
     let text = serde_json::to_string_pretty(&fit)?;
     match &args.json {
         Some(path) => std::fs::write(path, text + "\n")
             .with_context(|| format!("{}: cannot write", path.display()))?,
         None => crate::stdout::write(&(text + "\n"))?,
     }
-    let toml = to_toml(&fit);
     if let Some(path) = &args.toml {
-        // Never a file its own loader refuses.
-        fitted_tissue(&toml).with_context(|| format!("{}: not written", path.display()))?;
         std::fs::write(path, &toml).with_context(|| format!("{}: cannot write", path.display()))?;
     }
     if let Some(path) = &args.plot {

@@ -218,19 +218,31 @@ pub const FASTEST_DRIVE_MPS: f64 = 1.0;
 /// samples a few µs apart on a jittered clock).
 pub const MOST_GLITCH_M: f64 = 0.001;
 
-/// Refuse a trial whose needle moves faster than any drive, saying where.
+/// Samples within which a reading that leapt comes back, for a spike (one
+/// bad encoder read) rather than a position no drive reached.
+const SPIKE_SAMPLES: usize = 5;
+
+/// Refuse a trial whose needle moves faster than any drive and stays
+/// there, saying where; a spike that comes back is the encoder's, and the
+/// device's detectors already flag it (`encoder_jump`).
 fn check_drive_speed(trial: &Trial) -> Result<()> {
     let (t, x) = (&trial.t_s, &trial.x_m);
-    for i in 1..trial.len() {
+    let mut i = 1;
+    while i < trial.len() {
         let dx = x[i] - x[i - 1];
         let dt = t[i] - t[i - 1];
         if dx.abs() > MOST_GLITCH_M && dx.abs() > FASTEST_DRIVE_MPS * dt {
-            bail!(
-                "x_m moves {dx:.4} m in {dt:.6} s at t = {:.6} s ({:.3} m/s, faster than any needle drive's {FASTEST_DRIVE_MPS} m/s): is x_m in metres, or the encoder glitching?",
-                t[i],
-                dx / dt
-            );
+            let near = |j: &usize| (x[*j] - x[i - 1]).abs() <= MOST_GLITCH_M;
+            match (i + 1..(i + 1 + SPIKE_SAMPLES).min(x.len())).find(near) {
+                Some(back) => i = back,
+                None => bail!(
+                    "x_m moves {dx:.4} m in {dt:.6} s at t = {:.6} s ({:.3} m/s, faster than any needle drive's {FASTEST_DRIVE_MPS} m/s): is x_m in metres, or the encoder glitching?",
+                    t[i],
+                    dx / dt
+                ),
+            }
         }
+        i += 1;
     }
     Ok(())
 }
@@ -841,5 +853,36 @@ fn stronger(kept: Option<Held>, new: Held, sign: f64) -> Option<Held> {
     match kept {
         Some(k) if (k.1, sign * k.0) >= (new.1, sign * new.0) => Some(k),
         _ => Some(new),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use needle_holder::model::params::LIVER1;
+
+    fn liver() -> Trial {
+        crate::sim::insertion(&LIVER1, &crate::sim::Plan::PAPER).0
+    }
+
+    /// A reading that leaps and comes back is the encoder's; positions a
+    /// thousand times too large, or a leap that stays, are no drive's.
+    #[test]
+    fn only_a_needle_no_drive_could_move_is_refused() {
+        let mut spike = liver();
+        spike.x_m[3000] += 5.0;
+        check_drive_speed(&spike).unwrap();
+        assert!(fit_trial(&spike).is_ok());
+        let mut mm = liver();
+        mm.x_m.iter_mut().for_each(|x| *x *= 1000.0);
+        let err = check_drive_speed(&mm).unwrap_err().to_string();
+        assert!(
+            err.contains("faster than any needle drive's 1 m/s"),
+            "{err}"
+        );
+        let mut leap = liver();
+        leap.x_m[3000..].iter_mut().for_each(|x| *x += 5.0);
+        let err = check_drive_speed(&leap).unwrap_err().to_string();
+        assert!(err.contains("x_m moves 5.0000 m"), "{err}");
     }
 }

@@ -865,7 +865,7 @@ fn previous_simulation(dir: &Path) -> Result<Vec<PathBuf>> {
     let simulated = entries.iter().any(|p| name(p) == "truth.json");
     let foreign_csv = entries
         .iter()
-        .find(|p| p.extension().is_some_and(|e| e == "csv") && !(simulated && ours(p)));
+        .find(|p| crate::trial::is_trial_csv(p) && !(simulated && ours(p)));
     if let Some(csv) = foreign_csv {
         bail!(
             "{}: holds trials that are not a simulation's ({}); simulate into another directory",
@@ -897,10 +897,11 @@ pub fn check_rate_hz(flag: &str, rate_hz: f64) -> Result<()> {
 /// load-cell full scale (±10 N); 1e308 N wrote `inf` into trial CSVs.
 pub const MOST_NOISE_N: f64 = 10.0;
 
-/// A force noise a simulation can be made with: within 0..=10 N.
+/// A force noise (or tare spread) a simulation can be made with: within
+/// 0..=10 N.
 pub fn check_noise_n(flag: &str, noise_n: f64) -> Result<()> {
     if !(0.0..=MOST_NOISE_N).contains(&noise_n) {
-        bail!("{flag} {noise_n:?}: the noise must be a number of newtons within 0..={MOST_NOISE_N} (the load cell's full scale)");
+        bail!("{flag} {noise_n:?}: must be a number of newtons within 0..={MOST_NOISE_N} (the load cell's full scale)");
     }
     Ok(())
 }
@@ -1010,10 +1011,13 @@ impl Dataset<'_> {
             std::fs::remove_file(&path)
                 .with_context(|| format!("{}: cannot remove", path.display()))?;
         }
-        for entry in std::fs::read_dir(&staging)
+        // truth.json last: it is what makes the directory a simulation.
+        let mut staged: Vec<PathBuf> = std::fs::read_dir(&staging)
             .with_context(|| format!("{}: cannot list", staging.display()))?
-        {
-            let from = entry?.path();
+            .map(|e| e.map(|e| e.path()))
+            .collect::<std::io::Result<_>>()?;
+        staged.sort_by_key(|p| p.ends_with("truth.json"));
+        for from in staged {
             let to = dir.join(from.file_name().unwrap_or_default());
             std::fs::rename(&from, &to)
                 .with_context(|| format!("{}: cannot move to {}", from.display(), to.display()))?;
