@@ -633,7 +633,10 @@ mod tests {
         let late: String = std::iter::once("t_s,x_m,f_n\n".to_owned())
             .chain((0..3000).map(|i| format!("{:.6},0,{i}\n", 1000.0 + i as f64 / 2000.0)))
             .collect();
-        assert_eq!(read_for_analysis(&write(&dir, &late), None).unwrap().step, 1);
+        assert_eq!(
+            read_for_analysis(&write(&dir, &late), None).unwrap().step,
+            1
+        );
         for (rate_hz, step) in [(10_000.0, 5), (2000.0, 1), (100.0, 1)] {
             let text: String = std::iter::once("t_s,x_m,f_n\n".to_owned())
                 .chain((0..3000).map(|i| format!("{},0,{i}\n", i as f64 / rate_hz)))

@@ -978,3 +978,56 @@ fn a_simulated_load_cell_reads_no_more_than_its_full_scale() {
         .fold(0.0, f64::max);
     assert!(most <= 10.0 && most > 9.9, "{most} N");
 }
+
+#[test]
+fn simulate_deletes_and_writes_over_nothing_a_simulation_did_not_write() {
+    // Any truth.json made a directory a simulation's, so a hand-written
+    // one beside real trials had them deleted; a user's file in
+    // `.simulating`, or a replay named like ours, went without a word.
+    let real = simulated(3, 1);
+    let d = real.path().to_str().unwrap();
+    std::fs::write(
+        real.path().join("truth.json"),
+        r#"{"trials":[{"file":"trial_000.csv","events":[]}]}"#,
+    )
+    .unwrap();
+    let before = std::fs::read(real.path().join("trial_002.csv")).unwrap();
+    let err = refused(&["simulate", "--out", d, "--trials", "1"]);
+    assert!(err.contains("trials that are not a simulation's"), "{err}");
+    assert_eq!(
+        std::fs::read(real.path().join("trial_002.csv")).unwrap(),
+        before
+    );
+    let notes = tempfile::tempdir().unwrap();
+    std::fs::create_dir(notes.path().join(".simulating")).unwrap();
+    std::fs::write(notes.path().join(".simulating/mine.txt"), "precious").unwrap();
+    let err = refused(&[
+        "simulate",
+        "--out",
+        notes.path().to_str().unwrap(),
+        "--trials",
+        "1",
+    ]);
+    assert!(
+        err.contains("mine.txt, which no simulation writes"),
+        "{err}"
+    );
+    assert!(notes.path().join(".simulating/mine.txt").exists());
+    let replay = tempfile::tempdir().unwrap();
+    std::fs::write(replay.path().join("trial_000.replay"), "mine").unwrap();
+    let err = refused(&[
+        "simulate",
+        "--out",
+        replay.path().to_str().unwrap(),
+        "--trials",
+        "1",
+    ]);
+    assert!(
+        err.contains("would write over that no simulation wrote"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(replay.path().join("trial_000.replay")).unwrap(),
+        "mine"
+    );
+}

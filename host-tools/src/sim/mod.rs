@@ -841,42 +841,120 @@ struct TruthTrial<'a> {
     truth: &'a TrialTruth,
 }
 
-/// The files of an earlier simulation in `dir`, which the new one replaces
-/// (its `truth.json`, `trial_*.csv`, `trial_*.replay`), so no stale trial
-/// from another seed or count stays beside the new ones (a second run with
-/// fewer trials left the rest, and `fit` mixed two seeds). Trials that are
-/// not a simulation's (CSVs with no `truth.json`) are never deleted: the
-/// directory is refused.
-fn previous_simulation(dir: &Path) -> Result<Vec<PathBuf>> {
-    let entries: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("{}: cannot list", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .collect();
-    let name = |p: &Path| {
-        p.file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    };
-    let ours = |p: &Path| {
-        let n = name(p);
-        n == "truth.json"
-            || (n.starts_with("trial_") && (n.ends_with(".csv") || n.ends_with(".replay")))
-    };
-    let simulated = entries.iter().any(|p| name(p) == "truth.json");
-    let foreign_csv = entries
+/// A `truth.json` as far as it says which files a simulation wrote: it is
+/// one of ours only if it reads as one (a hand-written truth for scoring
+/// real trials is not).
+#[derive(serde::Deserialize)]
+struct Written {
+    #[allow(dead_code)] // present in ours, not in a hand-written truth
+    seed: u64,
+    #[allow(dead_code)]
+    sensor: serde_json::Value,
+    trials: Vec<WrittenTrial>,
+}
+
+#[derive(serde::Deserialize)]
+struct WrittenTrial {
+    file: String,
+    replay: String,
+}
+
+/// Whether `name` is one a simulation writes (`trial_NNN.csv`,
+/// `trial_NNN.replay`, `truth.json`).
+fn simulation_name(name: &str) -> bool {
+    let stem = name
+        .strip_suffix(".csv")
+        .or_else(|| name.strip_suffix(".replay"))
+        .and_then(|n| n.strip_prefix("trial_"));
+    name == "truth.json"
+        || stem.is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// The files of an earlier simulation in `dir`, which the new one of
+/// `trials` trials replaces: those its `truth.json` lists, and that file
+/// (so no stale trial from another seed or count stays beside the new
+/// ones: a second run with fewer trials left the rest, and `fit` mixed two
+/// seeds). Nothing else is ever deleted or written over: trials no
+/// simulation listed (they would mix with the new ones), or a file of a
+/// name the new one writes that no simulation wrote, and the directory is
+/// refused.
+fn previous_simulation(dir: &Path, trials: usize) -> Result<Vec<PathBuf>> {
+    let truth = dir.join("truth.json");
+    let written: Option<Written> = truth
+        .is_file()
+        .then(|| crate::input::read_small_text(&truth).ok())
+        .flatten()
+        .and_then(|text| serde_json::from_str(&text).ok());
+    let mut listed: std::collections::BTreeSet<String> = written
         .iter()
-        .find(|p| crate::trial::is_trial_csv(p) && !(simulated && ours(p)));
-    if let Some(csv) = foreign_csv {
-        bail!(
-            "{}: holds trials that are not a simulation's ({}); simulate into another directory",
+        .flat_map(|w| &w.trials)
+        .flat_map(|t| [t.file.clone(), t.replay.clone()])
+        .filter(|n| simulation_name(n))
+        .collect();
+    if written.is_some() {
+        listed.insert("truth.json".into());
+    }
+    let refuse = |path: &Path, what: &str| {
+        anyhow::anyhow!(
+            "{}: holds {what} ({}); simulate into another directory",
             dir.display(),
-            csv.display()
+            path.display()
+        )
+    };
+    for entry in
+        std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?
+    {
+        let path = entry?.path();
+        let name = crate::trial::name_of(&path);
+        if crate::trial::is_trial_csv(&path) && !listed.contains(&name) {
+            return Err(refuse(&path, "trials that are not a simulation's"));
+        }
+    }
+    let new_names = (0..trials)
+        .flat_map(|k| [format!("trial_{k:03}.csv"), format!("trial_{k:03}.replay")])
+        .chain(std::iter::once("truth.json".to_owned()));
+    for name in new_names {
+        let path = dir.join(&name);
+        if path.exists() && !listed.contains(&name) {
+            return Err(refuse(
+                &path,
+                "a file the simulation would write over that no simulation wrote",
+            ));
+        }
+    }
+    Ok(listed
+        .iter()
+        .map(|n| dir.join(n))
+        .filter(|p| p.is_file())
+        .collect())
+}
+
+/// A staging directory left by a stopped run is removed only when all it
+/// holds is what a simulation writes.
+fn clear_staging(staging: &Path) -> Result<()> {
+    if staging.is_symlink() {
+        return std::fs::remove_file(staging)
+            .with_context(|| format!("{}: cannot remove", staging.display()));
+    }
+    if !staging.exists() {
+        return Ok(());
+    }
+    let entries: Vec<PathBuf> = std::fs::read_dir(staging)
+        .with_context(|| format!("{}: cannot list", staging.display()))?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<std::io::Result<_>>()?;
+    if let Some(other) = entries
+        .iter()
+        .find(|p| !(p.is_file() && simulation_name(&crate::trial::name_of(p))))
+    {
+        bail!(
+            "{}: left by a stopped simulation, but holds {}, which no simulation writes: move it",
+            staging.display(),
+            other.display()
         );
     }
-    Ok(entries
-        .into_iter()
-        .filter(|p| simulated && ours(p))
-        .collect())
+    std::fs::remove_dir_all(staging)
+        .with_context(|| format!("{}: cannot remove", staging.display()))
 }
 
 /// Where a simulation is written before it replaces the one in `--out`.
@@ -995,15 +1073,12 @@ impl Dataset<'_> {
         }
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
-        let previous = previous_simulation(dir)?;
+        let previous = previous_simulation(dir, self.trials)?;
         // Written beside, then moved in: a run stopped half-way (Ctrl-C, a
         // full disk) left trials without a truth.json, which the next run
         // then refused as another's, and the earlier simulation gone.
         let staging = dir.join(STAGING);
-        if staging.exists() {
-            std::fs::remove_dir_all(&staging)
-                .with_context(|| format!("{}: cannot remove", staging.display()))?;
-        }
+        clear_staging(&staging)?;
         std::fs::create_dir(&staging)
             .with_context(|| format!("{}: cannot create", staging.display()))?;
         let written = self.write_into(&staging)?;
