@@ -166,35 +166,50 @@ fn segment_path(base: &Path, segment: u32) -> PathBuf {
     base.with_file_name(format!("{stem}-{}{ext}", segment + 1))
 }
 
-/// An earlier decode's segment files beside `base` (`NAME-2.csv`, …) are
-/// removed, so that no stale segment of another capture stays beside the
-/// new CSV for `fit` to read as a trial; a file there that is not one (not
-/// a regular file, or its header is not decode's) is refused.
+/// Where a decode lists the segment files it wrote beside `base`
+/// (`NAME.csv.segments`), so that the next decode to the same `--csv` removes
+/// those and nothing else (a file that merely looks like a segment may be
+/// another decode's own output).
+fn segment_list(base: &Path) -> PathBuf {
+    let mut name = base.as_os_str().to_owned();
+    name.push(".segments");
+    PathBuf::from(name)
+}
+
+/// The segment files an earlier decode to `base` listed are removed, so
+/// that no stale segment of another capture stays beside the new CSV for
+/// `fit` to read as a trial; each must still carry decode's header.
 fn remove_stale_segments(base: &Path) -> Result<()> {
+    let list = segment_list(base);
+    if !list.exists() {
+        return Ok(());
+    }
+    let text = crate::input::read_small_text(&list)?;
     let header = CSV_HEADER.join(",");
-    for segment in 1.. {
-        let path = segment_path(base, segment);
-        if !path.exists() {
-            return Ok(());
-        }
-        let shown = path.display();
-        // A few bytes only: the name may be a link to a device or a pipe.
+    for name in text.lines().filter(|l| !l.is_empty()) {
+        let path = base.with_file_name(name);
+        // A few bytes only, and from a regular file only: the name may
+        // have become a link to a device or a pipe.
         let mut first = String::new();
         if crate::input::regular_file(&path).is_ok() {
-            let file =
-                std::fs::File::open(&path).with_context(|| format!("{shown}: cannot read"))?;
+            let file = std::fs::File::open(&path)
+                .with_context(|| format!("{}: cannot read", path.display()))?;
             let _ = std::io::Read::read_to_string(
                 &mut std::io::Read::take(file, header.len() as u64 + 2),
                 &mut first,
             );
         }
-        if first.lines().next() != Some(header.as_str()) {
-            bail!("{shown}: is where segment {} of --csv {} would go, and is no earlier decode's segment: move it, or name another --csv", segment + 1, base.display());
+        if first.lines().next() == Some(header.as_str()) {
+            std::fs::remove_file(&path)
+                .with_context(|| format!("{}: cannot remove", path.display()))?;
+            eprintln!(
+                "removed {} (a segment of an earlier decode to the same --csv, listed in {})",
+                path.display(),
+                list.display()
+            );
         }
-        std::fs::remove_file(&path).with_context(|| format!("{shown}: cannot remove"))?;
-        eprintln!("removed {shown} (a segment of an earlier decode to the same --csv)");
     }
-    Ok(())
+    std::fs::remove_file(&list).with_context(|| format!("{}: cannot remove", list.display()))
 }
 
 /// A trial CSV with its header line.
@@ -256,9 +271,28 @@ impl SegmentedCsv {
         {
             bail!("{}: segment {} of --csv {} would be written over the capture being decoded: name another --csv", capture.display(), segment + 1, self.base.display());
         }
+        if segment > 0 && path.exists() {
+            bail!("{}: is where segment {} of --csv {} would go, and is no segment an earlier decode listed: move it, or name another --csv", path.display(), segment + 1, self.base.display());
+        }
         self.open = Some((segment, create_csv(&path)?));
         self.written.push((path, 0));
+        if segment > 0 {
+            self.list_segments()?;
+        }
         Ok(())
+    }
+
+    /// The segment files written so far, for the next decode to the same
+    /// `--csv` to remove ([`remove_stale_segments`]).
+    fn list_segments(&self) -> Result<()> {
+        let list = segment_list(&self.base);
+        let names: String = self
+            .written
+            .iter()
+            .filter(|(p, _)| *p != self.base)
+            .map(|(p, _)| crate::trial::name_of(p) + "\n")
+            .collect();
+        std::fs::write(&list, names).with_context(|| format!("{}: cannot write", list.display()))
     }
 
     fn close(&mut self) -> Result<()> {

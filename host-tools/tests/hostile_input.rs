@@ -553,7 +553,7 @@ fn decode_segments_never_write_over_the_capture_or_stay_stale() {
     // the capture half-way through reading it.
     std::fs::write(at("cap-2.csv"), &joined).unwrap();
     let err = refused(&["decode", &s(&at("cap-2.csv")), "--csv", &s(&at("cap.csv"))]);
-    assert!(err.contains("is no earlier decode's segment"), "{err}");
+    assert!(err.contains("would be written over the capture"), "{err}");
     assert_eq!(std::fs::read(at("cap-2.csv")).unwrap(), joined);
     // Three segments, then one capture to the same --csv: the old
     // segment files went on standing beside it, for `fit` to read.
@@ -571,6 +571,20 @@ fn decode_segments_never_write_over_the_capture_or_stay_stale() {
     assert!(out.status.success(), "{err}");
     assert!(!at("o-2.csv").exists() && !at("o-3.csv").exists(), "{err}");
     assert!(err.contains("removed") && err.contains("o-2.csv"), "{err}");
+    // Another decode's own output named like a segment (`o2.csv` then
+    // `o.csv`'s segment 2) was deleted as a stale segment: only the
+    // segments a decode listed in `o.csv.segments` go.
+    let out = needle(&["decode", &s(&at("one.bin")), "--csv", &s(&at("p-2.csv"))]);
+    assert!(out.status.success());
+    let other = std::fs::read(at("p-2.csv")).unwrap();
+    let err = refused(&["decode", &s(&at("joined.bin")), "--csv", &s(&at("p.csv"))]);
+    assert!(
+        err.contains("is no segment an earlier decode listed"),
+        "{err}"
+    );
+    let out = needle(&["decode", &s(&at("one.bin")), "--csv", &s(&at("p.csv"))]);
+    assert!(out.status.success());
+    assert_eq!(std::fs::read(at("p-2.csv")).unwrap(), other);
     // Bytes that hold no frame are no capture: an error, not an empty CSV,
     // and the earlier decode's CSV is left as it was.
     let good = std::fs::read(at("o.csv")).unwrap();
