@@ -35,7 +35,7 @@ pub struct DetectArgs {
     /// structure, exit (stop on that event), depth (stop at
     /// --target-depth-mm past the surface), back-off (after a puncture
     /// stop, hold x_s2 − x_s3 behind the tip), speed-limit.
-    #[arg(long, default_value = "")]
+    #[arg(long, default_value = "none")]
     pub assist: String,
     /// Target depth past the surface for `--assist depth`, mm.
     #[arg(long, default_value_t = 30.0)]
@@ -44,6 +44,10 @@ pub struct DetectArgs {
 
 /// Parse `--assist`.
 pub fn parse_assist(list: &str) -> Result<AssistModes> {
+    // An empty list is no choice: `none` says "no assist" in words.
+    if list.split(',').all(|m| m.trim().is_empty()) {
+        anyhow::bail!("assist: name the modes, or `none` to turn them all off");
+    }
     list.split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty() && *s != "none")
@@ -110,6 +114,11 @@ pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
     }
     let mut state = PipelineState::default();
     let mut found = TrialDetection::default();
+    // The device's positions count from its first sample (its encoder's
+    // zero); the file's are a stage's. Events are given in the file's, for
+    // a robot in those coordinates (a stage 0.12 m off was told to hold
+    // 0.12 m away) and for `diagnose`, which looks them up there.
+    let x0_m = trial.x_m.first().copied().unwrap_or(0.0);
     for i in 0..trial.len() {
         let record = raw_record(
             trial.x_m[i],
@@ -131,7 +140,7 @@ pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
             found.events.push(Detected {
                 kind: event_name(e.kind),
                 t_s: t(e.index),
-                x_m: e.x.as_m(),
+                x_m: x0_m + e.x.as_m(),
                 f_n: e.force.as_n(),
                 confidence: f64::from(e.confidence_permille) / 1000.0,
             });
@@ -145,8 +154,8 @@ pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
             found.halt = Some(HaltOut {
                 reason,
                 t_s: t(out.sample.index),
-                x_m: x.as_m(),
-                hold_x_m: hold_x.as_m(),
+                x_m: x0_m + x.as_m(),
+                hold_x_m: x0_m + hold_x.as_m(),
             });
         }
     }

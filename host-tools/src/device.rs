@@ -99,9 +99,6 @@ pub fn command_of(action: &Action) -> Result<Command> {
             {
                 bail!("--depth-mm {depth_mm:?}: must be between 0.1 and 100 mm");
             }
-            if modes.split(',').all(|m| m.trim().is_empty()) {
-                bail!("assist: name the modes, or `none` to turn them all off");
-            }
             Command::SetAssist {
                 modes: crate::detect::parse_assist(modes)?,
                 target_depth,

@@ -906,6 +906,9 @@ fn detect_and_evaluate_take_only_what_the_device_does() {
             "{depth}: {err}"
         );
     }
+    // An empty list meant no assist here and was refused by `device`.
+    let err = refused(&["detect", d, "--assist", ","]);
+    assert!(err.contains("name the modes, or `none`"), "{err}");
     let err = refused(&["evaluate", "--trials", "1", "--rates-hz", "65535"]);
     assert!(err.contains("at most 2000 Hz"), "{err}");
     let err = refused(&["evaluate", "--trials", "1001"]);
@@ -1044,4 +1047,47 @@ fn simulate_deletes_and_writes_over_nothing_a_simulation_did_not_write() {
         std::fs::read_to_string(replay.path().join("trial_000.replay")).unwrap(),
         "mine"
     );
+}
+
+#[test]
+fn detect_gives_positions_in_the_files_own_coordinates() {
+    // A stage 0.12 m off zero was given events and a hold position counted
+    // from the first sample: a robot in stage coordinates would have been
+    // told to hold 0.12 m away.
+    let dir = simulated(1, 4);
+    let d = dir.path().to_str().unwrap();
+    let text = std::fs::read_to_string(dir.path().join("trial_000.csv")).unwrap();
+    let mut lines = text.lines();
+    let mut moved = format!("{}\n", lines.next().unwrap());
+    for l in lines {
+        let v: Vec<&str> = l.split(',').collect();
+        moved += &format!(
+            "{},{:.9},{}\n",
+            v[0],
+            v[1].parse::<f64>().unwrap() + 0.12,
+            v[2]
+        );
+    }
+    let stage = tempfile::tempdir().unwrap();
+    std::fs::write(stage.path().join("trial_000.csv"), moved).unwrap();
+    let events = |dir: &str| -> serde_json::Value {
+        let out = needle(&["detect", dir, "--assist", "puncture,back-off"]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["trials"][0].clone()
+    };
+    let (at_zero, on_stage) = (events(d), events(stage.path().to_str().unwrap()));
+    let x = |t: &serde_json::Value, p: &str| t.pointer(p).and_then(|v| v.as_f64()).unwrap();
+    for p in [
+        "/events/0/x_m",
+        "/events/1/x_m",
+        "/halt/x_m",
+        "/halt/hold_x_m",
+    ] {
+        let shift = x(&on_stage, p) - x(&at_zero, p);
+        assert!((shift - 0.12).abs() < 2e-6, "{p}: {shift}");
+    }
 }

@@ -399,10 +399,20 @@ pub fn to_toml(fit: &Value) -> String {
         ),
     ];
     for (key, value) in keys {
-        out += &format!("{key} = {:?}\n", value.unwrap_or(0.0));
+        let value = value.unwrap_or(0.0);
+        // A sign the model cannot take is written as its limit, and says so.
+        if let Some(raw) = get(key).filter(|&raw| raw != value) {
+            out += &format!(
+                "{CLAMPED} {key} was fitted as {raw:?}; the model takes no value past {value:?}\n"
+            );
+        }
+        out += &format!("{key} = {value:?}\n");
     }
     out
 }
+
+/// How `to_toml` marks an estimate written as its limit.
+const CLAMPED: &str = "# clamped:";
 
 pub fn run(args: &FitArgs) -> Result<()> {
     let outputs = [
@@ -426,6 +436,9 @@ pub fn run(args: &FitArgs) -> Result<()> {
         Some(path) => std::fs::write(path, text + "\n")
             .with_context(|| format!("{}: cannot write", path.display()))?,
         None => crate::stdout::write(&(text + "\n"))?,
+    }
+    for note in toml.lines().filter(|l| l.starts_with(CLAMPED)) {
+        eprintln!("needle fit: {}", note.trim_start_matches("# "));
     }
     if let Some(path) = &args.toml {
         std::fs::write(path, &toml).with_context(|| format!("{}: cannot write", path.display()))?;
