@@ -176,6 +176,15 @@ fn segment_list(base: &Path) -> PathBuf {
     PathBuf::from(name)
 }
 
+/// The path of `base`'s segment called `name` (`NAME-k.csv`, k ≥ 2), if
+/// it is one.
+fn segment_named(base: &Path, name: &str) -> Option<PathBuf> {
+    let digits = name.rsplit_once('-')?.1.split('.').next()?;
+    let k: u32 = digits.parse().ok().filter(|&k| k >= 2)?;
+    let path = segment_path(base, k - 1);
+    (crate::trial::name_of(&path) == name).then_some(path)
+}
+
 /// The segment files an earlier decode to `base` listed are removed, so
 /// that no stale segment of another capture stays beside the new CSV for
 /// `fit` to read as a trial; each must still carry decode's header.
@@ -186,8 +195,12 @@ fn remove_stale_segments(base: &Path) -> Result<()> {
     }
     let text = crate::input::read_small_text(&list)?;
     let header = CSV_HEADER.join(",");
-    for name in text.lines().filter(|l| !l.is_empty()) {
-        let path = base.with_file_name(name);
+    for name in text.lines() {
+        // Only a name a segment of `base` can have: the list is a file
+        // anyone can write, and `../x.csv` in it is no segment.
+        let Some(path) = segment_named(base, name) else {
+            continue;
+        };
         // A few bytes only, and from a regular file only: the name may
         // have become a link to a device or a pipe.
         let mut first = String::new();

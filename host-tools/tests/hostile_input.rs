@@ -582,6 +582,24 @@ fn decode_segments_never_write_over_the_capture_or_stay_stale() {
         err.contains("is no segment an earlier decode listed"),
         "{err}"
     );
+    // The list is a file anyone can write: a name in it that is no segment
+    // of `p.csv` (`../x.csv`, `other.csv`) is never removed.
+    let outside = dir.path().join("sub");
+    std::fs::create_dir(&outside).unwrap();
+    std::fs::copy(at("p-2.csv"), at("other.csv")).unwrap();
+    std::fs::write(
+        at("sub/p.csv.segments"),
+        "../other.csv\nother.csv\n/etc/hostname\n",
+    )
+    .unwrap();
+    let out = needle(&[
+        "decode",
+        &s(&at("one.bin")),
+        "--csv",
+        &s(&outside.join("p.csv")),
+    ]);
+    assert!(out.status.success());
+    assert!(at("other.csv").exists());
     let out = needle(&["decode", &s(&at("one.bin")), "--csv", &s(&at("p.csv"))]);
     assert!(out.status.success());
     assert_eq!(std::fs::read(at("p-2.csv")).unwrap(), other);
