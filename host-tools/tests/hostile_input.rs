@@ -177,6 +177,9 @@ fn evaluate_rejects_rates_and_noises_it_cannot_simulate() {
         let err = refused(&["simulate", "--out", d, "--trials", "1", flag, bad]);
         assert!(err.contains(says), "{flag} {bad}: {err}");
     }
+    // Zero trials wrote a truth.json of none over the last simulation.
+    let err = refused(&["simulate", "--out", d, "--trials", "0"]);
+    assert!(err.contains("--trials 0"), "{err}");
     // The JSON's path is checked before the evaluation, not after it.
     let err = refused(&[
         "evaluate",

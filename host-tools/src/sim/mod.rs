@@ -989,6 +989,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     check_rate_hz("--rate-hz", args.rate_hz)?;
     check_noise_n("--noise-n", args.noise_n)?;
     check_noise_n("--tare-n", args.tare_n)?;
+    if !(1..=10_000).contains(&args.trials) {
+        bail!("--trials {}: must be within 1..=10000", args.trials);
+    }
     if args.layers > 3 {
         bail!("--layers must be within 0..=3");
     }
