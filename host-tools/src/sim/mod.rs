@@ -837,6 +837,10 @@ struct TruthFile<'a> {
 struct TruthTrial<'a> {
     file: String,
     replay: String,
+    /// Sizes as written: a file of another size is not the simulation's
+    /// any more (a user's trial copied over it), and is never replaced.
+    file_bytes: u64,
+    replay_bytes: u64,
     #[serde(flatten)]
     truth: &'a TrialTruth,
 }
@@ -857,6 +861,9 @@ struct Written {
 struct WrittenTrial {
     file: String,
     replay: String,
+    /// Absent from a truth.json of before the sizes were kept.
+    file_bytes: Option<u64>,
+    replay_bytes: Option<u64>,
 }
 
 /// Whether `name` is one a simulation writes (`trial_NNN.csv`,
@@ -885,15 +892,32 @@ fn previous_simulation(dir: &Path, trials: usize) -> Result<Vec<PathBuf>> {
         .then(|| crate::input::read_small_text(&truth).ok())
         .flatten()
         .and_then(|text| serde_json::from_str(&text).ok());
-    let mut listed: std::collections::BTreeSet<String> = written
+    // Each listed file with the size it was written at, if kept.
+    let mut listed: std::collections::BTreeMap<String, Option<u64>> = written
         .iter()
         .flat_map(|w| &w.trials)
-        .flat_map(|t| [t.file.clone(), t.replay.clone()])
-        .filter(|n| simulation_name(n))
+        .flat_map(|t| {
+            [
+                (t.file.clone(), t.file_bytes),
+                (t.replay.clone(), t.replay_bytes),
+            ]
+        })
+        .filter(|(n, _)| simulation_name(n))
         .collect();
     if written.is_some() {
-        listed.insert("truth.json".into());
+        listed.insert("truth.json".into(), None);
     }
+    // A listed file changed since (another size, or newer than the
+    // truth.json written after it) is someone's now, not the simulation's.
+    let truth_time = std::fs::metadata(&truth).and_then(|m| m.modified()).ok();
+    listed.retain(|name, bytes| {
+        let Ok(meta) = std::fs::symlink_metadata(dir.join(name.as_str())) else {
+            return true;
+        };
+        let newer = matches!((meta.modified(), truth_time), (Ok(t), Some(truth)) if t > truth);
+        let resized = bytes.is_some_and(|b| b != meta.len());
+        name == "truth.json" || !(newer || resized)
+    });
     let refuse = |path: &Path, what: &str| {
         anyhow::anyhow!(
             "{}: holds {what} ({}); simulate into another directory",
@@ -906,7 +930,7 @@ fn previous_simulation(dir: &Path, trials: usize) -> Result<Vec<PathBuf>> {
     {
         let path = entry?.path();
         let name = crate::trial::name_of(&path);
-        if crate::trial::is_trial_csv(&path) && !listed.contains(&name) {
+        if crate::trial::is_trial_csv(&path) && !listed.contains_key(&name) {
             return Err(refuse(&path, "trials that are not a simulation's"));
         }
     }
@@ -915,7 +939,7 @@ fn previous_simulation(dir: &Path, trials: usize) -> Result<Vec<PathBuf>> {
         .chain(std::iter::once("truth.json".to_owned()));
     for name in new_names {
         let path = dir.join(&name);
-        if path.exists() && !listed.contains(&name) {
+        if path.exists() && !listed.contains_key(&name) {
             return Err(refuse(
                 &path,
                 "a file the simulation would write over that no simulation wrote",
@@ -923,7 +947,7 @@ fn previous_simulation(dir: &Path, trials: usize) -> Result<Vec<PathBuf>> {
         }
     }
     Ok(listed
-        .iter()
+        .keys()
         .map(|n| dir.join(n))
         .filter(|p| p.is_file())
         .collect())
@@ -1076,6 +1100,14 @@ impl Dataset<'_> {
         }
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
+        // One simulation at a time in a directory (two at once shared the
+        // staging and each removed the other's files); the lock goes with
+        // the process, however it ends.
+        let lock =
+            std::fs::File::open(dir).with_context(|| format!("{}: cannot open", dir.display()))?;
+        if lock.try_lock().is_err() {
+            bail!("{}: another simulation is writing it", dir.display());
+        }
         let previous = previous_simulation(dir, self.trials)?;
         // Written beside, then moved in: a run stopped half-way (Ctrl-C, a
         // full disk) left trials without a truth.json, which the next run
@@ -1085,16 +1117,16 @@ impl Dataset<'_> {
         std::fs::create_dir(&staging)
             .with_context(|| format!("{}: cannot create", staging.display()))?;
         let written = self.write_into(&staging)?;
-        for path in previous {
-            std::fs::remove_file(&path)
-                .with_context(|| format!("{}: cannot remove", path.display()))?;
-        }
-        // truth.json last: it is what makes the directory a simulation.
+        // Moved over the earlier files first, the rest of those removed
+        // after, so a failure on the way removes nothing; truth.json last:
+        // it is what makes the directory a simulation.
         let mut staged: Vec<PathBuf> = std::fs::read_dir(&staging)
             .with_context(|| format!("{}: cannot list", staging.display()))?
             .map(|e| e.map(|e| e.path()))
             .collect::<std::io::Result<_>>()?;
         staged.sort_by_key(|p| p.ends_with("truth.json"));
+        let staged_names: std::collections::BTreeSet<String> =
+            staged.iter().map(|p| crate::trial::name_of(p)).collect();
         for from in staged {
             let to = dir.join(from.file_name().unwrap_or_default());
             std::fs::rename(&from, &to)
@@ -1102,6 +1134,14 @@ impl Dataset<'_> {
         }
         std::fs::remove_dir(&staging)
             .with_context(|| format!("{}: cannot remove", staging.display()))?;
+        for path in previous
+            .iter()
+            .filter(|p| !staged_names.contains(&crate::trial::name_of(p)))
+        {
+            std::fs::remove_file(path)
+                .with_context(|| format!("{}: cannot remove", path.display()))?;
+        }
+        drop(lock);
         Ok(written)
     }
 
@@ -1146,7 +1186,8 @@ impl Dataset<'_> {
             let (trial, truth) =
                 simulate_trial_in(tissue, &protocol, effects, form, sensor, &mut rng);
             let name = format!("trial_{k:03}");
-            crate::trial::write(&dir.join(format!("{name}.csv")), &trial)?;
+            let csv = dir.join(format!("{name}.csv"));
+            crate::trial::write(&csv, &trial)?;
             let replay = to_replay(
                 &trial,
                 sensor.rate_hz.round() as u16,
@@ -1154,9 +1195,10 @@ impl Dataset<'_> {
                 &config.encoder,
             );
             let path = dir.join(format!("{name}.replay"));
+            let bytes = [replay.len() as u64, std::fs::metadata(&csv)?.len()];
             std::fs::write(&path, replay)
                 .with_context(|| format!("{}: cannot write", path.display()))?;
-            truths.push((name, truth));
+            truths.push((name, truth, bytes));
         }
         let file = TruthFile {
             tissue: tissue_name,
@@ -1168,9 +1210,11 @@ impl Dataset<'_> {
             rig,
             trials: truths
                 .iter()
-                .map(|(name, truth)| TruthTrial {
+                .map(|(name, truth, [replay_bytes, file_bytes])| TruthTrial {
                     file: format!("{name}.csv"),
                     replay: format!("{name}.replay"),
+                    file_bytes: *file_bytes,
+                    replay_bytes: *replay_bytes,
                     truth,
                 })
                 .collect(),
