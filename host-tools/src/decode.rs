@@ -195,17 +195,28 @@ fn remove_stale_segments(base: &Path) -> Result<()> {
     }
     let text = crate::input::read_small_text(&list)?;
     let header = CSV_HEADER.join(",");
-    for name in text.lines() {
-        // Only a name a segment of `base` can have: the list is a file
-        // anyone can write, and `../x.csv` in it is no segment.
-        let Some(path) = segment_named(base, name) else {
-            continue;
-        };
+    // Only names a segment of `base` can have: the list is a file anyone
+    // can write (`../x.csv` in it is no segment), and a file of that name
+    // holding anything else is no list of ours.
+    let mut segments = Vec::new();
+    for (k, name) in text.lines().enumerate().filter(|(_, l)| !l.is_empty()) {
+        match segment_named(base, name) {
+            Some(path) => segments.push(path),
+            None => bail!(
+                "{}:{}: {:?} is no segment of --csv {}: this is no segment list of decode's; move it, or name another --csv",
+                list.display(),
+                k + 1,
+                name.chars().take(40).collect::<String>(),
+                base.display()
+            ),
+        }
+    }
+    for path in &segments {
         // A few bytes only, and from a regular file only: the name may
         // have become a link to a device or a pipe.
         let mut first = String::new();
-        if crate::input::regular_file(&path).is_ok() {
-            let file = std::fs::File::open(&path)
+        if crate::input::regular_file(path).is_ok() {
+            let file = std::fs::File::open(path)
                 .with_context(|| format!("{}: cannot read", path.display()))?;
             let _ = std::io::Read::read_to_string(
                 &mut std::io::Read::take(file, header.len() as u64 + 2),
@@ -213,7 +224,7 @@ fn remove_stale_segments(base: &Path) -> Result<()> {
             );
         }
         if first.lines().next() == Some(header.as_str()) {
-            std::fs::remove_file(&path)
+            std::fs::remove_file(path)
                 .with_context(|| format!("{}: cannot remove", path.display()))?;
             eprintln!(
                 "removed {} (a segment of an earlier decode to the same --csv, listed in {})",
@@ -299,6 +310,11 @@ impl SegmentedCsv {
     /// `--csv` to remove ([`remove_stale_segments`]).
     fn list_segments(&self) -> Result<()> {
         let list = segment_list(&self.base);
+        // A link there would have the list written through it, elsewhere.
+        if list.is_symlink() {
+            std::fs::remove_file(&list)
+                .with_context(|| format!("{}: cannot remove", list.display()))?;
+        }
         let names: String = self
             .written
             .iter()
