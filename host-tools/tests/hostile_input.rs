@@ -585,8 +585,8 @@ fn decode_segments_never_write_over_the_capture_or_stay_stale() {
         err.contains("is no segment an earlier decode listed"),
         "{err}"
     );
-    // The list is a file anyone can write: a name in it that is no segment
-    // of `p.csv` (`../x.csv`, `other.csv`) is never removed.
+    // The list is a file anyone can write: one naming what is no segment
+    // of `p.csv` (`../x.csv`, `other.csv`) is refused, and nothing removed.
     let outside = dir.path().join("sub");
     std::fs::create_dir(&outside).unwrap();
     std::fs::copy(at("p-2.csv"), at("other.csv")).unwrap();
@@ -595,13 +595,16 @@ fn decode_segments_never_write_over_the_capture_or_stay_stale() {
         "../other.csv\nother.csv\n/etc/hostname\n",
     )
     .unwrap();
-    let out = needle(&[
+    let err = refused(&[
         "decode",
         &s(&at("one.bin")),
         "--csv",
         &s(&outside.join("p.csv")),
     ]);
-    assert!(out.status.success());
+    assert!(
+        err.contains("p.csv.segments:1: \"../other.csv\" is no segment"),
+        "{err}"
+    );
     assert!(at("other.csv").exists());
     let out = needle(&["decode", &s(&at("one.bin")), "--csv", &s(&at("p.csv"))]);
     assert!(out.status.success());
@@ -1111,4 +1114,119 @@ fn detect_gives_positions_in_the_files_own_coordinates() {
         let shift = x(&on_stage, p) - x(&at_zero, p);
         assert!((shift - 0.12).abs() < 2e-6, "{p}: {shift}");
     }
+}
+
+#[test]
+fn two_simulations_into_one_directory_are_not_run_at_once() {
+    // Two at once shared the staging directory; each removed the other's
+    // files and one reported success over a dataset of two seeds.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    let mut first = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args([
+            "simulate",
+            "--out",
+            d,
+            "--trials",
+            "100",
+            "--rate-hz",
+            "20000",
+        ])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let staged = dir.path().join(".simulating/trial_000.csv");
+    for _ in 0..1000 {
+        if staged.exists() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let err = refused(&["simulate", "--out", d, "--trials", "1", "--seed", "2"]);
+    first.kill().unwrap();
+    first.wait().unwrap();
+    assert!(err.contains("another simulation is writing it"), "{err}");
+}
+
+#[test]
+fn simulate_never_replaces_a_trial_changed_since_it_wrote_it() {
+    // A user's trial copied over a simulated one of the same name (truth.json
+    // still listing it) was overwritten or deleted without a word.
+    let dir = simulated(2, 1);
+    let d = dir.path().to_str().unwrap();
+    let other = simulated(1, 7);
+    std::fs::copy(
+        other.path().join("trial_000.csv"),
+        dir.path().join("trial_001.csv"),
+    )
+    .unwrap();
+    let mine = std::fs::read(dir.path().join("trial_001.csv")).unwrap();
+    let err = refused(&["simulate", "--out", d, "--trials", "1", "--seed", "3"]);
+    assert!(err.contains("trial_001.csv"), "{err}");
+    assert_eq!(
+        std::fs::read(dir.path().join("trial_001.csv")).unwrap(),
+        mine
+    );
+}
+
+#[test]
+fn decode_takes_a_segment_list_only_if_it_is_one_and_never_writes_through_a_link() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| dir.path().join(name).to_str().unwrap().to_owned();
+    std::fs::write(at("one.bin"), twin_capture(3.0)).unwrap();
+    // A CSV where the list goes (another decode's output) was deleted.
+    assert!(
+        needle(&["decode", &at("one.bin"), "--csv", &at("o.csv.segments")])
+            .status
+            .success()
+    );
+    let before = std::fs::read(at("o.csv.segments")).unwrap();
+    let err = refused(&["decode", &at("one.bin"), "--csv", &at("o.csv")]);
+    assert!(err.contains("is no segment list of decode's"), "{err}");
+    assert_eq!(std::fs::read(at("o.csv.segments")).unwrap(), before);
+    // A dangling link where the list goes had the list written through it.
+    let joined = [twin_capture(3.0), twin_capture(3.0)].concat();
+    std::fs::write(at("joined.bin"), joined).unwrap();
+    std::os::unix::fs::symlink(dir.path().join("elsewhere.txt"), at("q.csv.segments")).unwrap();
+    let out = needle(&["decode", &at("joined.bin"), "--csv", &at("q.csv")]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!dir.path().join("elsewhere.txt").exists());
+    assert_eq!(
+        std::fs::read_to_string(at("q.csv.segments")).unwrap(),
+        "q-2.csv\n"
+    );
+}
+
+#[test]
+fn fit_says_every_value_it_writes_other_than_estimated() {
+    let dir = simulated(3, 2);
+    let d = dir.path().to_str().unwrap();
+    let toml = dir.path().join("fitted.toml");
+    let out = needle(&["fit", d, "--toml", toml.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let text = std::fs::read_to_string(&toml).unwrap();
+    for note in text.lines().filter(|l| l.starts_with("# note:")) {
+        assert!(
+            err.contains(note.trim_start_matches("# ")),
+            "{note} not said: {err}"
+        );
+    }
+    let back = needle(&[
+        "detect",
+        d,
+        "--params",
+        toml.to_str().unwrap(),
+        "--json",
+        dir.path().join("d.json").to_str().unwrap(),
+    ]);
+    assert!(
+        back.status.success(),
+        "{}",
+        String::from_utf8_lossy(&back.stderr)
+    );
 }

@@ -352,67 +352,83 @@ pub fn to_toml(fit: &Value) -> String {
     let mut out = String::from("# Written by `needle fit`.\n[fitted]\n");
     out += &format!("source = \"needle fit over {} trials\"\n", fit["trials"]);
     out += &format!("stiffness_law = \"{law}\"\n");
+    // Each key with its estimate and the side of zero the model takes.
+    use Sign::{Any, Negative, Positive};
     let keys = [
-        ("a1_n_per_m", get("a1_n_per_m").map(|v| v.max(0.0))),
-        ("a2_n_per_m2", get("a2_n_per_m2").map(|v| v.max(0.0))),
-        ("rational_a_per_n", get("rational_a_per_n")),
-        ("rational_b_m_per_n", get("rational_b_m_per_n")),
-        ("puncture_force_n", get("puncture_force_n")),
-        ("puncture_depth_m", get("puncture_depth_m")),
-        (
-            "puncture_drop_to_n",
-            get("puncture_drop_to_n").map(|v| v.max(0.0)),
-        ),
+        ("a1_n_per_m", get("a1_n_per_m"), Positive),
+        ("a2_n_per_m2", get("a2_n_per_m2"), Positive),
+        ("rational_a_per_n", get("rational_a_per_n"), Any),
+        ("rational_b_m_per_n", get("rational_b_m_per_n"), Any),
+        ("puncture_force_n", get("puncture_force_n"), Any),
+        ("puncture_depth_m", get("puncture_depth_m"), Any),
+        ("puncture_drop_to_n", get("puncture_drop_to_n"), Positive),
         (
             "relaxation",
             get("relaxation").or(fit["relaxation"].get("model_uses").and_then(Value::as_f64)),
+            Any,
         ),
-        (
-            "cutting_force_n",
-            get("cutting_force_n").map(|v| v.max(0.0)),
-        ),
-        ("cp_n_per_m", get("cp_n_per_m").map(|v| v.max(0.0))),
-        ("cn_n_per_m", get("cn_n_per_m").map(|v| v.min(0.0))),
-        ("bp_ns_per_m2", get("bp_ns_per_m2").map(|v| v.max(0.0))),
-        ("bn_ns_per_m2", get("bn_ns_per_m2").map(|v| v.max(0.0))),
+        ("cutting_force_n", get("cutting_force_n"), Positive),
+        ("cp_n_per_m", get("cp_n_per_m"), Positive),
+        ("cn_n_per_m", get("cn_n_per_m"), Negative),
+        ("bp_ns_per_m2", get("bp_ns_per_m2"), Positive),
+        ("bn_ns_per_m2", get("bn_ns_per_m2"), Positive),
         // Not identified: the bound the data gives (what was seen held).
         (
             "dp_n_per_m",
-            get("dp_n_per_m")
-                .or(bound("dp_n_per_m", "lower_bound"))
-                .map(|v| v.max(0.0)),
+            get("dp_n_per_m").or(bound("dp_n_per_m", "lower_bound")),
+            Positive,
         ),
         (
             "dn_n_per_m",
-            get("dn_n_per_m")
-                .or(bound("dn_n_per_m", "upper_bound"))
-                .map(|v| v.min(0.0)),
+            get("dn_n_per_m").or(bound("dn_n_per_m", "upper_bound")),
+            Negative,
         ),
         // The data cannot resolve the band: the library's usual value.
-        ("half_band_mps", Some(5e-6)),
+        ("half_band_mps", Some(5e-6), Any),
         // A touch, and a structure's rise and fall (twice and 1.6 times
         // it), must stand as far above this recording's noise as liver's
         // 50 mN does above the 5–10 mN it was tuned for.
         (
             "contact_force_n",
             Some(get("noise_n").map_or(0.05, |sd| (5.0 * sd).max(0.05))),
+            Any,
         ),
     ];
-    for (key, value) in keys {
-        let value = value.unwrap_or(0.0);
-        // A sign the model cannot take is written as its limit, and says so.
-        if let Some(raw) = get(key).filter(|&raw| raw != value) {
-            out += &format!(
-                "{CLAMPED} {key} was fitted as {raw:?}; the model takes no value past {value:?}\n"
-            );
+    for (key, estimate, sign) in keys {
+        // Nothing found, or a sign the model cannot take: written as the
+        // limit, and said (in the file and, by `run`, on stderr).
+        let value = match (estimate, sign) {
+            (None, _) => 0.0,
+            (Some(v), Positive) => v.max(0.0),
+            (Some(v), Negative) => v.min(0.0),
+            (Some(v), Any) => v,
+        };
+        match estimate {
+            None => {
+                out += &format!("{NOTE} {key} was not found in the data; written as {value:?}\n")
+            }
+            Some(raw) if raw != value => {
+                out += &format!(
+                    "{NOTE} {key} was fitted as {raw:?}; the model takes no value past {value:?}\n"
+                )
+            }
+            Some(_) => {}
         }
         out += &format!("{key} = {value:?}\n");
     }
     out
 }
 
-/// How `to_toml` marks an estimate written as its limit.
-const CLAMPED: &str = "# clamped:";
+/// The side of zero a tissue parameter must be on.
+#[derive(Clone, Copy)]
+enum Sign {
+    Any,
+    Positive,
+    Negative,
+}
+
+/// How `to_toml` marks a value written as other than estimated.
+const NOTE: &str = "# note:";
 
 pub fn run(args: &FitArgs) -> Result<()> {
     let outputs = [
@@ -437,7 +453,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             .with_context(|| format!("{}: cannot write", path.display()))?,
         None => crate::stdout::write(&(text + "\n"))?,
     }
-    for note in toml.lines().filter(|l| l.starts_with(CLAMPED)) {
+    for note in toml.lines().filter(|l| l.starts_with(NOTE)) {
         eprintln!("needle fit: {}", note.trim_start_matches("# "));
     }
     if let Some(path) = &args.toml {
