@@ -199,19 +199,20 @@ fn remove_stale_segments(base: &Path) -> Result<()> {
     // can write (`../x.csv` in it is no segment), and a file of that name
     // holding anything else is no list of ours.
     let mut segments = Vec::new();
-    for (k, name) in text.lines().enumerate().filter(|(_, l)| !l.is_empty()) {
-        match segment_named(base, name) {
-            Some(path) => segments.push(path),
-            None => bail!(
+    for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.is_empty()) {
+        let (name, bytes) = line.rsplit_once(' ').unwrap_or((line, ""));
+        match (segment_named(base, name), bytes.parse::<u64>()) {
+            (Some(path), Ok(bytes)) => segments.push((path, bytes)),
+            _ => bail!(
                 "{}:{}: {:?} is no segment of --csv {}: this is no segment list of decode's; move it, or name another --csv",
                 list.display(),
                 k + 1,
-                name.chars().take(40).collect::<String>(),
+                line.chars().take(40).collect::<String>(),
                 base.display()
             ),
         }
     }
-    for path in &segments {
+    for (path, bytes) in &segments {
         // A few bytes only, and from a regular file only: the name may
         // have become a link to a device or a pipe.
         let mut first = String::new();
@@ -223,7 +224,10 @@ fn remove_stale_segments(base: &Path) -> Result<()> {
                 &mut first,
             );
         }
-        if first.lines().next() == Some(header.as_str()) {
+        // Another size: written since (another decode to that name, say),
+        // and no segment of ours any more.
+        let same = std::fs::metadata(path).is_ok_and(|m| m.len() == *bytes);
+        if same && first.lines().next() == Some(header.as_str()) {
             std::fs::remove_file(path)
                 .with_context(|| format!("{}: cannot remove", path.display()))?;
             eprintln!(
@@ -235,6 +239,10 @@ fn remove_stale_segments(base: &Path) -> Result<()> {
     }
     std::fs::remove_file(&list).with_context(|| format!("{}: cannot remove", list.display()))
 }
+
+/// The most segments one decode writes: a stream whose index goes back
+/// thousands of times is no device's run (9000 repeats made 9000 files).
+const MOST_SEGMENTS: u32 = 1000;
 
 /// A trial CSV with its header line.
 pub fn create_csv(path: &Path) -> Result<csv::Writer<std::fs::File>> {
@@ -298,17 +306,20 @@ impl SegmentedCsv {
         if segment > 0 && path.exists() {
             bail!("{}: is where segment {} of --csv {} would go, and is no segment an earlier decode listed: move it, or name another --csv", path.display(), segment + 1, self.base.display());
         }
+        if segment > MOST_SEGMENTS {
+            bail!("more than {MOST_SEGMENTS} segments (the index went back that often): no capture of a device's run; stopped");
+        }
         self.open = Some((segment, create_csv(&path)?));
         self.written.push((path, 0));
-        if segment > 0 {
-            self.list_segments()?;
-        }
         Ok(())
     }
 
-    /// The segment files written so far, for the next decode to the same
-    /// `--csv` to remove ([`remove_stale_segments`]).
+    /// The segment files written, with their sizes, for the next decode
+    /// to the same `--csv` to remove ([`remove_stale_segments`]).
     fn list_segments(&self) -> Result<()> {
+        if self.written.len() < 2 {
+            return Ok(());
+        }
         let list = segment_list(&self.base);
         // A link there would have the list written through it, elsewhere.
         if list.is_symlink() {
@@ -319,7 +330,10 @@ impl SegmentedCsv {
             .written
             .iter()
             .filter(|(p, _)| *p != self.base)
-            .map(|(p, _)| crate::trial::name_of(p) + "\n")
+            .map(|(p, _)| {
+                let bytes = std::fs::metadata(p).map_or(0, |m| m.len());
+                format!("{} {bytes}\n", crate::trial::name_of(p))
+            })
             .collect();
         std::fs::write(&list, names).with_context(|| format!("{}: cannot write", list.display()))
     }
@@ -341,6 +355,7 @@ impl SegmentedCsv {
     /// Close the file in hand and say what went where.
     fn finish(&mut self) -> Result<()> {
         self.close()?;
+        self.list_segments()?;
         let total: u64 = self.written.iter().map(|(_, n)| n).sum();
         match self.written.as_slice() {
             [] => eprintln!("no sample to write: {} not written", self.base.display()),

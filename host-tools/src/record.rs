@@ -107,10 +107,10 @@ fn check_dir(dir: &Path) -> Result<()> {
     let existing = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot read", dir.display()))?
         .filter_map(|e| e.ok())
-        .any(|e| crate::trial::is_trial_csv(&e.path()));
+        .any(|e| crate::trial::is_trial_csv(&e.path()) || e.file_name() == "stream.bin");
     if existing {
         bail!(
-            "{}: already holds CSV files; record into an empty directory",
+            "{}: already holds CSV files or a stream.bin (an earlier session's); record into an empty directory",
             dir.display()
         );
     }

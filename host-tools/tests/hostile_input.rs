@@ -738,6 +738,26 @@ fn outputs_that_cannot_be_written_name_their_path_in_words() {
 }
 
 #[test]
+fn needle_record_never_writes_over_an_earlier_sessions_stream() {
+    // A session with no insertion leaves only stream.bin, which the next
+    // session into the same directory overwrote.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("stream.bin"), "earlier").unwrap();
+    let err = refused(&[
+        "record",
+        "--port",
+        "/dev/null",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(err.contains("stream.bin"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("stream.bin")).unwrap(),
+        "earlier"
+    );
+}
+
+#[test]
 fn needle_record_on_a_port_with_no_device_leaves_no_directory() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("trials");
@@ -1195,10 +1215,31 @@ fn decode_takes_a_segment_list_only_if_it_is_one_and_never_writes_through_a_link
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(!dir.path().join("elsewhere.txt").exists());
+    let bytes = std::fs::metadata(at("q-2.csv")).unwrap().len();
     assert_eq!(
         std::fs::read_to_string(at("q.csv.segments")).unwrap(),
-        "q-2.csv\n"
+        format!("q-2.csv {bytes}\n")
     );
+    // A listed segment written since by another decode of its own (to
+    // `q-2.csv` on purpose) was removed as stale: another size, kept.
+    std::fs::write(at("two.bin"), twin_capture(5.0)).unwrap();
+    assert!(needle(&["decode", &at("two.bin"), "--csv", &at("q-2.csv")])
+        .status
+        .success());
+    let mine = std::fs::read(at("q-2.csv")).unwrap();
+    let out = needle(&["decode", &at("one.bin"), "--csv", &at("q.csv")]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(std::fs::read(at("q-2.csv")).unwrap(), mine);
+    // 9000 restarts made 9000 files, in time growing with their square.
+    let short = twin_capture(2.0);
+    std::fs::write(at("many.bin"), short.repeat(1002)).unwrap();
+    std::fs::create_dir(dir.path().join("many")).unwrap();
+    let err = refused(&["decode", &at("many.bin"), "--csv", &at("many/m.csv")]);
+    assert!(err.contains("more than 1000 segments"), "{err}");
 }
 
 #[test]

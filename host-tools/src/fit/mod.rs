@@ -353,7 +353,7 @@ pub fn to_toml(fit: &Value) -> String {
     out += &format!("source = \"needle fit over {} trials\"\n", fit["trials"]);
     out += &format!("stiffness_law = \"{law}\"\n");
     // Each key with its estimate and the side of zero the model takes.
-    use Sign::{Any, Negative, Positive};
+    use Sign::{Any, Derived, Negative, Positive};
     let keys = [
         ("a1_n_per_m", get("a1_n_per_m"), Positive),
         ("a2_n_per_m2", get("a2_n_per_m2"), Positive),
@@ -384,47 +384,52 @@ pub fn to_toml(fit: &Value) -> String {
             Negative,
         ),
         // The data cannot resolve the band: the library's usual value.
-        ("half_band_mps", Some(5e-6), Any),
+        ("half_band_mps", Some(5e-6), Derived),
         // A touch, and a structure's rise and fall (twice and 1.6 times
         // it), must stand as far above this recording's noise as liver's
         // 50 mN does above the 5–10 mN it was tuned for.
         (
             "contact_force_n",
             Some(get("noise_n").map_or(0.05, |sd| (5.0 * sd).max(0.05))),
-            Any,
+            Derived,
         ),
     ];
     for (key, estimate, sign) in keys {
-        // Nothing found, or a sign the model cannot take: written as the
-        // limit, and said (in the file and, by `run`, on stderr).
+        // A sign the model cannot take is written as the limit, nothing
+        // found as 0; each said (in the file and, by `run`, on stderr).
         let value = match (estimate, sign) {
             (None, _) => 0.0,
             (Some(v), Positive) => v.max(0.0),
             (Some(v), Negative) => v.min(0.0),
-            (Some(v), Any) => v,
+            (Some(v), Any | Derived) => v,
         };
+        let identified = get(key).is_some();
         match estimate {
-            None => {
-                out += &format!("{NOTE} {key} was not found in the data; written as {value:?}\n")
-            }
             Some(raw) if raw != value => {
                 out += &format!(
                     "{NOTE} {key} was fitted as {raw:?}; the model takes no value past {value:?}\n"
                 )
             }
-            Some(_) => {}
+            // A bound, the model's choice, or nothing at all.
+            _ if !identified && !matches!(sign, Derived) => {
+                out +=
+                    &format!("{NOTE} {key} is not identified by the data; written as {value:?}\n")
+            }
+            _ => {}
         }
         out += &format!("{key} = {value:?}\n");
     }
     out
 }
 
-/// The side of zero a tissue parameter must be on.
+/// The side of zero a tissue parameter must be on; `Derived` for one not
+/// estimated at all (a library value, or one set from the noise).
 #[derive(Clone, Copy)]
 enum Sign {
     Any,
     Positive,
     Negative,
+    Derived,
 }
 
 /// How `to_toml` marks a value written as other than estimated.
