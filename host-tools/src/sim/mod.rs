@@ -850,10 +850,11 @@ struct TruthTrial<'a> {
 /// real trials is not).
 #[derive(serde::Deserialize)]
 struct Written {
-    #[allow(dead_code)] // present in ours, not in a hand-written truth
-    seed: u64,
-    #[allow(dead_code)]
-    sensor: serde_json::Value,
+    // Read only to tell ours from a hand-written truth, which has neither.
+    #[serde(rename = "seed")]
+    _seed: u64,
+    #[serde(rename = "sensor")]
+    _sensor: serde_json::Value,
     trials: Vec<WrittenTrial>,
 }
 
