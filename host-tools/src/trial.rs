@@ -64,13 +64,13 @@ fn median_step_s(t_s: &[f64]) -> Option<f64> {
     (!dt.is_empty()).then(|| *dt.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
-/// The thinning step that brings `rate_hz` to `most_hz` or below. A rate a
-/// hair above (2000.0000000011 Hz from microsecond timestamps) is that
-/// rate, not one to halve.
+/// The thinning step that brings `rate_hz` to `most_hz` or below. A ratio a
+/// hair above a whole number (2000.0000000011 Hz from microsecond
+/// timestamps) is that number: 2 kHz is not halved, 10 kHz taken 1 in 5.
 fn step_to(rate_hz: f64, most_hz: f64) -> usize {
     let ratio = rate_hz / most_hz;
-    if ratio.is_finite() && ratio > 1.0 + 1e-6 {
-        ratio.ceil() as usize
+    if ratio.is_finite() && ratio > 1.0 {
+        ((ratio - 1e-6).ceil() as usize).max(1)
     } else {
         1
     }
@@ -628,15 +628,15 @@ mod tests {
     #[test]
     fn a_fast_trial_is_thinned_to_the_devices_top_rate_and_a_slow_one_kept_whole() {
         let dir = tempfile::tempdir().unwrap();
-        // 2 kHz from t = 1000 s in microseconds: steps a hair under 0.5 ms
-        // in floating point were halved to 1 kHz.
-        let late: String = std::iter::once("t_s,x_m,f_n\n".to_owned())
-            .chain((0..3000).map(|i| format!("{:.6},0,{i}\n", 1000.0 + i as f64 / 2000.0)))
-            .collect();
-        assert_eq!(
-            read_for_analysis(&write(&dir, &late), None).unwrap().step,
-            1
-        );
+        // From t = 1000 s in microseconds: steps a hair under 0.5 ms in
+        // floating point halved 2 kHz to 1 kHz (and took 10 kHz 1 in 6).
+        for (rate_hz, step) in [(2000.0, 1), (10_000.0, 5)] {
+            let late: String = std::iter::once("t_s,x_m,f_n\n".to_owned())
+                .chain((0..3000).map(|i| format!("{:.6},0,{i}\n", 1000.0 + i as f64 / rate_hz)))
+                .collect();
+            let read = read_for_analysis(&write(&dir, &late), None).unwrap();
+            assert_eq!(read.step, step, "{rate_hz} Hz");
+        }
         for (rate_hz, step) in [(10_000.0, 5), (2000.0, 1), (100.0, 1)] {
             let text: String = std::iter::once("t_s,x_m,f_n\n".to_owned())
                 .chain((0..3000).map(|i| format!("{},0,{i}\n", i as f64 / rate_hz)))
