@@ -281,10 +281,9 @@ impl SegmentedCsv {
         if self.open.as_ref().map(|(k, _)| *k) != Some(segment) {
             self.start(segment)?;
         }
-        let failed = self.failed();
-        if let (Some((_, w)), Some((_, n))) = (self.open.as_mut(), self.written.last_mut()) {
+        if let (Some((_, w)), Some((path, n))) = (self.open.as_mut(), self.written.last_mut()) {
             w.write_record(csv_row(s, 0, rate_hz))
-                .with_context(|| failed)?;
+                .with_context(|| format!("{}: cannot write", path.display()))?;
             *n += 1;
         }
         Ok(())
@@ -410,6 +409,9 @@ impl Output {
     }
 
     fn item(&mut self, item: Item) -> Result<()> {
+        if let Item::Sample(_) = item {
+            self.in_segment += 1;
+        }
         match item {
             Item::Sample(s) if self.csv.is_some() => self.sample_to_csv(s)?,
             Item::Sample(s) => writeln!(
@@ -496,7 +498,6 @@ impl Output {
     }
 
     fn sample_to_csv(&mut self, s: Sample) -> Result<()> {
-        self.in_segment += 1;
         if let (Some(csv), Some(rate)) = (self.csv.as_mut(), self.rate_hz) {
             return csv.write(self.segment, &s, rate);
         }

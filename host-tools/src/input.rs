@@ -57,6 +57,18 @@ pub fn not_a_device(path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// An `--out` directory that exists must be one: a file named there is no
+/// place for trials.
+pub fn out_dir(dir: &Path) -> Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        bail!(
+            "{}: is a file, not a directory (--out names the directory the trials go to)",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
 /// Whether `a` and `b` name one file (the same path, a link, or the same
 /// inode); a path that does not exist is no file.
 pub fn same_file(a: &Path, b: &Path) -> bool {

@@ -38,7 +38,6 @@ pub struct RecordArgs {
 }
 
 pub fn run(args: &RecordArgs) -> Result<()> {
-    crate::link::check_baud(args.baud)?;
     let until = crate::decode::read_for(args.seconds)?
         .map(|d| {
             Instant::now()
@@ -95,14 +94,9 @@ pub fn run(args: &RecordArgs) -> Result<()> {
 /// The output directory, if it exists: a directory without trial CSVs
 /// that the new ones would mix with.
 fn check_dir(dir: &Path) -> Result<()> {
+    crate::input::out_dir(dir)?;
     if !dir.exists() {
         return Ok(());
-    }
-    if !dir.is_dir() {
-        bail!(
-            "{}: is a file, not a directory (--out names the directory the trials go to)",
-            dir.display()
-        );
     }
     let existing = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot read", dir.display()))?

@@ -508,6 +508,10 @@ fn decode_splits_at_an_index_that_goes_back_and_never_writes_time_backwards() {
         err.contains("0 samples lost") && err.contains("1 restarts"),
         "{err}"
     );
+    // As text too: the samples before the restart are a segment of their
+    // own (text mode counted none and said the segment had no sample).
+    let out = needle(&["decode", joined.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("; segment 2 begins"));
     let (first, second) = (times(&csv), times(&dir.path().join("joined-2.csv")));
     assert_eq!(first.len(), second.len());
     // A stretch of the stream twice (cut at frame boundaries): up to b,

@@ -1093,12 +1093,7 @@ impl Dataset<'_> {
     /// Write trial CSVs, firmware replays and truth.json into `dir`. Same
     /// seed, same bytes.
     pub fn write(&self, dir: &Path) -> Result<usize> {
-        if dir.exists() && !dir.is_dir() {
-            bail!(
-                "{}: is a file, not a directory (--out names the directory the trials go to)",
-                dir.display()
-            );
-        }
+        crate::input::out_dir(dir)?;
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
         // One simulation at a time in a directory (two at once shared the
