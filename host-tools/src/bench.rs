@@ -74,10 +74,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         &replay_path,
         sim::to_replay(&trial, 500, &config.load_cell, &config.encoder),
     )?;
-    println!(
+    crate::out!(
         "recorded insertion: liver 1, 3 mm/s, {} samples at 500 Hz",
         trial.len()
-    );
+    )?;
 
     let capture = dir.join("liver1.frames");
     let mut means = Vec::new();
@@ -96,14 +96,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             // samples: what the link must carry.
             let sent = std::fs::metadata(&capture)?.len();
             bytes_per_sample = sent as f64 / counts.per_region.len().max(1) as f64;
-            println!(
+            crate::out!(
                 "stream: {sent} bytes for {} samples = {bytes_per_sample:.2} bytes per sample ({:.0} Bd at 500 Hz, {:.0} Bd at 2 kHz, 10 bits a byte)",
                 counts.per_region.len(),
                 bytes_per_sample * 500.0 * 10.0,
                 bytes_per_sample * 2000.0 * 10.0
-            );
+            )?;
         }
-        println!(
+        crate::out!(
             "{core:>9} ({}): {:.1} instructions per sample (max {}, marker overhead {} subtracted), {} samples, counted in {:.0} s",
             board.target(),
             counts.mean(),
@@ -111,15 +111,16 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             counts.overhead,
             counts.per_region.len(),
             started.elapsed().as_secs_f64()
-        );
+        )?;
         means.push((core, counts.mean().round() as u64));
     }
     let elf = firmware::build(Board::Lm3s6965)?;
     let size = image_size(&elf)?;
-    println!(
+    crate::out!(
         "CI board image: {} bytes flash, {} bytes static RAM",
-        size.flash_bytes, size.ram_bytes
-    );
+        size.flash_bytes,
+        size.ram_bytes
+    )?;
     // The real board's load at its fastest rate: its per-sample
     // instructions (the same board code, replay in place of the sensors)
     // taken as cycles — the M4 issues about one instruction a cycle, and
@@ -130,10 +131,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         .find(|(k, _)| *k == "cortex-m4f")
         .map_or(0, |m| m.1);
     let load_percent = m4 as f64 * F411_FASTEST_HZ / F411_CLOCK_HZ * 100.0;
-    println!(
+    crate::out!(
         "nucleo-f411re at {F411_FASTEST_HZ} Hz: {m4} instructions a sample ≈ {load_percent:.2} % of its {} MHz",
         F411_CLOCK_HZ / 1e6
-    );
+    )?;
     if args.json {
         let json = serde_json::json!({
             "instructions_per_sample": means.iter().map(|(k, v)| (k.to_string(), serde_json::Value::from(*v))).collect::<serde_json::Map<_, _>>(),
@@ -142,7 +143,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             "ram_bytes": size.ram_bytes,
             "nucleo_f411re_cpu_load_at_2khz_percent": load_percent,
         });
-        println!("{json}");
+        crate::out!("{json}")?;
     }
     Ok(())
 }

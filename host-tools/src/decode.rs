@@ -138,7 +138,7 @@ fn read_blocks(path: &Path, mut each: impl FnMut(&[u8]) -> Result<()>) -> Result
             } else {
                 0.0
             };
-            eprint!(
+            crate::note_inline!(
                 "\rdecode: {shown}: {:.0} MB of {:.0} MB ({percent:.0} %)",
                 done as f64 / 1e6,
                 total as f64 / 1e6
@@ -147,7 +147,7 @@ fn read_blocks(path: &Path, mut each: impl FnMut(&[u8]) -> Result<()>) -> Result
         }
     }
     if progressed {
-        eprintln!();
+        crate::note!("");
     }
     Ok(())
 }
@@ -230,7 +230,7 @@ fn remove_stale_segments(base: &Path) -> Result<()> {
         if same && first.lines().next() == Some(header.as_str()) {
             std::fs::remove_file(path)
                 .with_context(|| format!("{}: cannot remove", path.display()))?;
-            eprintln!(
+            crate::note!(
                 "removed {} (a segment of an earlier decode to the same --csv, listed in {})",
                 path.display(),
                 list.display()
@@ -357,14 +357,14 @@ impl SegmentedCsv {
         self.list_segments()?;
         let total: u64 = self.written.iter().map(|(_, n)| n).sum();
         match self.written.as_slice() {
-            [] => eprintln!("no sample to write: {} not written", self.base.display()),
-            [(path, _)] => eprintln!("wrote {total} samples to {}", path.display()),
+            [] => crate::note!("no sample to write: {} not written", self.base.display()),
+            [(path, _)] => crate::note!("wrote {total} samples to {}", path.display()),
             files => {
                 let each: Vec<String> = files
                     .iter()
                     .map(|(p, n)| format!("{n} to {}", p.display()))
                     .collect();
-                eprintln!("wrote {total} samples: {}", each.join(", "));
+                crate::note!("wrote {total} samples: {}", each.join(", "));
             }
         }
         Ok(())
@@ -373,7 +373,7 @@ impl SegmentedCsv {
 
 /// Where decoded items go: text lines, and samples to CSV when asked.
 struct Output {
-    text: std::io::BufWriter<std::io::Stdout>,
+    text: std::io::BufWriter<crate::stdout::Named>,
     csv: Option<SegmentedCsv>,
     /// Segments begun after the first (the index went back).
     segment: u32,
@@ -398,7 +398,7 @@ const MOST_PENDING: usize = 1 << 16;
 impl Output {
     fn new(csv_path: Option<&Path>, capture: Option<&Path>, rate_hz: Option<u16>) -> Self {
         Self {
-            text: std::io::BufWriter::new(std::io::stdout()),
+            text: crate::stdout::buffered(),
             csv: csv_path.map(|p| SegmentedCsv::new(p, capture)),
             segment: 0,
             in_segment: 0,
@@ -480,7 +480,7 @@ impl Output {
             return Ok(());
         }
         if let Some(given) = self.fallback_hz.filter(|&g| g != rate_hz) {
-            eprintln!("decode: the stream says {rate_hz} Hz; --rate-hz {given} is for a stream that says nothing, and is not used");
+            crate::note!("decode: the stream says {rate_hz} Hz; --rate-hz {given} is for a stream that says nothing, and is not used");
         }
         self.use_rate(rate_hz)
     }
@@ -525,7 +525,7 @@ impl Output {
         if let Some(csv) = self.csv.as_mut() {
             csv.finish()?;
         }
-        eprintln!("{}", summary_line(stats));
+        crate::note!("{}", summary_line(stats));
         Ok(())
     }
 }

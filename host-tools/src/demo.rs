@@ -33,16 +33,16 @@ const QEMU_TIMEOUT: Duration = Duration::from_secs(120);
 pub fn run(args: &DemoArgs) -> Result<()> {
     let tissue = LIVER1;
     let plan = Plan::PAPER;
-    println!(
+    crate::out!(
         "needle demo: liver 1 of the paper (a1 = {} N/m, a2 = {} N/m², puncture at {:.2} mm), {} mm/s, {} Hz",
         tissue.a1_n_per_m,
         tissue.a2_n_per_m2,
         tissue.puncture_depth_m * 1e3,
         plan.speed_mps * 1e3,
         plan.rate_hz
-    );
+    )?;
     firmware::ensure_qemu()?;
-    println!("building the firmware for {} …", args.board.target());
+    crate::out!("building the firmware for {} …", args.board.target())?;
     let elf = firmware::build(args.board)?;
 
     let dir = args
@@ -61,19 +61,19 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let replay_path = dir.join("liver1.replay");
     std::fs::write(&replay_path, &replay)
         .with_context(|| format!("{}: cannot write", replay_path.display()))?;
-    println!(
+    crate::out!(
         "replay: {} ({} samples, {:.1} s)",
         replay_path.display(),
         trial.len(),
         trial.t_s.last().unwrap_or(&0.0)
-    );
+    )?;
 
     let listener = TcpListener::bind("127.0.0.1:0").context("cannot listen on loopback")?;
     let addr = listener.local_addr()?;
-    println!(
+    crate::out!(
         "running QEMU {:?}; frames UART → tcp {addr}, decoded as they arrive:",
         args.board
-    );
+    )?;
     let cmd = firmware::qemu_command(args.board, &elf, &replay_path, Serial::Tcp(addr), &[]);
     let qemu = std::thread::spawn(move || firmware::run_qemu(cmd, QEMU_TIMEOUT));
 
@@ -89,8 +89,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         }
         capture.extend_from_slice(&buf[..n]);
         decoder.feed(&buf[..n], |item| seen.item(item))?;
+        seen.output_result()?;
     }
     let stats = decoder.finish(|item| seen.item(item));
+    seen.output_result()?;
     let run = qemu
         .join()
         .map_err(|_| anyhow::anyhow!("QEMU thread panicked"))??
@@ -98,13 +100,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     std::fs::write(dir.join("frames.bin"), &capture)?;
     std::fs::write(dir.join("defmt.bin"), &run.defmt)?;
 
-    println!("{}", summary_line(&stats));
+    crate::out!("{}", summary_line(&stats))?;
     let (Some(contact), Some(puncture), Some(last)) = (seen.contact, seen.puncture, seen.last)
     else {
         bail!("the device did not report both contact and puncture");
     };
     let past_contact_mm = |x: f64| (x - contact.x.as_m()) * 1e3;
-    println!(
+    crate::out!(
         "contact at x = {:.3} mm; puncture {:.2} mm past contact at {:.3} N \
          (simulated truth {:.2} mm, {:.3} N; paper 16.65 ± 3.55 mm, 2.30 ± 0.83 N)",
         contact.x.as_m() * 1e3,
@@ -112,19 +114,19 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         puncture.force.as_n(),
         (truth.puncture_x_m - truth.contact_x_m) * 1e3,
         truth.puncture_force_n,
-    );
-    println!(
+    )?;
+    crate::out!(
         "deepest {:.2} mm past contact; final position {:.3} mm; {} faults",
         past_contact_mm(seen.deepest_m),
         last.x.as_m() * 1e3,
         seen.faults
-    );
-    println!(
+    )?;
+    crate::out!(
         "capture {} and defmt log {} kept (decode: needle decode FILE; defmt-print -e {} < LOG)",
         dir.join("frames.bin").display(),
         dir.join("defmt.bin").display(),
         elf.display()
-    );
+    )?;
     if stats.gaps > 0 || stats.skipped_bytes > 0 || seen.faults > 0 {
         bail!("the stream was not clean: see above");
     }
@@ -160,10 +162,24 @@ struct Seen {
     last: Option<Sample>,
     deepest_m: f64,
     faults: u32,
+    /// Standard output failed (the decoder's callback cannot return it).
+    output_error: Option<anyhow::Error>,
 }
 
 impl Seen {
+    fn output_result(&mut self) -> Result<()> {
+        self.output_error.take().map_or(Ok(()), Err)
+    }
+
     fn item(&mut self, item: Item) {
+        if self.output_error.is_none() {
+            if let Err(e) = self.show(item) {
+                self.output_error = Some(e);
+            }
+        }
+    }
+
+    fn show(&mut self, item: Item) -> Result<()> {
         match item {
             Item::Sample(s) => {
                 self.deepest_m = self.deepest_m.max(s.x.as_m());
@@ -184,10 +200,11 @@ impl Seen {
                     _ => false,
                 };
                 if !quiet {
-                    println!("  {}", describe(&frame, self.rate_hz));
+                    crate::out!("  {}", describe(&frame, self.rate_hz))?;
                 }
             }
-            other => println!("  {other:?}"),
+            other => crate::out!("  {other:?}")?,
         }
+        Ok(())
     }
 }

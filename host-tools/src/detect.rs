@@ -374,7 +374,7 @@ fn warn_if_truth_disagrees(
         .collect();
     let missing: Vec<&&str> = listed.iter().filter(|f| !present.contains(**f)).collect();
     if !untold.is_empty() || !missing.is_empty() {
-        eprintln!(
+        crate::note!(
             "needle detect: {}: truth.json and the CSVs disagree: no truth for {untold:?}, no CSV for {missing:?}; scoring only the trials both have",
             dir.display()
         );
@@ -402,10 +402,10 @@ pub fn run(args: &DetectArgs) -> Result<()> {
     config.assist.target_depth = depth;
     let out = detect_dataset(&args.dir, &config)?;
     if let Some(eval) = out.get("evaluation").and_then(Value::as_array) {
-        eprintln!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");
-        eprintln!("|---|---|---|---|---|---|---|");
+        crate::note!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");
+        crate::note!("|---|---|---|---|---|---|---|");
         for k in eval {
-            eprintln!(
+            crate::note!(
                 "| {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} |",
                 k["kind"].as_str().unwrap_or("?"),
                 k["true_events"],

@@ -63,12 +63,12 @@ pub enum Action {
 pub fn run(args: &DeviceArgs) -> Result<()> {
     if let Action::Tissues = args.action {
         for (i, (name, p)) in LIBRARY.iter().enumerate() {
-            println!(
+            crate::out!(
                 "{i:>2}  {name:<18} puncture {:.2} N at {:.1} mm, cutting {:.2} N",
                 p.puncture_force_n,
                 p.puncture_depth_m * 1e3,
                 p.cutting_force_n
-            );
+            )?;
         }
         return Ok(());
     }
@@ -78,7 +78,7 @@ pub fn run(args: &DeviceArgs) -> Result<()> {
     };
     let mut link = Link::open(port, args.baud)?;
     match link.command(command)? {
-        Ok(()) => println!("done"),
+        Ok(()) => crate::out!("done")?,
         Err(e) => bail!("{port}: the device refused: {}", command_error(&e)),
     }
     if let Action::Config = args.action {
@@ -138,7 +138,7 @@ fn print_config(link: &mut Link, port: &str) -> Result<()> {
         for item in link.poll()? {
             if let Item::Frame(Message::Config(c)) = item {
                 let rate = c.config.velocity.sample_rate_hz;
-                println!("{}", describe(&Message::Config(c.clone()), Some(rate)));
+                crate::out!("{}", describe(&Message::Config(c.clone()), Some(rate)))?;
                 let modes: Vec<&str> = needle_holder::assist::AssistModes::NAMES
                     .iter()
                     .filter(|(m, _)| c.config.assist.modes.contains(*m))
@@ -148,7 +148,7 @@ fn print_config(link: &mut Link, port: &str) -> Result<()> {
                     TissueSource::Library(_) => "from the library",
                     TissueSource::Uploaded => "uploaded",
                 };
-                println!(
+                crate::out!(
                     "rate {rate} Hz, tissue {} ({tissue}), assist {}",
                     crate::decode::tissue_name(c.tissue),
                     if modes.is_empty() {
@@ -156,7 +156,7 @@ fn print_config(link: &mut Link, port: &str) -> Result<()> {
                     } else {
                         modes.join(",")
                     }
-                );
+                )?;
                 return Ok(());
             }
         }

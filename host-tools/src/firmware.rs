@@ -173,7 +173,7 @@ pub fn ensure_target_using(rustup: &Path, root: &Path, target: &str) -> Result<(
         // No rustup: cargo may still have the target (a distro toolchain);
         // the build says so if not, and this says what to run.
         _ => {
-            eprintln!(
+            crate::note!(
                 "needle: cannot ask rustup whether {target} is installed; if the build fails, run `rustup target add {target}`"
             );
             return Ok(());
@@ -182,7 +182,7 @@ pub fn ensure_target_using(rustup: &Path, root: &Path, target: &str) -> Result<(
     if target_action(&installed, target) == TargetAction::Present {
         return Ok(());
     }
-    eprintln!("needle: the Rust target {target} is missing: installing it with `rustup target add {target}`");
+    crate::note!("needle: the Rust target {target} is missing: installing it with `rustup target add {target}`");
     let status = Command::new(rustup)
         .current_dir(root)
         .args(["target", "add", target])
@@ -199,7 +199,7 @@ pub fn ensure_qemu() -> Result<()> {
     if which("qemu-system-arm") {
         return Ok(());
     }
-    eprintln!("qemu-system-arm is missing: installing it with apt-get");
+    crate::note!("qemu-system-arm is missing: installing it with apt-get");
     let sudo: &[&str] = if is_root() { &[] } else { &["sudo"] };
     for args in [
         &["apt-get", "update"][..],

@@ -18,6 +18,28 @@ use needle_holder::protocol::{Command, CommandError, CommandFrame};
 
 use crate::frames::{Item, Message, StreamDecoder};
 
+/// The bytes a link keeps: in memory until it has a file, then in the
+/// file (unbuffered: each read from the port is one write).
+#[derive(Default)]
+struct Capture {
+    held: Vec<u8>,
+    file: Option<(std::fs::File, std::path::PathBuf)>,
+}
+
+impl Capture {
+    fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        match &mut self.file {
+            Some((file, path)) => file
+                .write_all(bytes)
+                .with_context(|| format!("{}: cannot write", path.display())),
+            None => {
+                self.held.extend_from_slice(bytes);
+                Ok(())
+            }
+        }
+    }
+}
+
 /// How long to wait for a reply before sending the command again.
 const REPLY_TIMEOUT: Duration = Duration::from_millis(1500);
 /// Sends of one command before giving up.
@@ -33,8 +55,9 @@ pub struct Link {
     next_seq: Option<u32>,
     /// Items read while waiting for a reply, for the caller.
     backlog: Vec<Item>,
-    /// The raw bytes read, when the caller keeps them.
-    capture: Option<Vec<u8>>,
+    /// Where the raw bytes read go, as they arrive, when the caller keeps
+    /// them (`needle record`'s `stream.bin`).
+    capture: Option<Capture>,
     closed: bool,
 }
 
@@ -57,17 +80,20 @@ impl Link {
         })
     }
 
-    /// Keep every byte read from now on (see [`Self::take_capture`]).
+    /// Keep every byte read from now on, in memory until
+    /// [`Self::capture_to`] gives a file.
     pub fn keep_capture(&mut self) {
-        self.capture.get_or_insert_with(Vec::new);
+        self.capture.get_or_insert_with(Capture::default);
     }
 
-    /// The bytes read since [`Self::keep_capture`], leaving it empty.
-    pub fn take_capture(&mut self) -> Vec<u8> {
-        self.capture
-            .as_mut()
-            .map(std::mem::take)
-            .unwrap_or_default()
+    /// Write the bytes kept so far, and every byte read from now on, to
+    /// `file` at `path`, as they arrive: a recording stopped by any means
+    /// keeps what came before.
+    pub fn capture_to(&mut self, file: std::fs::File, path: &std::path::Path) -> Result<()> {
+        let capture = self.capture.get_or_insert_with(Capture::default);
+        capture.file = Some((file, path.to_path_buf()));
+        let held = std::mem::take(&mut capture.held);
+        capture.write(&held)
     }
 
     /// The port closed (the device went away, or QEMU exited).
@@ -118,7 +144,7 @@ impl Link {
             Ok(0) => self.closed = true,
             Ok(n) => {
                 if let Some(capture) = self.capture.as_mut() {
-                    capture.extend_from_slice(&buf[..n]);
+                    capture.write(&buf[..n])?;
                 }
                 let backlog = &mut self.backlog;
                 let mut seq = None;
@@ -188,9 +214,12 @@ impl Link {
                 }
                 let start = self.backlog.len();
                 self.read_once()?;
-                let found = self.backlog[start..].iter().position(|item| {
-                    matches!(item, Item::Frame(Message::Reply(r)) if r.seq == frame.seq || r.seq == 0)
-                });
+                // Only the reply that names this command answers it: a
+                // stray byte on the line draws a `Corrupted` reply with
+                // sequence 0 just before the command is read and done.
+                let found = self.backlog[start..].iter().position(
+                    |item| matches!(item, Item::Frame(Message::Reply(r)) if r.seq == frame.seq),
+                );
                 if let Some(at) = found {
                     if let Item::Frame(Message::Reply(r)) = self.backlog.remove(start + at) {
                         return Ok(r.result);

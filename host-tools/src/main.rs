@@ -43,7 +43,10 @@ enum Command {
 
 fn main() -> ExitCode {
     keep_freed_heap();
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return clap_exit(&e),
+    };
     let result = match &cli.command {
         Command::Decode(args) => decode::run(args),
         Command::Demo(args) => demo::run(args),
@@ -61,9 +64,27 @@ fn main() -> ExitCode {
         // `needle decode … | head` closing the pipe is not a failure.
         Err(err) if is_broken_pipe(&err) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("needle: {err:#}");
+            host_tools::note!("needle: {err:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// What clap would do for `--help`, `--version` or a bad argument, but a
+/// help that cannot be written is a failure (clap's own `exit` ignores
+/// that and exits 0 over `needle --help > /dev/full`).
+fn clap_exit(e: &clap::Error) -> ExitCode {
+    use std::io::ErrorKind::BrokenPipe;
+    let printed = e.print();
+    if e.use_stderr() {
+        return ExitCode::from(2);
+    }
+    match printed {
+        Err(io) if io.kind() != BrokenPipe => {
+            host_tools::note!("needle: cannot write to standard output: {io}");
+            ExitCode::FAILURE
+        }
+        _ => ExitCode::SUCCESS,
     }
 }
 

@@ -46,10 +46,12 @@ pub fn run(args: &RecordArgs) -> Result<()> {
         })
         .transpose()?;
     check_dir(&args.out)?;
+    // Ctrl-C, `kill` and a closed terminal all end a recording the same
+    // way: the trial in hand is written whole.
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-        .context("cannot catch Ctrl-C")?;
+        .context("cannot catch Ctrl-C, SIGTERM and SIGHUP")?;
     let mut link = Link::open(&args.port, args.baud)?;
     link.keep_capture();
     if let Err(e) = link.command(Command::Stream(true))? {
@@ -63,12 +65,37 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     // it left an empty directory.
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
-    eprintln!(
+    let capture = args.out.join("stream.bin");
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&capture)
+        .with_context(|| format!("{}: cannot create", capture.display()))?;
+    link.capture_to(file, &capture)?;
+    crate::note!(
         "recording from {} into {} (Ctrl-C stops)",
         args.port,
         args.out.display()
     );
     let mut recorder = Recorder::new(&args.out);
+    let recorded = record(&mut link, &mut recorder, &stop, until);
+    if let Err(e) = recorded {
+        recorder.abandon();
+        return Err(e);
+    }
+    recorder.finish()?;
+    crate::note!("{}", crate::decode::summary_line(&link.decoder().stats()));
+    Ok(())
+}
+
+/// Read the device into `recorder` until a signal, `until`, or the
+/// device goes away.
+fn record(
+    link: &mut Link,
+    recorder: &mut Recorder,
+    stop: &AtomicBool,
+    until: Option<Instant>,
+) -> Result<()> {
     let mut shown = Instant::now();
     while !stop.load(Ordering::SeqCst) && !link.closed() && until.is_none_or(|u| Instant::now() < u)
     {
@@ -83,11 +110,12 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     for item in link.finish() {
         recorder.item(item)?;
     }
-    let capture = args.out.join("stream.bin");
-    std::fs::write(&capture, link.take_capture())
-        .with_context(|| format!("{}: cannot write", capture.display()))?;
-    recorder.finish()?;
-    eprintln!("{}", crate::decode::summary_line(&link.decoder().stats()));
+    if link.closed() {
+        recorder.line("the device went away (its port closed)");
+        recorder.close("the device went away")?;
+    } else if stop.load(Ordering::SeqCst) {
+        recorder.close("stopped by a signal")?;
+    }
     Ok(())
 }
 
@@ -101,7 +129,12 @@ fn check_dir(dir: &Path) -> Result<()> {
     let existing = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot read", dir.display()))?
         .filter_map(|e| e.ok())
-        .any(|e| crate::trial::is_trial_csv(&e.path()) || e.file_name() == "stream.bin");
+        .any(|e| {
+            let name = e.file_name();
+            crate::trial::is_trial_csv(&e.path())
+                || name == "stream.bin"
+                || name.to_string_lossy().ends_with(".csv.part")
+        });
     if existing {
         bail!(
             "{}: already holds CSV files or a stream.bin (an earlier session's); record into an empty directory",
@@ -111,9 +144,11 @@ fn check_dir(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// One trial being written.
+/// One trial being written, under a temporary name (`trial_NNN.csv.part`,
+/// which no command reads as a trial) until it is whole.
 struct TrialFile {
     path: PathBuf,
+    part: PathBuf,
     writer: csv::Writer<std::fs::File>,
     first_index: u32,
     samples: u64,
@@ -160,7 +195,7 @@ impl Recorder {
             // The device restarted: the trial in hand ends there.
             Item::Restart { last } => {
                 self.line(&format!("the device restarted after sample {last}"));
-                self.close()?;
+                self.close("the device restarted")?;
             }
             Item::Frame(_) => {}
         }
@@ -169,7 +204,7 @@ impl Recorder {
 
     /// A line above the progress line.
     fn line(&self, text: &str) {
-        eprintln!("\r\x1b[K{text}");
+        crate::note!("\r\x1b[K{text}");
     }
 
     fn learn_rate(&mut self, rate_hz: u16) -> Result<()> {
@@ -189,9 +224,11 @@ impl Recorder {
         };
         if self.current.is_none() {
             let path = self.dir.join(format!("trial_{:03}.csv", self.written));
-            let writer = create_csv(&path)?;
+            let part = self.dir.join(format!("trial_{:03}.csv.part", self.written));
+            let writer = create_csv(&part)?;
             self.current = Some(TrialFile {
                 path,
+                part,
                 writer,
                 first_index: s.index,
                 samples: 0,
@@ -205,40 +242,48 @@ impl Recorder {
         trial
             .writer
             .write_record(csv_row(&s, trial.first_index, rate))
-            .with_context(|| format!("{}: cannot write", trial.path.display()))?;
+            .with_context(|| format!("{}: cannot write", trial.part.display()))?;
         trial.samples += 1;
         trial.last = Some(s);
         if s.phase != Phase::Out {
             trial.entered = true;
         } else if trial.entered {
             // The needle left the tissue: this insertion is complete.
-            self.close()?;
+            self.close("the needle left the tissue")?;
         }
         Ok(())
     }
 
-    /// Write the trial in hand; one with no insertion is no trial.
-    fn close(&mut self) -> Result<()> {
+    /// Write the trial in hand, ended for `why`; one with no insertion is
+    /// no trial.
+    fn close(&mut self, why: &str) -> Result<()> {
         let Some(mut trial) = self.current.take() else {
             return Ok(());
         };
         trial
             .writer
             .flush()
-            .with_context(|| format!("{}: cannot write", trial.path.display()))?;
+            .with_context(|| format!("{}: cannot write", trial.part.display()))?;
         drop(trial.writer);
         if !trial.entered {
-            std::fs::remove_file(&trial.path)
-                .with_context(|| format!("{}: cannot remove", trial.path.display()))?;
+            std::fs::remove_file(&trial.part)
+                .with_context(|| format!("{}: cannot remove", trial.part.display()))?;
             self.line(&format!(
                 "{} samples after the last insertion (no tissue in them): kept in stream.bin only",
                 trial.samples
             ));
             return Ok(());
         }
+        std::fs::rename(&trial.part, &trial.path).with_context(|| {
+            format!(
+                "{}: cannot rename to {}",
+                trial.part.display(),
+                trial.path.display()
+            )
+        })?;
         let rate = f64::from(self.rate_hz.unwrap_or(1));
         self.line(&format!(
-            "{}: {} samples, {:.2} s",
+            "{}: {} samples, {:.2} s ({why})",
             trial.path.display(),
             trial.samples,
             trial.samples as f64 / rate
@@ -247,12 +292,25 @@ impl Recorder {
         Ok(())
     }
 
+    /// After a failure (a full disk, say): the trial in hand stays under
+    /// its temporary name, as far as it could be written, and is named.
+    fn abandon(&mut self) {
+        if let Some(mut trial) = self.current.take() {
+            let _ = trial.writer.flush();
+            self.line(&format!(
+                "{}: the trial in hand, incomplete ({} samples), left under this name",
+                trial.part.display(),
+                trial.samples
+            ));
+        }
+    }
+
     fn progress(&self) {
         let (Some(trial), Some(rate)) = (self.current.as_ref(), self.rate_hz) else {
             return;
         };
         let Some(s) = trial.last else { return };
-        eprint!(
+        crate::note_inline!(
             "\r\x1b[Ktrial {}: {:.1} s, {} samples, x {:.2} mm, f {:.3} N, {}",
             self.written,
             trial.samples as f64 / f64::from(rate),
@@ -270,8 +328,8 @@ impl Recorder {
                 self.pending.len()
             );
         }
-        self.close()?;
-        eprintln!("\r\x1b[K{} trials in {}", self.written, self.dir.display());
+        self.close("the recording ended")?;
+        crate::note!("\r\x1b[K{} trials in {}", self.written, self.dir.display());
         Ok(())
     }
 }

@@ -442,7 +442,7 @@ impl Progress {
         let now = std::time::Instant::now();
         let second = std::time::Duration::from_secs(1);
         if now - self.started >= second && self.last.is_none_or(|l| now - l >= second) {
-            eprintln!(
+            crate::note!(
                 "needle {}: {:5.1} s: {}",
                 self.command,
                 (now - self.started).as_secs_f64(),
@@ -511,12 +511,12 @@ pub fn read_dataset(dir: &Path, command: &str) -> Result<(Dataset, Vec<Unreadabl
         match read_for_analysis(&file, Some(&mut progress)) {
             Ok(analysed) => {
                 if let Some(note) = analysed.thinning_note(&file) {
-                    eprintln!("needle {command}: {note}");
+                    crate::note!("needle {command}: {note}");
                 }
                 trials.push((file, analysed.trial));
             }
             Err(err) => {
-                eprintln!("needle {command}: {err:#} (left out)");
+                crate::note!("needle {command}: {err:#} (left out)");
                 unreadable.push(Unreadable {
                     file,
                     reason: format!("{err:#}"),

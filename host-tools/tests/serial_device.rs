@@ -421,40 +421,170 @@ fn needle_record_over_a_pty_gives_the_trial_csv_decode_gives_on_a_capture() {
     assert!(stderr.contains("trial_000.csv"), "{stderr}");
 }
 
+/// Bytes left on the line before a command, as `printf '\x01\x02' > P`
+/// leaves them: the device reads them with the command's leading zero as
+/// a corrupted frame, and answers `Corrupted` with sequence 0 just before
+/// it reads and carries out the command itself.
+fn stray_bytes(port: &str) {
+    use std::io::Write;
+    let mut pty = std::fs::OpenOptions::new().write(true).open(port).unwrap();
+    pty.write_all(b"\x01\x02").unwrap();
+}
+
+/// `needle ARGS` against the device on `port`, after stray bytes: its
+/// stdout, having asserted that it succeeded.
+fn needle_after_stray_bytes(port: &str, args: &[&str]) -> String {
+    stray_bytes(port);
+    let out = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args(args)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "needle {args:?}: {stderr}");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
 #[test]
-fn ctrl_c_stops_needle_record_and_keeps_the_trial_in_hand() {
+fn a_command_after_stray_bytes_is_reported_done_and_is_done() {
     let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    // The paper's insertion: 25 s, interrupted well before its end.
     let replay = replay_file(dir.path(), &Plan::PAPER, 0);
     let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let port = device.port.as_str();
+    let device_args = |rest: &[&'static str]| -> Vec<&str> {
+        let mut args = vec!["device", "--port", port];
+        args.extend_from_slice(rest);
+        args
+    };
+    for action in [
+        &["tissue", "liver2"][..],
+        &["assist", "puncture"],
+        &["stream", "off"],
+    ] {
+        let stdout = needle_after_stray_bytes(port, &device_args(action));
+        assert_eq!(stdout.trim(), "done", "{action:?}");
+    }
+    let config = needle_after_stray_bytes(port, &device_args(&["config"]));
+    assert!(
+        config.contains("tissue liver2") && config.contains("assist puncture"),
+        "{config}"
+    );
+    // `needle record` starts the stream the same way.
     let out = dir.path().join("recorded");
-    let mut record = Process::new(env!("CARGO_BIN_EXE_needle"))
+    let out_arg = out.to_str().unwrap();
+    needle_after_stray_bytes(
+        port,
+        &["record", "--port", port, "--seconds", "1", "--out", out_arg],
+    );
+    assert!(std::fs::metadata(out.join("stream.bin")).unwrap().len() > 0);
+}
+
+#[test]
+fn needle_record_with_standard_error_full_records_all_the_same() {
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let plan = Plan {
+        speed_mps: 0.01,
+        depth_m: 0.015,
+        dwell_s: 0.5,
+        ..Plan::PAPER
+    };
+    let replay = replay_file(dir.path(), &plan, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let out = dir.path().join("recorded");
+    let full = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/full")
+        .unwrap();
+    let status = Process::new(env!("CARGO_BIN_EXE_needle"))
         .args(["record", "--port", &device.port, "--out"])
         .arg(&out)
-        .stderr(std::process::Stdio::piped())
-        .spawn()
+        .stderr(full)
+        .status()
         .unwrap();
-    // Into the tissue (contact at 1.7 s, puncture at 7.2 s), then Ctrl-C.
-    std::thread::sleep(Duration::from_secs(5));
-    // SAFETY: kill(2) on our own child's pid.
-    assert_eq!(unsafe { libc::kill(record.id() as i32, libc::SIGINT) }, 0);
-    let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(10))
-        .unwrap()
-        .expect("needle record stops at Ctrl-C");
-    let mut stderr = String::new();
-    std::io::Read::read_to_string(&mut record.stderr.take().unwrap(), &mut stderr).unwrap();
-    assert!(status.success(), "{stderr}");
-    let trial =
-        std::fs::read_to_string(out.join("trial_000.csv")).expect("the trial in hand is written");
-    let rows: Vec<&str> = trial.lines().skip(1).collect();
-    assert!(rows.len() > 500, "{} rows", rows.len());
-    assert!(
-        rows.iter().any(|r| r.ends_with(",loading")),
-        "it was in the tissue"
-    );
-    assert!(out.join("stream.bin").exists());
-    drop(device);
+    assert!(status.success());
+    let trial = std::fs::read_to_string(out.join("trial_000.csv")).unwrap();
+    assert!(trial.lines().last().unwrap().ends_with(",out"));
+    assert!(std::fs::metadata(out.join("stream.bin")).unwrap().len() > 0);
+}
+
+/// The lines of `stderr` read so far, collected by a thread.
+fn collect_lines(stderr: impl std::io::Read + Send + 'static) -> std::sync::mpsc::Receiver<String> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut reader = std::io::BufReader::new(stderr);
+        let mut buf = Vec::new();
+        // Progress lines end in a carriage return, messages in a newline.
+        loop {
+            buf.clear();
+            let mut byte = [0u8];
+            loop {
+                match std::io::Read::read(&mut reader, &mut byte) {
+                    Ok(1) if byte[0] != b'\r' && byte[0] != b'\n' => buf.push(byte[0]),
+                    Ok(1) => break,
+                    _ => return,
+                }
+            }
+            if tx.send(String::from_utf8_lossy(&buf).into_owned()).is_err() {
+                return;
+            }
+        }
+    });
+    rx
+}
+
+#[test]
+fn ctrl_c_sigterm_and_sighup_stop_needle_record_with_the_stream_and_trial_whole() {
+    for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        let _alone = one_at_a_time();
+        let dir = tempfile::tempdir().unwrap();
+        let replay = replay_file(dir.path(), &Plan::PAPER, 0);
+        let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+        let out = dir.path().join("recorded");
+        let mut record = Process::new(env!("CARGO_BIN_EXE_needle"))
+            .args(["record", "--port", &device.port, "--out"])
+            .arg(&out)
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let lines = collect_lines(record.stderr.take().unwrap());
+        // Wait for the needle to be in the tissue, as the progress line says.
+        let mut seen = Vec::new();
+        let until = Instant::now() + Duration::from_secs(60);
+        while !seen.iter().any(|l: &String| l.ends_with("loading")) {
+            assert!(Instant::now() < until, "never loading: {seen:?}");
+            if let Ok(line) = lines.recv_timeout(Duration::from_secs(1)) {
+                seen.push(line);
+            }
+        }
+        // The raw stream is on disk while the recording runs.
+        let streamed = std::fs::metadata(out.join("stream.bin")).unwrap().len();
+        assert!(streamed > 0, "stream.bin is written as it arrives");
+        // SAFETY: kill(2) on our own child's pid.
+        assert_eq!(unsafe { libc::kill(record.id() as i32, signal) }, 0);
+        let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
+            .unwrap()
+            .expect("needle record stops at the signal");
+        let rest: Vec<String> = lines.iter().collect();
+        assert!(status.success(), "signal {signal}: {rest:?}");
+        let trial = std::fs::read_to_string(out.join("trial_000.csv")).unwrap();
+        assert!(trial.ends_with('\n'), "the trial ends with a whole row");
+        let widths: Vec<usize> = trial.lines().map(|l| l.split(',').count()).collect();
+        assert!(widths.iter().all(|&w| w == widths[0]), "every row whole");
+        assert!(trial.lines().any(|r| r.ends_with(",loading")));
+        assert!(!out.join("trial_000.csv.part").exists());
+        // The kept stream decodes to the trial's rows, and more.
+        let kept = dir.path().join("kept.csv");
+        let decoded = Process::new(env!("CARGO_BIN_EXE_needle"))
+            .args(["decode", "--csv"])
+            .arg(&kept)
+            .arg(out.join("stream.bin"))
+            .output()
+            .unwrap();
+        assert!(decoded.status.success());
+        assert!(std::fs::read_to_string(&kept).unwrap().starts_with(&trial));
+        drop(device);
+    }
 }
 
 #[test]

@@ -393,7 +393,7 @@ pub fn load_reporting(
         match fit_trial(&trial) {
             Ok(fit) => trials.push((file, trial, fit)),
             Err(e) => {
-                eprintln!(
+                crate::note!(
                     "needle diagnose: {}: cannot find its geometry: {e:#} (left out)",
                     file.display()
                 );
@@ -1050,7 +1050,7 @@ fn with_device_model(
         match used {
             Ok(()) => kept.push(p),
             Err(e) => {
-                eprintln!(
+                crate::note!(
                     "needle diagnose: {e:#} (left out: --device-model needs the device's model_n)"
                 );
                 skipped.push(crate::trial::skipped(&path, &format!("{e:#}")));
@@ -1101,7 +1101,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut progress = |what: &str| {
         let elapsed = started.elapsed().as_secs_f64();
         if elapsed > 1.0 {
-            eprintln!("needle diagnose: {elapsed:5.1} s: {what}");
+            crate::note!("needle diagnose: {elapsed:5.1} s: {what}");
         }
     };
     progress("reading and fitting the trials");
@@ -1117,7 +1117,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut out = diagnose_with_progress(&data, nominal, &mut progress);
     out["skipped"] = Value::from(skipped);
     progress("done");
-    eprintln!("{}", report::headline(&out));
+    crate::note!("{}", report::headline(&out));
     if let Some(path) = &args.residuals {
         write_residuals(path, &data)?;
     }

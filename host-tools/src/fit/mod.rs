@@ -115,7 +115,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
         match fit_trial(trial).with_context(|| format!("{}: cannot fit", file.display())) {
             Ok(fit) => fits.push((file.clone(), fit)),
             Err(err) => {
-                eprintln!("needle fit: {err:#} (left out)");
+                crate::note!("needle fit: {err:#} (left out)");
                 skipped.push(crate::trial::skipped(file, &format!("{err:#}")));
             }
         }
@@ -459,7 +459,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         None => crate::stdout::write(&(text + "\n"))?,
     }
     for note in toml.lines().filter(|l| l.starts_with(NOTE)) {
-        eprintln!("needle fit: {}", note.trim_start_matches("# "));
+        crate::note!("needle fit: {}", note.trim_start_matches("# "));
     }
     if let Some(path) = &args.toml {
         std::fs::write(path, &toml).with_context(|| format!("{}: cannot write", path.display()))?;

@@ -1044,7 +1044,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         },
     }
     .write(&args.out)?;
-    eprintln!("wrote {written} trials to {}", args.out.display());
+    crate::note!("wrote {written} trials to {}", args.out.display());
     Ok(())
 }
 
