@@ -163,7 +163,9 @@ pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
     found
 }
 
-/// Detection quality for one event kind.
+/// Detection quality for one event kind. Latencies are counted from the
+/// true event's `t_s` (for a puncture or a structure, the first sample at
+/// which the force has fallen), over the detections that found one.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct KindScore {
     pub kind: String,
@@ -172,44 +174,89 @@ pub struct KindScore {
     pub misses: usize,
     pub false_alarms: usize,
     pub latency_samples_mean: f64,
+    pub latency_samples_min: f64,
     pub latency_samples_max: f64,
     pub latency_ms_mean: f64,
     pub latency_ms_max: f64,
 }
 
-/// A detection this long before the true event still counts (s): the
-/// device reports a puncture at the peak it confirmed, a contact at the
-/// surface it placed back along the curve, so times can sit a little early.
-const EARLY_S: f64 = 0.05;
-/// …and this long after it.
-const LATE_S: f64 = 1.0;
+/// A true event as the scorer reads it (from `truth.json`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrueEvent {
+    pub kind: String,
+    /// The event's sample; for a puncture or a structure, the first at
+    /// which the force has fallen.
+    pub t_s: f64,
+    /// For a puncture or a structure, the force peak before the fall.
+    pub peak_t_s: f64,
+    /// Where the needle was (the file's coordinates).
+    pub x_m: f64,
+}
+
+/// A detection as the scorer reads it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Found {
+    pub kind: String,
+    /// The sample at which the device reported it.
+    pub t_s: f64,
+    /// Where the needle was at that sample (not the position the event
+    /// names, which a detector may place back along the curve).
+    pub needle_x_m: f64,
+}
+
+/// A puncture counts from its peak to this many samples after the fall:
+/// the device can know of it only once the force falls, and a robot told
+/// to stop at puncture must be told before the needle travels on.
+pub const PUNCTURE_LATE_SAMPLES: f64 = 2.0;
+/// A structure (a vessel wall, a membrane) from its peak to this many
+/// samples after its fall: its drop is a few tenths of a newton, so the
+/// detector confirms it against the local trend over a few samples.
+pub const STRUCTURE_LATE_SAMPLES: f64 = 5.0;
+/// An exit into air within this many samples after the needle leaves.
+pub const EXIT_LATE_SAMPLES: f64 = 2.0;
+/// A contact is found once the tissue pushes back measurably, which takes
+/// travel, not time (1 mm/s or 10 mm/s): from the true contact until the
+/// needle is this far past it.
+pub const CONTACT_TRAVEL_M: f64 = 0.002;
+
+/// Whether `found` finds `truth` (same kind assumed), the sample period
+/// being `period_s`.
+pub fn finds(truth: &TrueEvent, found: &Found, period_s: f64) -> bool {
+    // Times in a CSV are rounded; a thousandth of a period is no sample.
+    let slack = 1e-3 * period_s;
+    let within = |from: f64, late_samples: f64| {
+        found.t_s >= from - slack && found.t_s <= truth.t_s + late_samples * period_s + slack
+    };
+    match truth.kind.as_str() {
+        "puncture" => within(truth.peak_t_s, PUNCTURE_LATE_SAMPLES),
+        "structure" => within(truth.peak_t_s, STRUCTURE_LATE_SAMPLES),
+        "exit" => within(truth.t_s, EXIT_LATE_SAMPLES),
+        _ => found.t_s >= truth.t_s - slack && found.needle_x_m <= truth.x_m + CONTACT_TRAVEL_M,
+    }
+}
 
 /// Score detections against truth events, per kind.
-pub fn score(
-    truth: &[(String, f64)],
-    found: &[(String, f64)],
-    rate_hz: f64,
-    kinds: &[&str],
-) -> Vec<KindScore> {
+pub fn score(truth: &[TrueEvent], found: &[Found], rate_hz: f64, kinds: &[&str]) -> Vec<KindScore> {
+    let period_s = 1.0 / rate_hz;
     kinds
         .iter()
         .map(|&kind| {
-            let true_t: Vec<f64> = truth.iter().filter(|e| e.0 == kind).map(|e| e.1).collect();
-            let mut used = vec![false; true_t.len()];
+            let true_events: Vec<&TrueEvent> = truth.iter().filter(|e| e.kind == kind).collect();
+            let mut used = vec![false; true_events.len()];
             let mut s = KindScore {
                 kind: kind.to_owned(),
-                true_events: true_t.len(),
+                true_events: true_events.len(),
                 ..Default::default()
             };
             let mut latencies = Vec::new();
-            for (_, t) in found.iter().filter(|e| e.0 == kind) {
+            for f in found.iter().filter(|e| e.kind == kind) {
                 s.detected += 1;
-                let hit = (0..true_t.len())
-                    .find(|&k| !used[k] && *t >= true_t[k] - EARLY_S && *t <= true_t[k] + LATE_S);
+                let hit = (0..true_events.len())
+                    .find(|&k| !used[k] && finds(true_events[k], f, period_s));
                 match hit {
                     Some(k) => {
                         used[k] = true;
-                        latencies.push(t - true_t[k]);
+                        latencies.push(f.t_s - true_events[k].t_s);
                     }
                     None => s.false_alarms += 1,
                 }
@@ -218,12 +265,25 @@ pub fn score(
             if !latencies.is_empty() {
                 let mean = latencies.iter().sum::<f64>() / latencies.len() as f64;
                 let max = latencies.iter().copied().fold(f64::MIN, f64::max);
+                let min = latencies.iter().copied().fold(f64::MAX, f64::min);
                 (s.latency_ms_mean, s.latency_ms_max) = (mean * 1e3, max * 1e3);
                 (s.latency_samples_mean, s.latency_samples_max) = (mean * rate_hz, max * rate_hz);
+                s.latency_samples_min = min * rate_hz;
             }
             s
         })
         .collect()
+}
+
+/// The needle's position at the row at `t_s` (a detection's own row).
+fn needle_x_at(trial: &crate::trial::Trial, t_s: f64) -> f64 {
+    let i = trial.t_s.partition_point(|&t| t < t_s);
+    trial
+        .x_m
+        .get(i)
+        .or(trial.x_m.last())
+        .copied()
+        .unwrap_or(0.0)
 }
 
 /// Merge per-trial scores.
@@ -237,6 +297,13 @@ fn merge(total: &mut [KindScore], part: &[KindScore]) {
             t.latency_samples_mean =
                 (t.latency_samples_mean * n0 + p.latency_samples_mean * n1) / (n0 + n1);
             t.latency_ms_mean = (t.latency_ms_mean * n0 + p.latency_ms_mean * n1) / (n0 + n1);
+        }
+        if n1 > 0.0 {
+            t.latency_samples_min = if n0 > 0.0 {
+                t.latency_samples_min.min(p.latency_samples_min)
+            } else {
+                p.latency_samples_min
+            };
         }
         t.latency_samples_max = t.latency_samples_max.max(p.latency_samples_max);
         t.latency_ms_max = t.latency_ms_max.max(p.latency_ms_max);
@@ -267,6 +334,11 @@ struct TruthTrial {
 struct TruthEvent {
     kind: TruthKind,
     t_s: f64,
+    /// Absent (a hand-written truth): the peak is taken as the event's
+    /// own sample.
+    peak_t_s: Option<f64>,
+    /// Absent: a contact is scored by time alone.
+    x_m: Option<f64>,
 }
 
 #[derive(Debug, Deserialize, Clone, Copy)]
@@ -324,13 +396,24 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
             .as_ref()
             .and_then(|t| t.trials.iter().find(|t| t.file == name))
         {
-            let true_events: Vec<(String, f64)> = t
+            let true_events: Vec<TrueEvent> = t
                 .events
                 .iter()
-                .map(|e| (e.kind.name().to_owned(), e.t_s))
+                .map(|e| TrueEvent {
+                    kind: e.kind.name().to_owned(),
+                    t_s: e.t_s,
+                    peak_t_s: e.peak_t_s.unwrap_or(e.t_s),
+                    x_m: e.x_m.unwrap_or(f64::INFINITY),
+                })
                 .collect();
-            let found: Vec<(String, f64)> =
-                events.iter().map(|e| (e.kind.to_owned(), e.t_s)).collect();
+            let found: Vec<Found> = events
+                .iter()
+                .map(|e| Found {
+                    kind: e.kind.to_owned(),
+                    t_s: e.t_s,
+                    needle_x_m: needle_x_at(&trial, e.t_s),
+                })
+                .collect();
             merge(
                 &mut total,
                 &score(&true_events, &found, trial.rate_hz(), &kinds),

@@ -119,11 +119,16 @@ pub struct Rig {
     pub tare_sd_n: f64,
 }
 
-/// A ground-truth event.
+/// A ground-truth event. For a puncture or a structure, `t_s` is the
+/// first sample at which the force has fallen and `peak_t_s` the sample
+/// of the peak before it (a detector can know of a rupture only once the
+/// force falls, and must not report one before the peak); for a contact
+/// or an exit both are the event's sample.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct TruthEvent {
     pub kind: &'static str,
     pub t_s: f64,
+    pub peak_t_s: f64,
     pub x_m: f64,
 }
 
@@ -385,6 +390,9 @@ pub fn simulate_trial_in(
     let mut branches = [0.0_f64; 5];
     let (mut mount, mut mount_rate) = (0.0_f64, 0.0_f64);
     let mut prev_p = 0.0;
+    // The puncture whose fall comes at the next sample (its peak is the
+    // sample the capsule gave way at).
+    let mut falls_next: Option<usize> = None;
     for i in 0..m.t_s.len() {
         let (t, x, v, a) = (m.t_s[i], m.x_m[i], m.v_mps[i], m.a_mps2[i]);
         let dt = if i == 0 {
@@ -392,6 +400,9 @@ pub fn simulate_trial_in(
         } else {
             t - m.t_s[i - 1]
         };
+        if let Some(k) = falls_next.take() {
+            truth.events[k].t_s = t;
+        }
         // Position and velocity relative to the tissue.
         let (mut p, mut vr) = (x, v);
         for effect in effects {
@@ -429,6 +440,7 @@ pub fn simulate_trial_in(
             truth.events.push(TruthEvent {
                 kind: "contact",
                 t_s: t,
+                peak_t_s: t,
                 x_m: x,
             });
         }
@@ -445,9 +457,11 @@ pub fn simulate_trial_in(
                     truth.puncture_x_m = Some(x);
                     truth.puncture_force_n = Some(f);
                     truth.relaxed_surface_x_m = Some(x_s3);
+                    falls_next = Some(truth.events.len());
                     truth.events.push(TruthEvent {
                         kind: "puncture",
                         t_s: t,
+                        peak_t_s: t,
                         x_m: x,
                     });
                 }
@@ -465,6 +479,7 @@ pub fn simulate_trial_in(
                 truth.events.push(TruthEvent {
                     kind: "exit",
                     t_s: t,
+                    peak_t_s: t,
                     x_m: x,
                 });
             }
@@ -522,7 +537,7 @@ pub fn simulate_trial_in(
                         layer.rupture_n,
                         &mut layers_ruptured[k],
                         &mut truth.events,
-                        (t, x),
+                        (t, t - dt, x),
                     );
                 }
                 for (k, &(depth, rupture)) in truth.structures.iter().enumerate() {
@@ -543,7 +558,13 @@ pub fn simulate_trial_in(
                         // Stiffening (a collagen wall), doubling at 1 mm.
                         wall *= 1.0 + stretch / 0.001;
                     }
-                    f += give_way(wall, rupture, &mut ruptured[k], &mut truth.events, (t, x));
+                    f += give_way(
+                        wall,
+                        rupture,
+                        &mut ruptured[k],
+                        &mut truth.events,
+                        (t, t - dt, x),
+                    );
                 }
             }
         }
@@ -637,7 +658,7 @@ fn give_way(
     rupture_n: f64,
     ruptured: &mut bool,
     events: &mut Vec<TruthEvent>,
-    (t_s, x_m): (f64, f64),
+    (t_s, peak_t_s, x_m): (f64, f64, f64),
 ) -> f64 {
     if force_n < rupture_n {
         return force_n;
@@ -646,6 +667,7 @@ fn give_way(
     events.push(TruthEvent {
         kind: "structure",
         t_s,
+        peak_t_s,
         x_m,
     });
     0.0
@@ -766,7 +788,7 @@ pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
     let truth = Truth {
         contact_t_s: event("contact").map_or(0.0, |e| e.t_s),
         contact_x_m: event("contact").map_or(0.0, |e| e.x_m),
-        puncture_t_s: event("puncture").map_or(0.0, |e| e.t_s),
+        puncture_t_s: event("puncture").map_or(0.0, |e| e.peak_t_s),
         puncture_x_m: full.puncture_x_m.unwrap_or(0.0),
         puncture_force_n: full.puncture_force_n.unwrap_or(0.0),
     };
