@@ -46,6 +46,12 @@ status=0
 cargo test --workspace --no-fail-fast 2>&1 | tee "$log" || status=$?
 # One closing line over all suites (cargo ends with the doc-test suite, which
 # may hold no test, and that last line is not the whole story), printed
-# whether or not a suite failed.
-awk '/^test result:/ { p += $4; f += $6 } END { printf "\ntotal: %d passed, %d failed\n", p, f }' "$log"
+# whether or not a suite failed. A test binary that started ("Running",
+# "Doc-tests") and printed no result crashed: it counts as a failure.
+awk '/^ *(Running|Doc-tests) / { started++ }
+     /^test result:/ { p += $4; f += $6; ended++ }
+     END { crashed = started - ended
+           printf "\ntotal: %d passed, %d failed", p, f + crashed
+           if (crashed > 0) printf " (%d test binaries crashed)", crashed
+           printf "\n" }' "$log"
 exit "$status"

@@ -168,6 +168,7 @@ fn on_a_clean_insertion_the_residual_is_small_in_every_phase() {
     let (speed, surface, depth) = (0.003, 0.005, 0.03);
     let mut state = PipelineState::default();
     let mut worst = [0.0f64; 4];
+    let mut checked = [0usize; 4];
     let mut v_device = 0.0;
     let (mut x_s2, mut x_s3, mut deepest, mut last_sliding) = (None::<f64>, 0.0, 0.0, 0.0);
     let t_in = (surface + depth) / speed;
@@ -217,6 +218,7 @@ fn on_a_clean_insertion_the_residual_is_small_in_every_phase() {
         if !settling {
             let slot = out.sample.phase as usize;
             worst[slot] = worst[slot].max(out.sample.residual.as_n().abs());
+            checked[slot] += 1;
         }
     }
     // Out of tissue the device expects nothing until the force has stayed
@@ -229,7 +231,9 @@ fn on_a_clean_insertion_the_residual_is_small_in_every_phase() {
         (Phase::Inserted, 0.02),
         (Phase::Withdrawal, 0.02),
     ];
-    for ((phase, bound), w) in bounds.iter().zip(worst) {
+    for (((phase, bound), w), n) in bounds.iter().zip(worst).zip(checked) {
+        // Every phase entered, for a second's worth of samples at least.
+        assert!(n as f64 >= rate_hz, "{phase:?}: {n} samples checked");
         assert!(
             w <= bound + 1e-6,
             "{phase:?}: worst residual {w} N, bound {bound} N"

@@ -86,9 +86,13 @@ fn a_rational_tissue_is_recognised_and_its_a_and_b_recovered() {
 }
 
 /// The drift table of the README: each effect at its default strength,
-/// fitted with the nominal model. Run with `--nocapture` to print it.
+/// fitted with the nominal model (run with `--nocapture` to print it).
+/// Asserted: the nominal within 10 %, and the four effects that act on
+/// what the fit estimates (friction's rate, cutting, relaxation, the
+/// zero) move it by more than 5 %; the other four (presliding, structures,
+/// inertia, motion) act where the fit does not look and are only printed.
 #[test]
-fn each_effect_drifts_the_fit_and_the_table_prints() {
+fn four_effects_on_fitted_quantities_drift_the_fit_by_over_5_percent() {
     let keys = identified(&LIVER1);
     let mut table = String::from("| effect |");
     for (key, _) in keys {
