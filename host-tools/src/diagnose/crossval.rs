@@ -121,6 +121,133 @@ impl Gram {
     }
 }
 
+/// Relative ridge on the shared columns once the trials' own are taken out.
+const RIDGE: f64 = 1e-3;
+
+/// Least squares with some columns free per trial (the trial-to-trial
+/// spread of a tissue: each insertion meets its own stiffness, cutting
+/// force and friction) and the rest shared: the shared θ from the
+/// training trials' sums with each trial's own columns eliminated (its
+/// Schur complement), and a trial's own values given the shared ones.
+#[derive(Clone, Debug)]
+pub struct PerTrial<'a> {
+    /// Indices of the columns fitted per trial.
+    pub own: &'a [usize],
+    /// The first this many columns (the nominal's corrections) get the
+    /// ridge; a candidate's own columns never do.
+    pub ridged: usize,
+}
+
+impl PerTrial<'_> {
+    fn shared(&self, n: usize) -> Vec<usize> {
+        (0..n).filter(|i| !self.own.contains(i)).collect()
+    }
+
+    /// The shared θ (full length, the per-trial entries 0) from the
+    /// trials' whole-trial sums.
+    pub fn solve_shared(&self, trials: &[&Gram]) -> Vec<f64> {
+        let n = trials.first().map_or(0, |g| g.n);
+        let shared = self.shared(n);
+        let mut reduced = Gram::new(shared.len());
+        for g in trials {
+            let r = self.reduce(g, &shared);
+            reduced.merge(&r);
+        }
+        // The trials' own columns are near some combination of the
+        // shared ones in every trial (the friction scale is nearly the
+        // friction basis at the nominal's coefficients): that direction
+        // is left to the own columns, not fitted from rounding.
+        let s = shared.len();
+        for (i, &col) in shared.iter().enumerate() {
+            if col < self.ridged {
+                reduced.ata[i * s + i] *= 1.0 + RIDGE;
+            }
+        }
+        let th = reduced.solve();
+        let mut full = vec![0.0; n];
+        for (k, &i) in shared.iter().enumerate() {
+            full[i] = th[k];
+        }
+        full
+    }
+
+    /// θ for one trial: `shared` with this trial's own columns fitted to
+    /// what the shared ones leave of it.
+    pub fn for_trial(&self, g: &Gram, shared: &[f64]) -> Vec<f64> {
+        let n = g.n;
+        let own = self.own;
+        let mut sub = Gram::new(own.len());
+        for (a, &i) in own.iter().enumerate() {
+            for (b, &j) in own.iter().enumerate() {
+                sub.ata[a * own.len() + b] = g.ata[i * n + j];
+            }
+            let explained: f64 = (0..n)
+                .filter(|k| !own.contains(k))
+                .map(|k| g.ata[i * n + k] * shared[k])
+                .sum();
+            sub.aty[a] = g.aty[i] - explained;
+        }
+        let mine = sub.solve();
+        let mut theta = shared.to_vec();
+        for (a, &i) in own.iter().enumerate() {
+            theta[i] = mine[a];
+        }
+        theta
+    }
+
+    /// The shared columns' sums with this trial's own columns taken out:
+    /// A_ss − A_so A_oo⁻¹ A_os and b_s − A_so A_oo⁻¹ b_o.
+    fn reduce(&self, g: &Gram, shared: &[usize]) -> Gram {
+        let n = g.n;
+        let own = self.own;
+        let m = own.len();
+        let mut oo = Gram::new(m);
+        for (a, &i) in own.iter().enumerate() {
+            for (b, &j) in own.iter().enumerate() {
+                oo.ata[a * m + b] = g.ata[i * n + j];
+            }
+        }
+        // A_oo⁻¹ times each shared column's products with the own ones,
+        // and times b_o.
+        let solve_with = |rhs: Vec<f64>| {
+            let mut sys = oo.clone();
+            sys.aty = rhs;
+            sys.solve()
+        };
+        let by_shared: Vec<Vec<f64>> = shared
+            .iter()
+            .map(|&k| solve_with(own.iter().map(|&i| g.ata[i * n + k]).collect()))
+            .collect();
+        let by_y = solve_with(own.iter().map(|&i| g.aty[i]).collect());
+        let s = shared.len();
+        let mut r = Gram::new(s);
+        for (a, &i) in shared.iter().enumerate() {
+            for (b, &j) in shared.iter().enumerate() {
+                let taken: f64 = own
+                    .iter()
+                    .enumerate()
+                    .map(|(c, &o)| g.ata[i * n + o] * by_shared[b][c])
+                    .sum();
+                r.ata[a * s + b] = g.ata[i * n + j] - taken;
+            }
+            let taken: f64 = own
+                .iter()
+                .enumerate()
+                .map(|(c, &o)| g.ata[i * n + o] * by_y[c])
+                .sum();
+            r.aty[a] = g.aty[i] - taken;
+        }
+        let y_taken: f64 = own
+            .iter()
+            .enumerate()
+            .map(|(c, &o)| g.aty[o] * by_y[c])
+            .sum();
+        r.yy = g.yy - y_taken;
+        r.count = g.count;
+        r
+    }
+}
+
 /// Folds: trial `j` is withheld in fold `j % k`.
 pub fn folds(trials: usize) -> usize {
     trials.clamp(2, 5)
@@ -157,5 +284,40 @@ mod tests {
         assert!((th[0] - 2.0).abs() < 1e-6 && (th[1] + 3.0).abs() < 1e-6 && th[2] == 0.0);
         assert!(g.sse(&th) < 1e-8);
         assert!((g.sse(&[0.0; 3]) - g.yy).abs() < 1e-9);
+    }
+
+    /// Three trials of y = 2x + c_j (c_j their own offsets 1, −4, 7): the
+    /// slope is shared and found, each trial's offset is its own.
+    #[test]
+    fn a_column_free_per_trial_takes_each_trials_own_value() {
+        let offsets = [1.0, -4.0, 7.0];
+        let grams: Vec<Gram> = offsets
+            .iter()
+            .map(|c| {
+                let mut g = Gram::new(2);
+                for i in 0..50 {
+                    let x = i as f64 * 0.2;
+                    g.add(&[x, 1.0], 2.0 * x + c);
+                }
+                g
+            })
+            .collect();
+        let per = PerTrial {
+            own: &[1],
+            ridged: 0,
+        };
+        let refs: Vec<&Gram> = grams.iter().collect();
+        let shared = per.solve_shared(&refs);
+        assert!((shared[0] - 2.0).abs() < 1e-6, "{shared:?}");
+        for (g, c) in grams.iter().zip(offsets) {
+            let th = per.for_trial(g, &shared);
+            assert!((th[1] - c).abs() < 1e-6, "{th:?}");
+            assert!(g.sse(&th) < 1e-8);
+        }
+        // Shared alone, the offsets' spread is left in the error.
+        let mut all = Gram::new(2);
+        grams.iter().for_each(|g| all.merge(g));
+        let pooled = all.solve();
+        assert!(grams.iter().map(|g| g.sse(&pooled)).sum::<f64>() > 1.0);
     }
 }

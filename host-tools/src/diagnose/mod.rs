@@ -29,7 +29,7 @@ use needle_holder::model::params::TissueParams;
 use serde_json::{json, Value};
 
 use self::candidates::{Backfit, Candidate, CANDIDATES};
-use self::crossval::{folds, paired_t, Gram};
+use self::crossval::{folds, paired_t, Gram, PerTrial};
 use self::prepare::{prepare, Prepared, LOADING, PHASES, WITHDRAWAL};
 use crate::fit::fit_trial;
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
@@ -96,12 +96,14 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
 /// coefficients, refitted with every model on its training trials: the
 /// baseline is the nominal re-fitted on the same trials, and a candidate
 /// gets no credit for what a better a_1, a_2, c_p, b_p, c_n, b_n,
-/// cutting force or let-go point would have done. The last is the
-/// withdrawal's friction per length (minus its force's derivative in the
-/// point where the needle lets go): where the tissue lets go is geometry
-/// fitted per trial, like the contact point, and an effect in the
-/// withdrawal moves it.
-pub const NOMINAL_CORRECTIONS: [&str; 8] = [
+/// cutting force, let-go point or friction scale would have done. The
+/// let-go shift is the withdrawal's friction per length (minus its
+/// force's derivative in the point where the needle lets go): where the
+/// tissue lets go is geometry fitted per trial, like the contact point,
+/// and an effect in the withdrawal moves it. The friction scale is the
+/// nominal's own friction term and the stiffness scale its own loading
+/// force, which [`SPREAD`] frees per trial.
+pub const NOMINAL_CORRECTIONS: [&str; 10] = [
     "a1_n_per_m",
     "a2_n_per_m2",
     "cp_n_per_m",
@@ -110,7 +112,20 @@ pub const NOMINAL_CORRECTIONS: [&str; 8] = [
     "bn_ns_per_m2",
     "cutting_force_n",
     "let_go_shift_m",
+    "friction_scale",
+    "stiffness_scale",
 ];
+
+/// The corrections each trial has its own value of, fitted on the trial
+/// itself, withheld or not: the capsule's stiffness (so the puncture
+/// force), the cutting force and the scale of friction. Real tissue
+/// differs from one insertion to the next in these (the paper: puncture
+/// 2.30 ± 0.83 N, cutting 0.94 ± 0.36 N), and that spread is not an
+/// unmodelled effect: judged with them shared, a dataset of the nominal
+/// physics with spread was called `unexplained`. The rule is fixed before
+/// any effect is looked at, and an effect must explain what these three
+/// per-trial numbers cannot.
+pub const SPREAD: [usize; 3] = [6, 8, 9];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
@@ -134,6 +149,18 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
             .map(|i| {
                 if p.phase[i] == WITHDRAWAL && p.length_m[i] > 0.0 {
                     -p.friction_n[i] / p.length_m[i]
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+    );
+    cols.push(p.friction_n.clone());
+    cols.push(
+        (0..n)
+            .map(|i| {
+                if p.phase[i] == LOADING {
+                    p.nominal_n[i]
                 } else {
                     0.0
                 }
@@ -304,30 +331,45 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
             .collect(),
     };
     let k = folds(data.len());
+    let per = PerTrial {
+        own: &SPREAD,
+        ridged: NOMINAL_CORRECTIONS.len(),
+    };
+    let totals: Vec<Vec<Gram>> = per_grid
+        .iter()
+        .map(|gs| gs.iter().map(total).collect())
+        .collect();
+    // The shared θ over `trials` and their error, each trial with its own
+    // spread columns.
+    let fit = |gi: usize, trials: &mut dyn Iterator<Item = usize>| {
+        let picked: Vec<&Gram> = trials.map(|j| &totals[gi][j]).collect();
+        let shared = per.solve_shared(&picked);
+        let sse: f64 = picked
+            .iter()
+            .map(|g| g.sse(&per.for_trial(g, &shared)))
+            .sum();
+        (sse, shared)
+    };
+    let best_fit = |trials: &dyn Fn(usize) -> bool| {
+        (0..per_grid.len())
+            .map(|gi| (gi, fit(gi, &mut (0..data.len()).filter(|&j| trials(j)))))
+            .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0))
+            .map(|(gi, (_, th))| (gi, th))
+            .unwrap_or((0, Vec::new()))
+    };
     let mut per_trial = vec![(0.0, 0); data.len()];
     let mut by_phase = [(0.0, 0); PHASES.len()];
     let mut fold_theta = Vec::with_capacity(k);
     for fold in 0..k {
-        let fit = |gs: &Vec<[Gram; PHASES.len()]>| {
-            let mut train = Gram::new(gs[0][0].n);
-            for (_, g) in gs.iter().enumerate().filter(|(j, _)| j % k != fold) {
-                train.merge(&total(g));
-            }
-            let theta = train.solve();
-            (train.sse(&theta), theta)
-        };
-        let (best, theta) = per_grid
-            .iter()
-            .enumerate()
-            .map(|(gi, gs)| (gi, fit(gs)))
-            .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0))
-            .map(|(gi, (_, th))| (gi, th))
-            .unwrap_or((0, Vec::new()));
+        let (best, shared) = best_fit(&|j| j % k != fold);
         for (j, g) in per_grid[best]
             .iter()
             .enumerate()
             .filter(|(j, _)| j % k == fold)
         {
+            // The withheld trial's own spread, by the rule fixed above;
+            // every shared term as the other trials set it.
+            let theta = per.for_trial(&totals[best][j], &shared);
             for (ph, gp) in g.iter().enumerate() {
                 let e = gp.sse(&theta);
                 per_trial[j].0 += e;
@@ -336,20 +378,19 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
                 by_phase[ph].1 += gp.count;
             }
         }
-        fold_theta.push(theta);
+        fold_theta.push(shared);
     }
-    let (gi, theta) = per_grid
-        .iter()
-        .enumerate()
-        .map(|(gi, gs)| {
-            let mut all = Gram::new(gs[0][0].n);
-            gs.iter().for_each(|g| all.merge(&total(g)));
-            let th = all.solve();
-            (gi, all.sse(&th), th)
-        })
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(gi, _, th)| (gi, th))
-        .unwrap_or((0, Vec::new()));
+    let (gi, mut theta) = best_fit(&|_| true);
+    // The spread columns reported as their mean over the trials.
+    for &i in &SPREAD {
+        let own: Vec<f64> = totals[gi]
+            .iter()
+            .map(|g| per.for_trial(g, &theta)[i])
+            .collect();
+        if let Some(v) = theta.get_mut(i) {
+            *v = own.iter().sum::<f64>() / own.len().max(1) as f64;
+        }
+    }
     Scored {
         per_trial,
         by_phase,
@@ -737,11 +778,21 @@ pub fn diagnose_with_progress(
         })
         .collect();
     ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
-    let significant = |shrink: f64, t: f64| shrink >= MIN_SHRINK && t >= MIN_T;
+    let noise = noise_floor(data);
+    // Significant: it shrinks the held-out error by MIN_SHRINK, on nearly
+    // every withheld trial (paired t), and what it takes away is no less
+    // than the noise floor in RMS — less than that the leftovers of the
+    // trials' spread can give as well.
+    let worthy = |before: f64, after: f64, t: f64| {
+        let shrink = 1.0 - after / before.max(1e-12);
+        let taken = (before * before - after * after).max(0.0).sqrt();
+        shrink >= MIN_SHRINK && t >= MIN_T && taken >= MIN_EFFECT_FLOORS * noise
+    };
+    let significant =
+        |shrink: f64, t: f64| worthy(baseline.rms(), baseline.rms() * (1.0 - shrink), t);
     // The most shrink among the significant: a larger shrink that does
     // not hold across the withheld trials (another effect's residual
     // beside it) does not hide a smaller one that does.
-    let noise = noise_floor(data);
     let first = ranked
         .iter()
         .find(|r| significant(r.2, r.3))
@@ -765,56 +816,78 @@ pub fn diagnose_with_progress(
                 })
                 .flatten()
         });
-    let mut second_name = "none";
-    let mut after = None;
+    // The waterfall: each further effect is the candidate of most shrink
+    // that is significant against what the effects before it left (with
+    // the nominal found again under them), until none is.
+    let mut steps: Vec<(usize, Scored)> = Vec::new();
     if let Some((ci, (alone, cleaned, fixed))) = &first {
-        // Within a tenth of the noise floor there is nothing left for a
-        // second effect to take (the search costs a third of a diagnosis).
-        let nothing_left = alone.rms() <= NOTHING_LEFT_FACTOR * noise;
-        if !nothing_left {
-            progress("searching for a second effect");
-        }
-        let best_second = CANDIDATES
-            .iter()
-            .enumerate()
-            .filter(|_| !nothing_left)
-            .filter(|(cj, _)| cj != ci)
-            .map(|(cj, c)| {
-                let with = score(cleaned, fixed, Some(c));
-                let (shrink, t) = improvement(alone, &with);
-                (cj, with, shrink, t)
-            })
-            .filter(|b| significant(b.2, b.3))
-            .max_by(|a, b| a.2.total_cmp(&b.2));
-        after = Some(alone.clone());
-        if let Some((cj, with, ..)) = best_second {
-            second_name = CANDIDATES[cj].effect;
-            let mut both = fixed.clone();
-            both.push((&CANDIDATES[cj], with.grid_value));
-            after = Some(scored_with_backfit(cleaned, &both, nominal).0);
+        steps.push((*ci, alone.clone()));
+        let (mut cur, mut fixed) = (cleaned.clone(), fixed.clone());
+        while steps.len() < MOST_EFFECTS {
+            let Some((_, left)) = steps.last() else { break };
+            // Within a tenth of the noise floor nothing is left to take.
+            if left.rms() <= NOTHING_LEFT_FACTOR * noise {
+                break;
+            }
+            progress(&format!("searching for effect {}", steps.len() + 1));
+            let next = CANDIDATES
+                .iter()
+                .enumerate()
+                .filter(|(cj, _)| steps.iter().all(|(ci, _)| ci != cj))
+                .map(|(cj, c)| {
+                    let with = score(&cur, &fixed, Some(c));
+                    let (_, t) = improvement(left, &with);
+                    (cj, with, t)
+                })
+                .filter(|(_, with, t)| worthy(left.rms(), with.rms(), *t))
+                .min_by(|a, b| a.1.rms().total_cmp(&b.1.rms()));
+            let Some((cj, with, _)) = next else { break };
+            let mut more = fixed.clone();
+            more.push((&CANDIDATES[cj], with.grid_value));
+            let (scored, cleaned, kept) = scored_with_backfit(&cur, &more, nominal);
+            // A backfit that undoes the step's gain ends the waterfall.
+            if scored.rms() >= left.rms() {
+                break;
+            }
+            steps.push((cj, scored));
+            (cur, fixed) = (cleaned, kept);
         }
     }
+    let after = steps.last().map(|(_, s)| s.clone());
     let left = after.as_ref().unwrap_or(&baseline);
     let gap_open = left.rms() > EXPLAINED_FACTOR * noise;
     // Never `none` over a gap: a residual well above the noise that no
     // candidate takes away is something none of them is. Nor is a gap
     // the named effects leave mostly open theirs: they stand as the
     // closest, and the verdict is `unexplained`.
-    let closest: Vec<&str> = first
-        .iter()
-        .map(|f| CANDIDATES[f.0].effect)
-        .chain((second_name != "none").then_some(second_name))
-        .collect();
+    let closest: Vec<&str> = steps.iter().map(|(ci, _)| CANDIDATES[*ci].effect).collect();
     let credible = !gap_open || gap_taken(baseline.rms(), left.rms(), noise) >= MOST_OF_GAP;
-    let effect = match &first {
-        Some(f) if credible => CANDIDATES[f.0].effect,
-        Some(_) => {
-            second_name = "none";
-            UNEXPLAINED
-        }
+    let effect = match steps.first() {
+        Some((ci, _)) if credible => CANDIDATES[*ci].effect,
+        Some(_) => UNEXPLAINED,
         None if gap_open => UNEXPLAINED,
         None => "none",
     };
+    let second_name = match steps.get(1) {
+        Some((cj, _)) if credible => CANDIDATES[*cj].effect,
+        _ => "none",
+    };
+    // Each step's share of the gap, in mean squares above the noise.
+    let gap_ms = (baseline.rms().powi(2) - noise * noise).max(1e-24);
+    let mut before_rms = baseline.rms();
+    let waterfall: Vec<Value> = steps
+        .iter()
+        .filter(|_| credible)
+        .map(|(ci, s)| {
+            let share = (before_rms.powi(2) - s.rms().powi(2)) / gap_ms;
+            before_rms = s.rms();
+            json!({
+                "effect": CANDIDATES[*ci].effect,
+                "heldout_rms_after_n": s.rms(),
+                "share_of_gap": share,
+            })
+        })
+        .collect();
     let verdict_shrink = after
         .as_ref()
         .map_or(0.0, |a| 1.0 - a.rms() / baseline.rms());
@@ -856,6 +929,7 @@ pub fn diagnose_with_progress(
             "effect": effect,
             "shrink": verdict_shrink,
             "second": second_name,
+            "effects": waterfall,
             "heldout_rms_after_n": left.rms(),
             "explained": !gap_open,
             "closest": closest,
@@ -863,6 +937,13 @@ pub fn diagnose_with_progress(
         },
     })
 }
+
+/// Most effects the waterfall names.
+const MOST_EFFECTS: usize = 4;
+
+/// What an effect must take away, in RMS, in noise floors
+/// ([`diagnose_with_progress`]'s `worthy`).
+pub const MIN_EFFECT_FLOORS: f64 = 0.5;
 
 /// Candidates tried with their backfit when none is significant without
 /// it: the three of most shrink.

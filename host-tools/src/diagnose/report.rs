@@ -21,10 +21,19 @@ pub fn headline(out: &Value) -> String {
         "unexplained" if !closest.is_empty() => {
             format!("unexplained (closest: {})", closest.join(" + "))
         }
-        effect => match v["second"].as_str().filter(|&s| s != "none") {
-            Some(second) => format!("{effect} (+ {second})"),
-            None => effect.to_owned(),
-        },
+        effect => {
+            let steps: Vec<&str> = v["effects"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|e| e["effect"].as_str())
+                .collect();
+            if steps.len() > 1 {
+                format!("{} (in turn)", steps.join(" → "))
+            } else {
+                effect.to_owned()
+            }
+        }
     };
     format!(
         "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {named}, shrink {:.0} %{}",
@@ -61,10 +70,58 @@ pub fn write(path: &Path, svg: &Path, out: &Value) -> Result<()> {
     let html = format!(
         "<!doctype html><meta charset=utf-8><title>needle diagnose</title>\
          <h1>Sim-to-real gap</h1><p><b>Verdict:</b> {}.\
+         <h2>The gap, effect by effect (held out)</h2>{}\
          <h2>Candidates, held out</h2><table border=1><tr><th>effect<th>held-out RMS (N)<th>shrink<th>paired t<th>significant</tr>\n{rows}</table>\
          <h2>A withheld trial: the model with and without the named effect, and the residual by phase</h2><img src=\"{}\">",
         headline(out),
+        waterfall_svg(out),
         svg.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
     );
     std::fs::write(path, html).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// The waterfall as an inline figure: a bar for the held-out RMS of the
+/// nominal, one after each named effect, and the noise floor as a line;
+/// every bar and line labelled with its name and value.
+fn waterfall_svg(out: &Value) -> String {
+    let num = |v: &Value| v.as_f64().unwrap_or(0.0);
+    let mut bars = vec![("nominal".to_owned(), num(&out["baseline"]["heldout_rms_n"]))];
+    for e in out["verdict"]["effects"].as_array().into_iter().flatten() {
+        bars.push((
+            format!("+ {}", e["effect"].as_str().unwrap_or("?")),
+            num(&e["heldout_rms_after_n"]),
+        ));
+    }
+    let noise = num(&out["noise_floor_n"]);
+    let top = bars.iter().map(|b| b.1).fold(noise, f64::max).max(1e-9) * 1.15;
+    let (w, h, left, bottom, bar_w) = (140.0 * bars.len() as f64 + 120.0, 300.0, 70.0, 250.0, 90.0);
+    let y = |v: f64| bottom - (v / top) * (bottom - 20.0);
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\
+         <text x=\"10\" y=\"14\">held-out RMS (N)</text>\
+         <line x1=\"{left}\" y1=\"{bottom}\" x2=\"{}\" y2=\"{bottom}\" stroke=\"black\"/>",
+        w - 10.0
+    );
+    for (k, (label, v)) in bars.iter().enumerate() {
+        let x = left + 20.0 + 140.0 * k as f64;
+        svg += &format!(
+            "<rect x=\"{x}\" y=\"{:.1}\" width=\"{bar_w}\" height=\"{:.1}\" fill=\"{}\"/>\
+             <text x=\"{x}\" y=\"{:.1}\">{v:.4} N</text>\
+             <text x=\"{x}\" y=\"{:.1}\">{label}</text>",
+            y(*v),
+            bottom - y(*v),
+            if k == 0 { "#888" } else { "#4a7" },
+            y(*v) - 4.0,
+            bottom + 16.0,
+        );
+    }
+    svg += &format!(
+        "<line x1=\"{left}\" y1=\"{0:.1}\" x2=\"{1}\" y2=\"{0:.1}\" stroke=\"#c33\" stroke-dasharray=\"4 3\"/>\
+         <text x=\"{2}\" y=\"{3:.1}\" fill=\"#c33\">noise floor {noise:.4} N</text></svg>",
+        y(noise),
+        w - 10.0,
+        w - 180.0,
+        y(noise) - 4.0,
+    );
+    svg
 }

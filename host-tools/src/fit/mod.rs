@@ -394,11 +394,13 @@ pub fn to_toml(fit: &Value) -> String {
             Derived,
         ),
     ];
+    let mut written: Vec<(&str, f64)> = Vec::new();
     for (key, estimate, sign) in keys {
         // A sign the model cannot take is written as the limit, nothing
-        // found as 0; each said (in the file and, by `run`, on stderr).
+        // found as its prior; each said (in the file and, by `run`, on
+        // stderr).
         let value = match (estimate, sign) {
-            (None, _) => 0.0,
+            (None, _) => prior(key, &written),
             (Some(v), Positive) => v.max(0.0),
             (Some(v), Negative) => v.min(0.0),
             (Some(v), Any | Derived) => v,
@@ -411,6 +413,11 @@ pub fn to_toml(fit: &Value) -> String {
                 )
             }
             // A bound, the model's choice, or nothing at all.
+            None if !matches!(sign, Derived) => {
+                out += &format!(
+                    "{NOTE} {key} is not identified by the data; written as its prior {value:?}\n"
+                )
+            }
             _ if !identified && !matches!(sign, Derived) => {
                 out +=
                     &format!("{NOTE} {key} is not identified by the data; written as {value:?}\n")
@@ -418,8 +425,28 @@ pub fn to_toml(fit: &Value) -> String {
             _ => {}
         }
         out += &format!("{key} = {value:?}\n");
+        written.push((key, value));
     }
     out
+}
+
+/// What a value the data do not give is written as: never 0 where 0 means
+/// another tissue (no static band holds nothing at rest, which a needle
+/// standing in tissue and holding a force shows it does). The static band
+/// is taken symmetric (the paper's D_p 30.4, D_n −29.3 N/m), so an
+/// unidentified side is the other side mirrored; anything else is the
+/// paper's liver value (DESIGN: b_p 904, b_n 458 N·s/m², cutting 0.94 N,
+/// C_p = C_n ≈ 0 in liver).
+fn prior(key: &str, written: &[(&str, f64)]) -> f64 {
+    let other = |k: &str| written.iter().find(|(w, _)| *w == k).map(|(_, v)| *v);
+    match key {
+        "dn_n_per_m" => other("dp_n_per_m").map_or(-29.3, |dp| -dp),
+        "dp_n_per_m" => 30.4,
+        "bp_ns_per_m2" => 904.0,
+        "bn_ns_per_m2" => 458.0,
+        "cutting_force_n" => 0.94,
+        _ => 0.0,
+    }
 }
 
 /// The side of zero a tissue parameter must be on; `Derived` for one not
