@@ -472,27 +472,3 @@ fn effects_stand_above_the_noise() {
     eprintln!("{}", lines.join("\n"));
     assert!(faint.is_empty(), "too faint: {faint:?}");
 }
-
-/// `APART_DUMP=DIR cargo test -p host-tools --test apart_check -- --ignored
-/// dump` writes every dataset (diagnosis cases, vessel_liver,
-/// layered_phantoms) under DIR, one directory each, for reading by eye or
-/// for running the analyses on.
-#[test]
-#[ignore]
-fn dump() {
-    let root = std::path::PathBuf::from(std::env::var("APART_DUMP").expect("APART_DUMP=DIR"));
-    let n: usize = std::env::var("APART_TRIALS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(10);
-    for c in cases() {
-        let dir = root.join(c.name.replace('/', "__"));
-        apart::write_dataset(&dir, &apart::generate(c, n, SEED)).unwrap();
-    }
-    apart::write_dataset(&root.join("vessel_liver"), &apart::vessel_liver(n, SEED)).unwrap();
-    apart::write_dataset(
-        &root.join("layered_phantoms"),
-        &apart::layered_phantoms(3 * n, SEED),
-    )
-    .unwrap();
-}
