@@ -70,6 +70,16 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         }
         crate::input::check_outputs(&[("--csv", csv)], &[])?;
     }
+    // One decode to a CSV at a time: two at once interleaved their rows
+    // and one's segment list named the other's segments.
+    let _lock = match &args.csv {
+        Some(csv) => Some(crate::input::lock_output(
+            csv,
+            &csv_lock_path(csv),
+            "needle decode",
+        )?),
+        None => None,
+    };
     let mut out = Output::new(args.csv.as_deref(), args.file.as_deref(), args.rate_hz);
     let mut decoder = StreamDecoder::new();
     let feed = |bytes: &[u8], decoder: &mut StreamDecoder, out: &mut Output| -> Result<()> {
@@ -111,6 +121,15 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The lock file of a `--csv` output: hidden beside it.
+fn csv_lock_path(csv: &Path) -> std::path::PathBuf {
+    let name = csv
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    csv.with_file_name(format!(".{name}.lock"))
 }
 
 /// Read a capture a block at a time into `each` (memory bounded whatever

@@ -57,6 +57,63 @@ pub fn not_a_device(path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// An output this process writes, held until it is dropped (the lock goes
+/// with the process however it ends): a second `needle` writing the same
+/// output is refused, named by what the first wrote into the lock file.
+pub struct OutputLock {
+    _file: std::fs::File,
+    path: std::path::PathBuf,
+}
+
+impl Drop for OutputLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Take the lock for `output` in the file `lock_path`, saying `what` holds
+/// it (e.g. `needle record`): two writers of one output interleaved their
+/// rows, or one replaced the other's trials, each saying it succeeded.
+pub fn lock_output(output: &Path, lock_path: &Path, what: &str) -> Result<OutputLock> {
+    use std::io::{Read, Write};
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(lock_path)
+        .with_context(|| format!("{}: cannot create", lock_path.display()))?;
+    match file.try_lock() {
+        Ok(()) => {
+            let holder = format!("{what} (pid {})", std::process::id());
+            file.set_len(0)
+                .and_then(|()| file.write_all(holder.as_bytes()))
+                .with_context(|| format!("{}: cannot write", lock_path.display()))?;
+            Ok(OutputLock {
+                _file: file,
+                path: lock_path.to_path_buf(),
+            })
+        }
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let mut holder = String::new();
+            let _ = file.take(200).read_to_string(&mut holder);
+            let holder = if holder.trim().is_empty() {
+                "another process".to_owned()
+            } else {
+                holder.trim().to_owned()
+            };
+            bail!(
+                "{}: {holder} is writing it (lock {}); wait for it to end, or write elsewhere",
+                output.display(),
+                lock_path.display()
+            )
+        }
+        Err(std::fs::TryLockError::Error(e)) => {
+            Err(e).with_context(|| format!("{}: cannot lock", lock_path.display()))
+        }
+    }
+}
+
 /// An `--out` directory that exists must be one: a file named there is no
 /// place for trials.
 pub fn out_dir(dir: &Path) -> Result<()> {

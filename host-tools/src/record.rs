@@ -65,6 +65,15 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     // it left an empty directory.
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
+    // One recording into a directory at a time (two replaced each other's
+    // trials, both saying they succeeded); and, the lock taken, the
+    // directory checked again: another may have recorded into it since.
+    let _lock = crate::input::lock_output(
+        &args.out,
+        &args.out.join(".needle-record.lock"),
+        "needle record",
+    )?;
+    check_dir(&args.out)?;
     let capture = args.out.join("stream.bin");
     let file = std::fs::OpenOptions::new()
         .write(true)

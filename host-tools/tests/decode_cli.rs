@@ -81,3 +81,47 @@ fn a_missing_file_is_a_clear_error() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_second_decode_to_one_csv_is_refused_naming_the_first() {
+    // Two decodes into one --csv interleaved their rows (time going
+    // backwards) and one's segment list named the other's segments.
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("capture.fifo");
+    let fifo_c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: mkfifo(3) on a path we own.
+    assert_eq!(unsafe { libc::mkfifo(fifo_c.as_ptr(), 0o600) }, 0);
+    let csv = dir.path().join("out.csv");
+    // The first waits on a pipe no one writes yet, holding its output.
+    let mut first = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args([
+            "decode".as_ref(),
+            fifo.as_os_str(),
+            "--csv".as_ref(),
+            csv.as_os_str(),
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lock = dir.path().join(".out.csv.lock");
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while !std::fs::read_to_string(&lock).is_ok_and(|s| s.contains("pid")) {
+        assert!(
+            std::time::Instant::now() < until,
+            "the first decode never took its lock"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let second = needle(&[
+        "decode".as_ref(),
+        dir.path().join("other.bin").as_os_str(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+    ]);
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(1), "{err}");
+    let holder = format!("needle decode (pid {}) is writing it", first.id());
+    assert!(err.contains(&holder), "{err}");
+    first.kill().unwrap();
+    first.wait().unwrap();
+}

@@ -526,6 +526,30 @@ fn needle_record_with_standard_error_full_records_all_the_same() {
     assert!(std::fs::metadata(out.join("stream.bin")).unwrap().len() > 0);
 }
 
+#[test]
+fn a_second_needle_record_into_one_directory_is_refused_naming_the_first() {
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let out = dir.path().join("recorded");
+    std::fs::create_dir(&out).unwrap();
+    // The first recording's lock, as `needle record` takes it.
+    let _first =
+        host_tools::input::lock_output(&out, &out.join(".needle-record.lock"), "needle record")
+            .unwrap();
+    let second = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["record", "--port", &device.port, "--seconds", "2", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(1), "{err}");
+    let holder = format!("needle record (pid {}) is writing it", std::process::id());
+    assert!(err.contains(&holder), "{err}");
+    assert!(!out.join("stream.bin").exists(), "nothing written");
+}
+
 /// The lines of `stderr` read so far, collected by a thread.
 fn collect_lines(stderr: impl std::io::Read + Send + 'static) -> std::sync::mpsc::Receiver<String> {
     let (tx, rx) = std::sync::mpsc::channel();
