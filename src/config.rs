@@ -95,6 +95,18 @@ impl TissueModel {
         })
     }
 
+    /// The one check of a tissue, the same on the host and on the device:
+    /// the parameters' own ([`TissueParams::validate`]), then the device's
+    /// on their fixed point ([`Self::check`]) — a value the fixed point
+    /// rounds to zero (a contact force of 1 nN, a band of 1 pm/s) was
+    /// taken by the host and refused by the device.
+    pub fn validated(p: &TissueParams) -> Result<Self, ParamError> {
+        p.validate()?;
+        let model = Self::from_params(p)?;
+        model.check()?;
+        Ok(model)
+    }
+
     /// The signs and ranges [`Self::from_params`] guarantees, checked in
     /// integers: what the device runs on a tissue it did not make.
     pub fn check(&self) -> Result<(), ParamError> {
@@ -149,7 +161,14 @@ impl TissueModel {
         )?;
         bad(d.exit_drop.0 >= 0, "cutting_force_n", NEG)?;
         bad(d.stuck_rise.0 > 0, "puncture_force_n", POS)?;
-        bad(self.expected_peak.0 > 0, "puncture_force_n", POS)
+        bad(self.expected_peak.0 > 0, "puncture_force_n", POS)?;
+        // A touch must be told before the capsule gives way: a contact
+        // threshold at or above the puncture force detects nothing.
+        bad(
+            d.contact_force.0 < self.expected_peak.0,
+            "contact_force_n",
+            "must be below puncture_force_n",
+        )
     }
 }
 
@@ -283,6 +302,32 @@ impl DeviceConfig {
 
 #[cfg(test)]
 mod tests {
+
+    /// Values the host's floating point takes and the device's fixed point
+    /// rounds to nothing, and fields that contradict each other, are refused
+    /// by the one check both sides run, naming the field.
+    #[test]
+    fn one_check_refuses_what_the_device_would_and_contradictions() {
+        type Spoil = fn(&mut TissueParams);
+        let cases: [(Spoil, &str); 4] = [
+            // 1 nN is 0 µN on the device.
+            (|p| p.contact_force_n = 1e-9, "contact_force_n"),
+            // 1 pm/s is 0 nm/s on the device.
+            (|p| p.half_band_mps = 1e-12, "half_band_mps"),
+            // A touch at 3 N is never told before a 2.3 N puncture.
+            (|p| p.contact_force_n = 3.0, "contact_force_n"),
+            // The fall cannot end above the peak.
+            (|p| p.puncture_drop_to_n = 2.5, "puncture_drop_to_n"),
+        ];
+        for (spoil, field) in cases {
+            let mut p = LIVER1;
+            spoil(&mut p);
+            let got = TissueModel::validated(&p).map(|_| ()).map_err(|e| e.field);
+            assert_eq!(got, Err(field), "{p:?}");
+        }
+        assert!(TissueModel::validated(&LIVER1).is_ok());
+    }
+
     use super::*;
     use crate::units::NanometresPerSecond;
 

@@ -84,7 +84,8 @@ pub fn parse(text: &str, path: &Path) -> Result<Vec<Tissue>> {
                         e.message()
                     )
                 })?;
-        params.validate().map_err(|e| {
+        // The device's own check too, in its fixed point: one validation.
+        needle_holder::config::TissueModel::validated(&params).map_err(|e| {
             anyhow!(
                 "{shown}:{}: [{name}] {e}",
                 key_line(text, Some(&name), e.field)

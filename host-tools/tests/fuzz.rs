@@ -145,8 +145,9 @@ proptest! {
     }
 
     /// Liver 1's entry with one number replaced by anything: the loader
-    /// accepts it exactly when the core's check (`TissueParams::validate`,
-    /// whose rules `src/model/params.rs` tests case by case) does — it
+    /// accepts it exactly when the core's check (`TissueModel::validated`,
+    /// whose rules `src/model/params.rs` and `src/config.rs` test case by
+    /// case) does — it
     /// adds no rule of its own and drops none. A consistency property,
     /// not a test of the rules.
     #[test]
@@ -169,7 +170,7 @@ proptest! {
         let valid = match toml::from_str::<toml::Value>(&format!("v = {value:?}")) {
             Ok(_) => {
                 set(&mut p, key, value);
-                p.validate().is_ok()
+                needle_holder::config::TissueModel::validated(&p).is_ok()
             }
             Err(_) => false,
         };

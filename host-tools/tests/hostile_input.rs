@@ -1289,3 +1289,46 @@ fn fit_says_every_value_it_writes_other_than_estimated() {
         String::from_utf8_lossy(&back.stderr)
     );
 }
+
+#[test]
+fn host_and_device_check_a_tissue_alike() {
+    // `contact_force_n = 1e-9` was taken by `detect --params` (75 false
+    // structures, a fault) and refused by the device; a contact force
+    // above the puncture force was taken by both, and nothing detected.
+    let dir = simulated(1, 3);
+    let d = dir.path().to_str().unwrap();
+    let library = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../src/model/tissues.toml"
+    ))
+    .unwrap();
+    let liver1: String = library
+        .split("\n[")
+        .nth(1)
+        .map(|e| format!("[{e}"))
+        .unwrap();
+    for (value, line_has) in [("1e-9", "contact_force_n"), ("3.0", "contact_force_n")] {
+        let text = liver1.replace(
+            "contact_force_n = 0.05",
+            &format!("contact_force_n = {value}"),
+        );
+        let toml = dir.path().join("t.toml");
+        std::fs::write(&toml, &text).unwrap();
+        let line = text
+            .lines()
+            .position(|l| l.starts_with("contact_force_n"))
+            .unwrap()
+            + 1;
+        let err = refused(&["detect", d, "--params", toml.to_str().unwrap()]);
+        assert!(err.contains(&format!("t.toml:{line}:")), "{err}");
+        assert!(err.contains(line_has), "{err}");
+        let err = refused(&[
+            "device",
+            "--port",
+            "/dev/null",
+            "tissue",
+            toml.to_str().unwrap(),
+        ]);
+        assert!(err.contains(line_has), "{err}");
+    }
+}

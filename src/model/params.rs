@@ -249,6 +249,11 @@ impl TissueParams {
                 "contact_force_n",
                 "must be positive"
             ),
+            check(
+                p.contact_force_n < p.puncture_force_n,
+                "contact_force_n",
+                "must be below puncture_force_n"
+            ),
         );
         match p.stiffness_law {
             StiffnessLaw::Polynomial => check(
