@@ -898,12 +898,13 @@ fn fit_leaves_out_what_no_needle_drive_could_do_and_writes_no_tissue_it_would_re
     let value: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(value["skipped"][0]["file"], "mm.csv", "{value}");
-    // At the speed of a drive but 200 times as deep: a fit, and a tissue
-    // past the device's 2 m, which is not written.
+    // At the speed of a drive (ten times the simulated one, sampled at
+    // 25 Hz) but 200 times as deep: a fit, and a tissue past the device's
+    // 2 m, which is not written.
     let deep = tempfile::tempdir().unwrap();
     for k in 0..2 {
         let one = simulated(1, k + 5);
-        scaled_copy(one.path(), deep.path(), &format!("t{k}.csv"), 200.0, 200.0);
+        scaled_copy(one.path(), deep.path(), &format!("t{k}.csv"), 20.0, 200.0);
     }
     let toml = deep.path().join("fit.toml");
     let err = refused(&[
@@ -1330,5 +1331,56 @@ fn host_and_device_check_a_tissue_alike() {
             toml.to_str().unwrap(),
         ]);
         assert!(err.contains(line_has), "{err}");
+    }
+}
+
+/// Rewrite `trial_000.csv` of `dir` row by row (index from 0 after the
+/// header, and its three values).
+fn rewrite_rows(dir: &std::path::Path, edit: impl Fn(usize, [f64; 3]) -> [f64; 3]) {
+    let path = dir.join("trial_000.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut out = String::from("t_s,x_m,f_n\n");
+    for (i, line) in text.lines().skip(1).enumerate() {
+        let v: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+        let [t, x, f] = edit(i, [v[0], v[1], v[2]]);
+        out += &format!("{t:e},{x:e},{f:e}\n");
+    }
+    std::fs::write(&path, out).unwrap();
+}
+
+#[test]
+fn fit_leaves_out_what_is_no_needle_insertion() {
+    // One row of 1e300 N gave a cutting force of 4.6e296 N; time in
+    // milliseconds fitted damping and cutting as 0; a +5 mm encoder spike
+    // every 50 rows fitted a1 at 77 N/m for 48. Each trial is left out,
+    // named with why, and fit goes on with the others.
+    let cases: [(&str, fn(usize, [f64; 3]) -> [f64; 3]); 3] = [
+        ("beyond any needle insertion's 100 N", |i, [t, x, f]| {
+            [t, x, if i == 4000 { 1e300 } else { f }]
+        }),
+        ("is t_s in seconds?", |_, [t, x, f]| [t * 1000.0, x, f]),
+        ("an encoder glitching", |i, [t, x, f]| {
+            [t, if i % 50 == 49 { x + 0.005 } else { x }, f]
+        }),
+    ];
+    for (why, edit) in cases {
+        let dir = simulated(3, 2);
+        rewrite_rows(dir.path(), edit);
+        let json = dir.path().join("fit.json");
+        let out = needle(&[
+            "fit",
+            dir.path().to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{why}: {err}");
+        assert!(
+            err.contains("trial_000.csv") && err.contains(why),
+            "{why}: {err}"
+        );
+        let fit: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert_eq!(fit["trials"], 2, "{why}: {fit}");
     }
 }

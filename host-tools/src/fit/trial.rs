@@ -221,6 +221,38 @@ pub const MOST_GLITCH_M: f64 = 0.001;
 /// Samples within which a reading that leapt comes back, for a spike (one
 /// bad encoder read) rather than a position no drive reached.
 const SPIKE_SAMPLES: usize = 5;
+/// Spikes a trial may hold and still be fitted: one bad read now and then
+/// is an encoder's; a spike every 50 rows fitted a₁ at 77 N/m for 48.
+const MOST_SPIKES: usize = 3;
+/// No needle insertion pushes back with 100 N: the paper's liver punctures
+/// at 2.3 N, real phantoms at 2–5 N, and a needle buckles long before
+/// (one row of 1e300 N once gave a cutting force of 4.6e296 N).
+pub const MOST_FORCE_N: f64 = 100.0;
+/// No rig samples slower: real ones record at 75 Hz to 2 kHz. Below this
+/// the times are in other units (milliseconds made a 500 Hz recording a
+/// 0.5 Hz one, whose damping and cutting fitted as 0).
+pub const SLOWEST_RATE_HZ: f64 = 10.0;
+
+/// Refuse what is not a needle insertion's recording, by the same bounds
+/// for every command that fits: a force beyond any insertion's, a sample
+/// rate no rig has, a needle faster than any drive.
+fn check_plausible(trial: &Trial) -> Result<()> {
+    if let Some(i) = trial.f_n.iter().position(|f| f.abs() > MOST_FORCE_N) {
+        bail!(
+            "f_n is {} N at t = {:.6} s, beyond any needle insertion's {MOST_FORCE_N} N: is f_n in newtons?",
+            trial.f_n[i],
+            trial.t_s[i]
+        );
+    }
+    let rate = trial.rate_hz();
+    if rate < SLOWEST_RATE_HZ {
+        bail!(
+            "samples {:.3} s apart ({rate:.3} Hz), slower than any rig ({SLOWEST_RATE_HZ} Hz at least): is t_s in seconds?",
+            1.0 / rate.max(1e-300)
+        );
+    }
+    check_drive_speed(trial)
+}
 
 /// Refuse a trial whose needle moves faster than any drive and stays
 /// there, saying where; a spike that comes back is the encoder's, and the
@@ -228,13 +260,22 @@ const SPIKE_SAMPLES: usize = 5;
 fn check_drive_speed(trial: &Trial) -> Result<()> {
     let (t, x) = (&trial.t_s, &trial.x_m);
     let mut i = 1;
+    let mut spikes = 0;
     while i < trial.len() {
         let dx = x[i] - x[i - 1];
         let dt = t[i] - t[i - 1];
         if dx.abs() > MOST_GLITCH_M && dx.abs() > FASTEST_DRIVE_MPS * dt {
             let near = |j: &usize| (x[*j] - x[i - 1]).abs() <= MOST_GLITCH_M;
             match (i + 1..(i + 1 + SPIKE_SAMPLES).min(x.len())).find(near) {
-                Some(back) => i = back,
+                Some(_) if spikes == MOST_SPIKES => bail!(
+                    "x_m leaps and comes back {} times, the last at t = {:.6} s: an encoder glitching, not a needle (the device flags each as encoder_jump)",
+                    spikes + 1,
+                    t[i]
+                ),
+                Some(back) => {
+                    spikes += 1;
+                    i = back
+                }
                 None => bail!(
                     "x_m moves {dx:.4} m in {dt:.6} s at t = {:.6} s ({:.3} m/s, faster than any needle drive's {FASTEST_DRIVE_MPS} m/s): is x_m in metres, or the encoder glitching?",
                     t[i],
@@ -252,7 +293,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     if trial.len() < 50 {
         bail!("only {} samples", trial.len());
     }
-    check_drive_speed(trial)?;
+    check_plausible(trial)?;
     let (x, f) = (&trial.x_m, &trial.f_n);
     let v = velocity(trial);
     let noise_n = noise(f);
