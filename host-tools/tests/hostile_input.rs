@@ -1354,7 +1354,8 @@ fn fit_leaves_out_what_is_no_needle_insertion() {
     // milliseconds fitted damping and cutting as 0; a +5 mm encoder spike
     // every 50 rows fitted a1 at 77 N/m for 48. Each trial is left out,
     // named with why, and fit goes on with the others.
-    let cases: [(&str, fn(usize, [f64; 3]) -> [f64; 3]); 3] = [
+    type Edit = fn(usize, [f64; 3]) -> [f64; 3];
+    let cases: [(&str, Edit); 3] = [
         ("beyond any needle insertion's 100 N", |i, [t, x, f]| {
             [t, x, if i == 4000 { 1e300 } else { f }]
         }),
