@@ -172,6 +172,9 @@ struct Recorder {
     pending: Vec<Sample>,
     current: Option<TrialFile>,
     written: usize,
+    /// Samples before the needle was first seen out of tissue: the tail of
+    /// an insertion under way when the recording began, no trial.
+    before_out: Option<u64>,
 }
 
 impl Recorder {
@@ -182,6 +185,7 @@ impl Recorder {
             pending: Vec::new(),
             current: None,
             written: 0,
+            before_out: Some(0),
         }
     }
 
@@ -205,6 +209,7 @@ impl Recorder {
             Item::Restart { last } => {
                 self.line(&format!("the device restarted after sample {last}"));
                 self.close("the device restarted")?;
+                self.before_out = Some(0);
             }
             Item::Frame(_) => {}
         }
@@ -231,6 +236,20 @@ impl Recorder {
             self.pending.push(s);
             return Ok(());
         };
+        // A trial begins with the needle out: what comes before is the
+        // rest of an insertion that began before the recording did.
+        if let Some(n) = self.before_out {
+            if s.phase != Phase::Out {
+                self.before_out = Some(n + 1);
+                return Ok(());
+            }
+            self.before_out = None;
+            if n > 0 {
+                self.line(&format!(
+                    "{n} samples of an insertion under way when the recording began: in stream.bin only, no trial"
+                ));
+            }
+        }
         if self.current.is_none() {
             let path = self.dir.join(format!("trial_{:03}.csv", self.written));
             let part = self.dir.join(format!("trial_{:03}.csv.part", self.written));
@@ -331,6 +350,11 @@ impl Recorder {
     }
 
     fn finish(mut self) -> Result<()> {
+        if let Some(n) = self.before_out.filter(|&n| n > 0) {
+            self.line(&format!(
+                "{n} samples, all of an insertion under way when the recording began: in stream.bin only, no trial"
+            ));
+        }
         if !self.pending.is_empty() {
             bail!(
                 "{} samples but no header or status frame gave the sample rate",

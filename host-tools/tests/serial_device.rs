@@ -550,6 +550,44 @@ fn a_second_needle_record_into_one_directory_is_refused_naming_the_first() {
     assert!(!out.join("stream.bin").exists(), "nothing written");
 }
 
+#[test]
+fn a_recording_begun_inside_an_insertion_writes_no_fragment_as_a_trial() {
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let plan = Plan {
+        speed_mps: 0.01,
+        depth_m: 0.015,
+        dwell_s: 0.5,
+        ..Plan::PAPER
+    };
+    let replay = replay_file(dir.path(), &plan, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    {
+        // The device samples from its first command; wait for the needle
+        // in the tissue, then let go of the port.
+        let mut link = Link::open(&device.port, 115_200).unwrap();
+        assert_eq!(link.command(Command::Stream(true)).unwrap(), Ok(()));
+        wait_for(&mut link, Duration::from_secs(20), "loading", |i| match i {
+            Item::Sample(s) if s.phase == needle_holder::protocol::Phase::Loading => Some(()),
+            _ => None,
+        });
+    }
+    let out = dir.path().join("recorded");
+    let recorded = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["record", "--port", &device.port, "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&recorded.stderr);
+    assert!(recorded.status.success(), "{err}");
+    assert!(
+        err.contains("insertion under way when the recording began"),
+        "{err}"
+    );
+    assert!(!out.join("trial_000.csv").exists(), "{err}");
+    assert!(std::fs::metadata(out.join("stream.bin")).unwrap().len() > 0);
+}
+
 /// The lines of `stderr` read so far, collected by a thread.
 fn collect_lines(stderr: impl std::io::Read + Send + 'static) -> std::sync::mpsc::Receiver<String> {
     let (tx, rx) = std::sync::mpsc::channel();
