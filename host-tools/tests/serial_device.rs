@@ -588,6 +588,47 @@ fn a_recording_begun_inside_an_insertion_writes_no_fragment_as_a_trial() {
     assert!(std::fs::metadata(out.join("stream.bin")).unwrap().len() > 0);
 }
 
+#[test]
+fn a_device_that_goes_away_mid_insertion_ends_the_trial_saying_so() {
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let out = dir.path().join("recorded");
+    let mut record = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["record", "--port", &device.port, "--out"])
+        .arg(&out)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lines = collect_lines(record.stderr.take().unwrap());
+    let mut seen = Vec::new();
+    let until = Instant::now() + Duration::from_secs(60);
+    while !seen.iter().any(|l: &String| l.ends_with("loading")) {
+        assert!(Instant::now() < until, "never loading: {seen:?}");
+        if let Ok(line) = lines.recv_timeout(Duration::from_secs(1)) {
+            seen.push(line);
+        }
+    }
+    // The device goes away (QEMU killed: its pseudo-terminal closes).
+    drop(device);
+    let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
+        .unwrap()
+        .expect("needle record stops when the device goes away");
+    let rest: Vec<String> = lines.iter().collect();
+    assert!(status.success(), "{rest:?}");
+    assert!(
+        rest.iter().any(|l| l.contains("the device went away")),
+        "{rest:?}"
+    );
+    assert!(
+        rest.iter()
+            .any(|l| l.contains("trial_000.csv") && l.contains("(the device went away)")),
+        "{rest:?}"
+    );
+    assert!(out.join("trial_000.csv").exists());
+}
+
 /// The lines of `stderr` read so far, collected by a thread.
 fn collect_lines(stderr: impl std::io::Read + Send + 'static) -> std::sync::mpsc::Receiver<String> {
     let (tx, rx) = std::sync::mpsc::channel();
