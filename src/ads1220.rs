@@ -3,7 +3,7 @@
 //!
 //! Written here rather than taken from `embedded-ads1220` 0.1, which sets
 //! the wrong data-rate bits, sign-extends positive codes and returns
-//! `Ok(0)` on a timeout (DESIGN.md §5). Generic over
+//! `Ok(0)` on a timeout (found by trying it). Generic over
 //! [`embedded_hal::spi::SpiDevice`] (SPI mode 1, up to 6.6 MHz; the device
 //! owns chip select) and the data-ready pin ([`InputPin`], low while a
 //! conversion waits to be read), so it runs on any HAL and is tested on the

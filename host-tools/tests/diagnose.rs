@@ -1,5 +1,5 @@
 //! `needle diagnose` on simulated datasets with the effect hidden from it:
-//! every effect of DESIGN.md §4 and `none`, two pairs, another physical
+//! every effect of README, *Names* and `none`, two pairs, another physical
 //! form of each effect, and the device's own residual stream as input.
 
 use std::path::Path;

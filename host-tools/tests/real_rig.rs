@@ -1,11 +1,11 @@
 //! `fit`, `detect` and `diagnose` on recordings shaped like a real rig's
-//! (DESIGN.md §1): insert 25 mm at 1–3 mm/s, hold 5 s, withdraw, with no
-//! oscillation; 100 Hz with jittered timing and gaps up to 70 ms; the stage
-//! coordinate starting 2–15 mm before the surface; a tare offset; up to two
-//! membranes below the capsule; the tissue dragged out on withdrawal, so
-//! the pull lasts until 1.5–9 mm before the contact point. Before this,
-//! `fit` and `diagnose` refused every such trial and `detect` faulted on
-//! every withdrawal.
+//! (README, *What real recordings look like*): insert 25 mm at 1–3 mm/s, hold
+//! 5 s, withdraw, with no oscillation; 100 Hz with jittered timing and gaps
+//! up to 70 ms; the stage coordinate starting 2–15 mm before the surface; a
+//! tare offset; up to two membranes below the capsule; the tissue dragged out
+//! on withdrawal, so the pull lasts until 1.5–9 mm before the contact point.
+//! Before this, `fit` and `diagnose` refused every such trial and `detect`
+//! faulted on every withdrawal.
 
 use std::path::Path;
 
@@ -404,7 +404,7 @@ const SNAPSHOT: [(&str, &str, &str); 9] = [
 #[test]
 fn a_puncture_drop_spread_over_samples_is_no_exit() {
     // 100 Hz at 2 mm/s into a skin phantom: loading to 4.8 N, the drop to
-    // 1.5 N over three samples (a real rig's skin, DESIGN.md §1), then
+    // 1.5 N over three samples (a real rig's skin, README, *What real recordings look like*), then
     // cutting and a friction slowly growing. Before, the drop's tail read
     // as an exit.
     let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();

@@ -69,7 +69,8 @@ pub struct Protocol {
     /// How far before the contact point the withdrawing needle lets go of
     /// the tissue, m: the tissue is drawn out with the needle, so the
     /// withdrawal friction acts over the needle from a surface dragged
-    /// there (DESIGN.md §1: zero force 1.5–9 mm before first contact).
+    /// there (README, *What real recordings look like*: zero force
+    /// 1.5–9 mm before first contact).
     /// 0: it lets go at x_s3, as the paper's model has it.
     pub drag_m: f64,
     /// Residual tare offset of the load cell, N.
@@ -199,11 +200,11 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
     }
 }
 
-/// Insert–dwell–withdraw as real rigs run it (DESIGN.md §1): the stage
-/// starts 2–15 mm before the surface, inserts 25 mm past it at 1, 2 or
-/// 3 mm/s, holds 5 s and withdraws; the tissue lets go of the withdrawing
-/// needle 1.5–9 mm before the contact point; up to `max_layers` membranes
-/// ([`draw_layers`]).
+/// Insert–dwell–withdraw as real rigs run it (README, *What real recordings
+/// look like*): the stage starts 2–15 mm before the surface, inserts 25 mm
+/// past it at 1, 2 or 3 mm/s, holds 5 s and withdraws; the tissue lets go of
+/// the withdrawing needle 1.5–9 mm before the contact point; up to
+/// `max_layers` membranes ([`draw_layers`]).
 pub fn insert_dwell_withdraw(
     tissue: &TissueParams,
     max_layers: u32,
@@ -1021,9 +1022,10 @@ fn clear_staging(staging: &Path) -> Result<()> {
 const STAGING: &str = ".simulating";
 
 /// A sample rate a simulation can be made at: 50 Hz (the slowest rigs the
-/// analysis commands take, DESIGN.md §1) to 65 535 Hz (the replay header's
-/// u16), in whole hertz (the replay's header holds whole hertz: 99.5 was
-/// written as 100). `flag` names the argument in the message.
+/// analysis commands take, README, *What real recordings look like*) to
+/// 65 535 Hz (the replay header's u16), in whole hertz (the replay's header
+/// holds whole hertz: 99.5 was written as 100). `flag` names the argument
+/// in the message.
 pub fn check_rate_hz(flag: &str, rate_hz: f64) -> Result<()> {
     if !((50.0..=65_535.0).contains(&rate_hz) && rate_hz.fract() == 0.0) {
         bail!("{flag} {rate_hz}: a sample rate must be a whole number of Hz within 50..=65535");
