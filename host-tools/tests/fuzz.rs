@@ -144,8 +144,7 @@ proptest! {
             "cn_n_per_m", "bp_ns_per_m2", "bn_ns_per_m2", "dp_n_per_m", "dn_n_per_m", "half_band_mps",
             "contact_force_n",
         ];
-        let library = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../src/model/tissues.toml")).unwrap();
-        let liver1: String = library.split("\n[").nth(1).map(|e| format!("[{e}")).unwrap();
+        let liver1 = liver1_entry();
         let text: String = liver1
             .lines()
             .map(|l| if l.starts_with(&format!("{} =", keys[key])) { format!("{} = {value:?}", keys[key]) } else { l.to_string() })
@@ -319,16 +318,7 @@ fn an_accepted_trial_round_trips() {
 /// accepted cases.
 #[test]
 fn an_accepted_tissue_is_valid_and_converts() {
-    let library = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../src/model/tissues.toml"
-    ))
-    .unwrap();
-    let liver1: String = library
-        .split("\n[")
-        .nth(1)
-        .map(|e| format!("[{e}"))
-        .unwrap();
+    let liver1 = liver1_entry();
     let strategy = prop::collection::vec(text_damage(), 0..4);
     counted("tissue loader", 400, 100, strategy, |damages| {
         let text = damage_text(&liver1, &damages);
@@ -430,4 +420,18 @@ fn a_damaged_stream_gives_only_the_devices_own_samples() {
         }
         Ok(given > 0)
     });
+}
+
+/// The library's first entry (`[liver1]`) as the text of a tissue file.
+fn liver1_entry() -> String {
+    let library = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../src/model/tissues.toml"
+    ))
+    .unwrap();
+    library
+        .split("\n[")
+        .nth(1)
+        .map(|e| format!("[{e}"))
+        .unwrap()
 }

@@ -279,16 +279,7 @@ fn a_tissue_past_the_devices_fixed_point_is_refused_naming_its_key() {
     // (the same output as 32 000 and 1e300), while `simulate` used it as
     // given; a string in place of a number named neither key nor line.
     let dir = tempfile::tempdir().unwrap();
-    let library = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../src/model/tissues.toml"
-    ))
-    .unwrap();
-    let liver1: String = library
-        .split("\n[")
-        .nth(1)
-        .map(|e| format!("[{e}"))
-        .unwrap();
+    let liver1 = liver1_entry();
     for (value, says) in [
         ("40000.0", "is not within the device's ±32 000 N/m"),
         ("\"abc\"", "must be a number, not string"),
@@ -1298,16 +1289,7 @@ fn host_and_device_check_a_tissue_alike() {
     // above the puncture force was taken by both, and nothing detected.
     let dir = simulated(1, 3);
     let d = dir.path().to_str().unwrap();
-    let library = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../src/model/tissues.toml"
-    ))
-    .unwrap();
-    let liver1: String = library
-        .split("\n[")
-        .nth(1)
-        .map(|e| format!("[{e}"))
-        .unwrap();
+    let liver1 = liver1_entry();
     for (value, line_has) in [("1e-9", "contact_force_n"), ("3.0", "contact_force_n")] {
         let text = liver1.replace(
             "contact_force_n = 0.05",
@@ -1384,4 +1366,18 @@ fn fit_leaves_out_what_is_no_needle_insertion() {
             serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
         assert_eq!(fit["trials"], 2, "{why}: {fit}");
     }
+}
+
+/// The library's first entry (`[liver1]`) as the text of a tissue file.
+fn liver1_entry() -> String {
+    let library = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../src/model/tissues.toml"
+    ))
+    .unwrap();
+    library
+        .split("\n[")
+        .nth(1)
+        .map(|e| format!("[{e}"))
+        .unwrap()
 }

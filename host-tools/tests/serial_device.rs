@@ -595,21 +595,7 @@ fn a_device_that_goes_away_mid_insertion_ends_the_trial_saying_so() {
     let replay = replay_file(dir.path(), &Plan::PAPER, 0);
     let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
     let out = dir.path().join("recorded");
-    let mut record = Process::new(env!("CARGO_BIN_EXE_needle"))
-        .args(["record", "--port", &device.port, "--out"])
-        .arg(&out)
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let lines = collect_lines(record.stderr.take().unwrap());
-    let mut seen = Vec::new();
-    let until = Instant::now() + Duration::from_secs(60);
-    while !seen.iter().any(|l: &String| l.ends_with("loading")) {
-        assert!(Instant::now() < until, "never loading: {seen:?}");
-        if let Ok(line) = lines.recv_timeout(Duration::from_secs(1)) {
-            seen.push(line);
-        }
-    }
+    let (mut record, lines) = record_until_loading(&device.port, &out);
     // The device goes away (QEMU killed: its pseudo-terminal closes).
     drop(device);
     let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
@@ -627,6 +613,31 @@ fn a_device_that_goes_away_mid_insertion_ends_the_trial_saying_so() {
         "{rest:?}"
     );
     assert!(out.join("trial_000.csv").exists());
+}
+
+/// `needle record` from `port` into `out`, once its progress line says the
+/// needle is in the tissue (loading); its standard error's lines go on
+/// arriving on the receiver.
+fn record_until_loading(
+    port: &str,
+    out: &Path,
+) -> (std::process::Child, std::sync::mpsc::Receiver<String>) {
+    let mut record = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["record", "--port", port, "--out"])
+        .arg(out)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lines = collect_lines(record.stderr.take().unwrap());
+    let mut seen = Vec::new();
+    let until = Instant::now() + Duration::from_secs(60);
+    while !seen.iter().any(|l: &String| l.ends_with("loading")) {
+        assert!(Instant::now() < until, "never loading: {seen:?}");
+        if let Ok(line) = lines.recv_timeout(Duration::from_secs(1)) {
+            seen.push(line);
+        }
+    }
+    (record, lines)
 }
 
 /// The lines of `stderr` read so far, collected by a thread.
@@ -662,22 +673,7 @@ fn ctrl_c_sigterm_and_sighup_stop_needle_record_with_the_stream_and_trial_whole(
         let replay = replay_file(dir.path(), &Plan::PAPER, 0);
         let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
         let out = dir.path().join("recorded");
-        let mut record = Process::new(env!("CARGO_BIN_EXE_needle"))
-            .args(["record", "--port", &device.port, "--out"])
-            .arg(&out)
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let lines = collect_lines(record.stderr.take().unwrap());
-        // Wait for the needle to be in the tissue, as the progress line says.
-        let mut seen = Vec::new();
-        let until = Instant::now() + Duration::from_secs(60);
-        while !seen.iter().any(|l: &String| l.ends_with("loading")) {
-            assert!(Instant::now() < until, "never loading: {seen:?}");
-            if let Ok(line) = lines.recv_timeout(Duration::from_secs(1)) {
-                seen.push(line);
-            }
-        }
+        let (mut record, lines) = record_until_loading(&device.port, &out);
         // The raw stream is on disk while the recording runs.
         let streamed = std::fs::metadata(out.join("stream.bin")).unwrap().len();
         assert!(streamed > 0, "stream.bin is written as it arrives");

@@ -8,10 +8,13 @@
 //!    squared residual, and system-identification checks (whiteness,
 //!    correlation with velocity, acceleration, depth, time).
 //! 3. Which: every candidate of [`candidates::CANDIDATES`], fitted on the
-//!    training trials of each fold and scored on the withheld ones.
+//!    training trials of each fold and scored on the withheld ones, each
+//!    trial with its own stiffness, cutting and friction scale ([`SPREAD`]).
 //! 4. Verdict: the best candidate if it shrinks the held-out RMS by at
 //!    least [`MIN_SHRINK`] with a paired t over withheld trials of at least
-//!    [`MIN_T`]; then greedily a second one on top of it, by the same test.
+//!    [`MIN_T`] and takes [`MIN_EFFECT_FLOORS`] noise floors; then, in
+//!    turn, each further one that passes the same test against what the
+//!    ones before left (the waterfall, `verdict.effects`).
 
 pub mod candidates;
 pub mod crossval;
@@ -124,7 +127,8 @@ pub const NOMINAL_CORRECTIONS: [&str; 10] = [
 /// unmodelled effect: judged with them shared, a dataset of the nominal
 /// physics with spread was called `unexplained`. The rule is fixed before
 /// any effect is looked at, and an effect must explain what these three
-/// per-trial numbers cannot.
+/// per-trial numbers cannot. Indices into [`NOMINAL_CORRECTIONS`]:
+/// `cutting_force_n`, `friction_scale`, `stiffness_scale`.
 pub const SPREAD: [usize; 3] = [6, 8, 9];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
