@@ -59,10 +59,17 @@ fn nominal_trials_give_back_every_identifiable_parameter_within_10_percent() {
             fit[key]
         );
     }
-    // The static band is never reached at these speeds: reported as a
-    // bound the truth respects, not as a number.
-    assert!(fit["dp_n_per_m"]["value"].is_null());
-    assert!(fit["dp_n_per_m"]["lower_bound"].as_f64().unwrap() <= LIVER1.dp_n_per_m);
+    // The first dwell stops at the cutting front, where the static band
+    // holds the tip's force with the shaft's and clamps it (0.94 N of
+    // cutting and 0.1 N of friction against D_p·l ≈ 0.8 N): D_p is found.
+    // A withdrawal never stops from beyond the band: D_n is a bound the
+    // truth respects, not a number.
+    let dp = value_of(&fit["dp_n_per_m"]).unwrap();
+    assert!(
+        (dp - LIVER1.dp_n_per_m).abs() <= 0.1 * LIVER1.dp_n_per_m,
+        "{dp}"
+    );
+    assert!(fit["dn_n_per_m"]["value"].is_null());
     assert!(fit["dn_n_per_m"]["upper_bound"].as_f64().unwrap() >= LIVER1.dn_n_per_m);
     assert_eq!(fit["stiffness_fit"]["better"], "polynomial");
     assert!(fit["stiffness_fit"]["polynomial"]["r2"].as_f64().unwrap() > 0.99);

@@ -55,6 +55,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[
             0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
             16.0, 17.0, 18.0, 19.0, 20.0, 21.0, 22.0, 23.0, 24.0, 25.0, 26.0, 27.0, 28.0, 29.0,
+            30.0, 31.0, 32.0, 33.0, 34.0, 35.0, 36.0, 37.0, 38.0, 39.0,
         ],
         linear: &["gain"],
         columns: relaxation,
@@ -135,14 +136,15 @@ pub const CANDIDATES: [Candidate; 8] = [
 ];
 
 /// Relaxation spectra on the grid: a centre τ of 0.25–4 s × a width of
-/// one time constant (the standard linear solid), one decade or two
-/// (Fung's quasi-linear viscoelasticity has a continuous box spectrum, a
-/// power law a flat one over decades). The spectrum's shape is chosen on
+/// one time constant (the standard linear solid), one, two or three
+/// decades (Fung's quasi-linear viscoelasticity has a continuous box
+/// spectrum from τ₁ to τ₂, in soft tissue three decades apart and more;
+/// a power law a flat one over decades). The spectrum's shape is chosen on
 /// the grid and its branches share one stiffness: a free weight per
 /// branch would let them cancel one another, fit the training trials'
 /// noise and miss the withheld ones.
 const SPECTRUM_TAU_S: [f64; 5] = [0.25, 0.5, 1.0, 2.0, 4.0];
-const SPECTRUM_DECADES: [f64; 3] = [0.0, 1.0, 2.0];
+const SPECTRUM_DECADES: [f64; 4] = [0.0, 1.0, 2.0, 3.0];
 
 fn spectrum_at(g: f64) -> (f64, f64) {
     let k = (g as usize).min(SPECTRUM_TAU_S.len() * SPECTRUM_DECADES.len() - 1);
@@ -155,7 +157,7 @@ fn spectrum_at(g: f64) -> (f64, f64) {
 /// Grid values from here on are relaxation of the tissue's force
 /// ([`qlv`]); below, a relaxing branch driven by the needle's motion
 /// ([`maxwell`]).
-const QLV_FROM: f64 = 15.0;
+const QLV_FROM: f64 = 20.0;
 
 fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
     let qlv = g >= QLV_FROM;

@@ -26,7 +26,7 @@ pub const PHASES: [&str; 7] = [
 pub const APPROACH: usize = 0;
 pub const LOADING: usize = 1;
 const INSERTION: usize = 2;
-const DWELL: usize = 3;
+pub const DWELL: usize = 3;
 const REVERSAL: usize = 4;
 pub const WITHDRAWAL: usize = 5;
 pub const AFTER: usize = 6;
@@ -139,10 +139,13 @@ impl Prepared {
         })
     }
 
-    /// The needle touches tissue at sample `i` (loading or after puncture,
-    /// before it left).
+    /// The needle touches tissue at sample `i`: loading, or after the
+    /// puncture with some of its length in the tissue (a withdrawing
+    /// needle the tissue has let go of touches nothing, though the stage
+    /// is still withdrawing).
     pub fn in_tissue(&self, i: usize) -> bool {
-        !matches!(self.phase[i], APPROACH | AFTER)
+        self.phase[i] == LOADING
+            || (!matches!(self.phase[i], APPROACH | AFTER) && self.length_m[i] > 0.0)
     }
 
     /// How likely `jump` shows on the sample before its own, its own, or
@@ -234,9 +237,13 @@ pub fn fit_relaxation(
                 let parts = predict_parts_at(params, &g, trial, (*v).clone());
                 // Each sample's square capped at ten noise sd: a membrane's
                 // or a wall's few newtons, which no ρ explains, must not
-                // decide it.
+                // decide it. Samples at rest neither: what the static band
+                // holds there (D_p·l) moves with ρ, but its level is each
+                // trial's own (the diagnosis frees it per trial), and a
+                // dwell's thousands of samples would set ρ by it.
                 let cap = (10.0 * geometry.noise_n).powi(2).max(f64::MIN_POSITIVE);
                 (parts.puncture_index + 1..trial.len())
+                    .filter(|&i| parts.v_mps[i].abs() >= params.half_band_mps)
                     .map(|i| {
                         (trial.f_n[i] - parts.friction_n[i] - parts.cutting_n[i])
                             .powi(2)

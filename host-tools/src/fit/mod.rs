@@ -13,7 +13,7 @@ use anyhow::{bail, Context, Result};
 use needle_holder::model::params::TissueParams;
 use serde_json::{json, Value};
 
-pub use self::trial::{fit_trial, TrialFit};
+pub use self::trial::{fit_trial, TrialFit, RELAXATION_PRIOR};
 
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
@@ -153,8 +153,8 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
         .copied()
         .filter(|t| t.relaxation_identified)
         .collect();
-    // Trials that place x_s3 (strokes in the cut track, a stop into a
-    // dwell, a needle let go inside the tissue) give ρ and the cutting
+    // Trials that place x_s3 (strokes in the cut track, a needle let go
+    // inside the tissue) give ρ and the cutting
     // force; the others' cutting carries friction × (x_s3 − x_s1).
     let (relaxation, cutting) = if identified.len() == all.len() {
         (
@@ -163,7 +163,7 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
         )
     } else if !identified.is_empty() {
         let note = format!(
-            "from the {} of {} trials that place x_s3 (a stop into a dwell, or the needle let go inside the tissue)",
+            "from the {} of {} trials that place x_s3 (strokes in the cut track, or the needle let go inside the tissue)",
             identified.len(),
             all.len()
         );
@@ -179,11 +179,11 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
             json!({ "value": cut, "sd": cut_sd, "note": note }),
         )
     } else {
-        let note = "not identified: no trial stopped into a dwell at the cutting front, and on withdrawal the tissue held the needle until it was behind the contact point (dragged out), so where the surface relaxed to is not seen; x_s3 = x_s1 is used, and the cutting force then carries c_p·(x_s3 − x_s1)";
-        let (with_x_s1, sd) = mean_sd(&col(|t| t.cutting_force_n));
+        let note = format!("not identified: on withdrawal the tissue held the needle until it was behind the contact point (dragged out), so where the surface relaxed to is not seen (a stop into a dwell does not show it: the static band holds the tip's force with the shaft's); the prior ρ = {RELAXATION_PRIOR} is used, and the cutting force carries c_p·(x_s3 − x_s1)'s error");
+        let (at_prior, sd) = mean_sd(&col(|t| t.cutting_force_n));
         (
-            json!({ "value": Value::Null, "model_uses": 0.0, "note": note }),
-            json!({ "value": with_x_s1, "sd": sd, "note": "confounded with friction × x_s3 (see relaxation)" }),
+            json!({ "value": Value::Null, "model_uses": RELAXATION_PRIOR, "note": note }),
+            json!({ "value": at_prior, "sd": sd, "note": "confounded with friction × x_s3 (see relaxation)" }),
         )
     };
     let drags: Vec<f64> = all

@@ -67,6 +67,7 @@ pub fn predict_parts_at(
     let mut deepest = geometry.puncture_x_m;
     let mut last_sliding = 0.0;
     let mut last_basis = [0.0; 4];
+    let mut held_cut_n = 0.0_f64;
     // Cutting goes on from the puncture, and again only once the tip is
     // past its deepest point by more than the encoder's jitter: a stroke
     // that turns round exactly at the deepest point (the paper's
@@ -150,7 +151,20 @@ pub fn predict_parts_at(
                 params.cutting_n(vi, ahead(on))
             }
         };
-        let cutting_n = cut(v.v_mps[i], cutting);
+        // At rest the static band holds the force the needle was applied
+        // with when it stopped, the tip's cutting force with the shaft's
+        // friction (the paper's Karnopp law, max(D_n, min(F_a, D_p)) of
+        // the applied force F_a): the tissue ahead of a stopped tip stays
+        // compressed. Each part is held in its own term.
+        let tip = |vi: f64, friction_n: f64| {
+            if vi.abs() < params.half_band_mps {
+                held_cut_n.min((params.dp_n_per_m * l - friction_n).max(0.0))
+            } else {
+                cut(vi, cutting)
+            }
+        };
+        let at_rest = v.v_mps[i].abs() < params.half_band_mps;
+        let cutting_n = tip(v.v_mps[i], here.friction_n);
         (p.friction_n[i], p.friction_basis[i], p.cutting_n[i]) =
             (here.friction_n, here.basis, cutting_n);
         // Next to a jump placed to within a fraction of a sample, the
@@ -161,7 +175,7 @@ pub fn predict_parts_at(
         }
         if let Some(&(_, v_other, prior)) = uncertain.get(next_uncertain).filter(|u| u.0 == i) {
             let other = Sliding::at(params, v_other, l, last_sliding, last_basis);
-            let other_cutting_n = cut(v_other, cutting);
+            let other_cutting_n = tip(v_other, other.friction_n);
             let w = other_side_odds(
                 prior,
                 trial.f_n[i],
@@ -180,12 +194,18 @@ pub fn predict_parts_at(
             p.other_side.push((i, w));
         }
         let on = if observed {
-            let predicted = p.cutting_n[i] / params.cutting_force_n.max(f64::MIN_POSITIVE);
+            // What the tip holds at rest is not cutting.
+            let (moving_n, held_n) = if at_rest {
+                (cut(v.v_mps[i], cutting), p.cutting_n[i])
+            } else {
+                (p.cutting_n[i], 0.0)
+            };
+            let predicted = moving_n / params.cutting_force_n.max(f64::MIN_POSITIVE);
             let friction_n = p.friction_n[i];
             observer.correct(
                 odds_at(v.v_mps[i]),
                 predicted,
-                trial.f_n[i],
+                trial.f_n[i] - held_n,
                 [friction_n, friction_n + params.cutting_force_n],
                 v.force_sd_n,
             )
@@ -193,6 +213,9 @@ pub fn predict_parts_at(
             ahead(cutting) && v.v_mps[i] >= params.half_band_mps
         };
         (last_basis, last_sliding, cutting) = (here.basis, here.last_sliding, on);
+        if !at_rest {
+            held_cut_n = p.cutting_n[i];
+        }
         p.length_m[i] = l;
         // The front follows the tip while it cuts and while it is not
         // advancing (a stop at speed lands between samples, and the rest

@@ -108,6 +108,9 @@ pub struct StiffnessFit {
 const REST_MPS: f64 = 0.0002;
 /// Speed above which it counts as sliding for the friction fit, m/s.
 const SLIDING_MPS: f64 = 0.0005;
+/// ρ where a trial does not show it (x_s3 = x_s1 + ρ·(x_s2 − x_s1)): the
+/// middle of the paper's x_s1 < x_s3 < x_s2, the library's own value.
+pub const RELAXATION_PRIOR: f64 = 0.5;
 
 /// Velocity by central differences over ±10 ms.
 pub fn velocity(trial: &Trial) -> Vec<f64> {
@@ -413,10 +416,18 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
             .iter()
             .any(|&xj| xj > x[i])
     };
+    // Sliding on both sides of the sample, not only by the ±10 ms window:
+    // the window calls the last samples of a dwell moving, and a dwell
+    // holds what the static band holds (the tip's force with the shaft's
+    // at the cutting front), not the kinetic friction of the stroke after.
+    let stepping = |i: usize| {
+        let step = |a: usize, b: usize| (x[b] - x[a]) * v[i].signum() > 0.0;
+        i > 0 && i + 1 < trial.len() && step(i - 1, i) && step(i, i + 1)
+    };
     for i in start..trial.len() {
         let new_tissue = x[i] >= deepest;
         deepest = deepest.max(x[i]);
-        if v[i].abs() >= SLIDING_MPS {
+        if v[i].abs() >= SLIDING_MPS && stepping(i) {
             if new_tissue && v[i] > 0.0 && advances_after(i) {
                 advancing.push((x[i], v[i], f[i]));
             } else {
@@ -432,7 +443,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let friction = if inward {
         both_ways(&track, &advancing, contact_x_m, x_s2)?
     } else {
-        one_way(&track, &advancing, contact_x_m, x_s2, noise_n, dwell)?
+        one_way(&track, &advancing, contact_x_m, x_s2, noise_n)?
     };
     let OneTrialFriction {
         relaxed_x_m,
@@ -460,8 +471,16 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
             continue;
         }
         let lk = x[k] - relaxed_x_m;
+        // The applied force the band holds: at the cutting front, the
+        // tip's cutting force with the shaft's friction.
+        let deepest_m = x[start..i].iter().copied().fold(f64::MIN, f64::max);
         let sliding = if v[k] > 0.0 {
-            (cp + bp * v[k]) * lk
+            let tip_n = if x[i] + 1e-5 >= deepest_m {
+                cutting_force_n
+            } else {
+                0.0
+            };
+            (cp + bp * v[k]) * lk + tip_n
         } else {
             (cn + bn * v[k]) * lk
         };
@@ -660,19 +679,18 @@ impl Beyond {
 /// c_p + b_p·v at its speed and the cutting force as the intercept. Each
 /// speed's coefficient is written as damping alone (c = 0, as the paper
 /// found in liver) — `needle fit` splits c and b when trials ran at
-/// several speeds. The cutting force is the fall of the force where the
-/// insertion stops into a dwell (cutting ends in a sample, friction holds),
-/// and x_s3 follows from the line's intercept; with no such stop x_s3 is
-/// where the needle let go when that lies between x_s1 and x_s2, and
-/// otherwise it is not identified: x_s1 is used, and the cutting force
-/// carries c_p·(x_s3 − x_s1) with it.
+/// several speeds. x_s3 is where the needle let go when that lies
+/// between x_s1 and x_s2; otherwise (a dragged tissue lets go before x_s1)
+/// it is not identified, ρ is held at [`RELAXATION_PRIOR`], and the
+/// cutting force, the line's value at that x_s3, carries
+/// c_p·(x_s3 − x_s1)'s error with it. A stop into a dwell places nothing:
+/// the static band holds the tip's force with the shaft's.
 fn one_way(
     track: &[Xvf],
     advancing: &[Xvf],
     contact_x_m: f64,
     x_s2: f64,
     noise_n: f64,
-    dwell: Option<DwellRelaxation>,
 ) -> Result<OneTrialFriction> {
     let out: Vec<Xvf> = track.iter().copied().filter(|s| s.1 < 0.0).collect();
     let depth = x_s2 - contact_x_m;
@@ -717,30 +735,19 @@ fn one_way(
         speed_mps: mean_speed(advancing),
         n_per_m: k,
     });
-    // At a stop at the deepest point cutting ends in a sample while the
-    // friction holds (Karnopp): the drop is the cutting force, and the
-    // line's intercept then places x_s3.
-    let deepest = advancing
-        .iter()
-        .map(|s| s.0)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let at_stop = line.zip(dwell.filter(|d| d.x_m >= deepest - 0.0005));
-    let from_stop = at_stop.and_then(|((c0, k), d)| {
-        let cutting = c0 + k * (d.x_m - contact_x_m) - d.start_level_n;
-        let rho = (cutting - c0) / (k * depth);
-        (k > 0.0 && depth > 0.0 && (-0.1..=1.1).contains(&rho))
-            .then_some((cutting, rho.clamp(0.0, 1.0)))
-    });
-    let (identified, rho) = match (from_stop, from_let_go) {
-        (Some((_, rho)), _) | (None, Some(rho)) => (true, rho),
-        (None, None) => (false, 0.0),
+    // A stop at the cutting front does not place x_s3: the static band
+    // holds the force the needle was applied with, the tip's with the
+    // shaft's (the paper's max(D_n, min(F_a, D_p))), so what falls there
+    // is what the band does not hold, not the cutting force. Only a needle
+    // let go inside the tissue shows where its surface relaxed to; else ρ
+    // is held at the stated prior and the cutting force carries the
+    // difference.
+    let (identified, rho) = match from_let_go {
+        Some(rho) => (true, rho),
+        None => (false, RELAXATION_PRIOR),
     };
     let relaxed_x_m = contact_x_m + rho * depth;
-    let cutting_force_n = match (from_stop, line) {
-        (Some((cutting, _)), _) => cutting,
-        (None, Some((c0, k))) => c0 + k * (relaxed_x_m - contact_x_m),
-        (None, None) => 0.0,
-    };
+    let cutting_force_n = line.map_or(0.0, |(c0, k)| c0 + k * (relaxed_x_m - contact_x_m));
     let damping = |at: Option<AtSpeed>| {
         at.filter(|a| a.speed_mps.abs() > 0.0)
             .map_or(0.0, |a| a.n_per_m / a.speed_mps)

@@ -393,6 +393,7 @@ pub fn simulate_trial_in(
     let mut trial = Trial::default();
     let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
     let (mut last_sliding, mut friction, mut maxwell) = (0.0, 0.0, 0.0);
+    let mut last_cutting = 0.0;
     let (mut maxwell_slow, mut a_filtered) = (0.0, 0.0);
     // Literature forms' state: the box spectrum's branches, the mount's
     // deflection and its rate.
@@ -536,6 +537,16 @@ pub fn simulate_trial_in(
                 }
                 deepest = deepest.max(p);
                 f = friction + cutting;
+                // At rest the static band holds the force the needle was
+                // applied with when it stopped, the tip's cutting force
+                // with the shaft's friction (the paper's Karnopp law,
+                // max(D_n, min(F_a, D_p)) of the applied force F_a): the
+                // tissue ahead of a stopped tip stays compressed.
+                if vr.abs() >= tissue.half_band_mps {
+                    last_cutting = cutting;
+                } else {
+                    f += last_cutting.min((tissue.dp_n_per_m * l - friction).max(0.0));
+                }
                 for (k, layer) in protocol.layers.iter().enumerate() {
                     let stretch = p - (s1 + layer.depth_m);
                     if layers_ruptured[k] || stretch <= 0.0 {
