@@ -22,6 +22,20 @@ use crate::model::stiffness::Stiffness;
 use crate::protocol::{Event, EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
+/// The fall that confirms a puncture, N: half the drop the tissue
+/// expects, and no less than twice the contact force (ten noise sd when
+/// `needle fit --toml` set it), so a tissue whose fall was read small
+/// (an artery rolling over) does not fire on noise.
+const fn puncture_drop_n(p: &TissueParams) -> f64 {
+    let half_drop_n = 0.5 * (p.puncture_force_n - p.puncture_drop_to_n);
+    let floor_n = 2.0 * p.contact_force_n;
+    if half_drop_n > floor_n {
+        half_drop_n
+    } else {
+        floor_n
+    }
+}
+
 /// Detector thresholds, derived from a tissue's parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DetectConfig {
@@ -32,7 +46,7 @@ pub struct DetectConfig {
     pub contact_offset: Nanometres,
     /// Smallest peak that counts as a capsule puncture.
     pub puncture_min_peak: MicroNewtons,
-    /// Fall below the running peak that confirms a puncture.
+    /// Fall, within 30 ms, that confirms a puncture.
     pub puncture_drop: MicroNewtons,
     /// Least rise of the force that can be an interior structure.
     pub structure_rise: MicroNewtons,
@@ -58,7 +72,8 @@ pub struct DetectConfig {
 impl DetectConfig {
     /// Thresholds for a tissue: contact at its `contact_force_n`; puncture
     /// once the force has peaked above 30 % of the expected puncture force
-    /// and fallen by half the expected drop; exit at half the cutting
+    /// and fallen by half the expected drop within 30 ms
+    /// ([`puncture_drop_n`]); exit at half the cutting
     /// force; a stuck encoder once the force has risen by a quarter of the
     /// puncture force without the encoder moving; a structure's rise and
     /// fall at 2 and 1.6 times the contact force (0.1 N and 80 mN for
@@ -71,7 +86,7 @@ impl DetectConfig {
             contact_force,
             contact_offset: Stiffness::from_params(p).deformation_at(contact_force),
             puncture_min_peak: MicroNewtons::from_n(0.3 * p.puncture_force_n),
-            puncture_drop: MicroNewtons::from_n(0.5 * (p.puncture_force_n - p.puncture_drop_to_n)),
+            puncture_drop: MicroNewtons::from_n(puncture_drop_n(p)),
             // Vessel walls in liver give way at 0.15 N and more (paper §3,
             // Figs. 2–3); 10–20× the 5–10 mN noise this is tuned for.
             structure_rise: MicroNewtons::from_n(2.0 * p.contact_force_n),

@@ -14,6 +14,7 @@ use needle_holder::model::params::TissueParams;
 use serde_json::{json, Value};
 
 pub use self::trial::{fit_trial, TrialFit, RELAXATION_PRIOR};
+use crate::trial::Trial;
 
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
@@ -123,7 +124,53 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
     if fits.is_empty() {
         bail!("{}: none of {total} trials could be fitted", dir.display());
     }
-    Ok(summarise(&fits, skipped))
+    let mut out = summarise(&fits, skipped);
+    if let Ok(params) = fitted_tissue(&to_toml(&out)) {
+        let fitted: Vec<(&Trial, &TrialFit)> = trials
+            .iter()
+            .filter_map(|(file, trial)| {
+                let (_, fit) = fits.iter().find(|(f, _)| f == file)?;
+                Some((trial, fit))
+            })
+            .collect();
+        out["puncture_detection"] = puncture_margins(&params, &fitted);
+    }
+    Ok(out)
+}
+
+/// How far to trust the puncture detector with the fitted tissue, on the
+/// fitted trials themselves: its threshold (the fall that confirms a
+/// puncture, from a peak that leaks away by it per 30 ms), the largest
+/// such fall while loading before each trial's peak (what would fire it
+/// early), and the smallest capsule fall (what must fire it), with the
+/// margins between them.
+fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Value {
+    let base = needle_holder::detect::DetectConfig::for_tissue(params);
+    let threshold_n = f64::from(base.puncture_drop.0) * 1e-6;
+    let mut largest_before_n: f64 = 0.0;
+    let mut smallest_fall_n = f64::INFINITY;
+    for (trial, fit) in fitted {
+        let rate_hz = trial.rate_hz().round().clamp(1.0, f64::from(u16::MAX)) as u16;
+        let window = needle_holder::detect::puncture::fall_window(&base.at_sample_rate(rate_hz));
+        // The detector's leaking peak ([`needle_holder::detect::puncture`]).
+        let leak_n = threshold_n / f64::from(window.max(1));
+        let mut peak_n: f64 = 0.0;
+        let loaded = (0..fit.puncture_index).filter(|&i| trial.x_m[i] >= fit.contact_x_m);
+        for i in loaded {
+            let leaked_n = peak_n - leak_n;
+            largest_before_n = largest_before_n.max(leaked_n - trial.f_n[i]);
+            peak_n = leaked_n.max(trial.f_n[i]);
+        }
+        smallest_fall_n = smallest_fall_n.min(fit.puncture_force_n - fit.puncture_drop_to_n);
+    }
+    json!({
+        "threshold_n": threshold_n,
+        "largest_fall_before_peak_n": largest_before_n,
+        "margin_to_early_n": threshold_n - largest_before_n,
+        "smallest_puncture_fall_n": smallest_fall_n,
+        "margin_to_miss_n": smallest_fall_n - threshold_n,
+        "note": "on the fitted trials: a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
+    })
 }
 
 /// Mean ± sd of per-trial fits, with the per-trial geometry and the trials
