@@ -397,11 +397,11 @@ const SNAPSHOT: [(&str, &str, &str); 9] = [
     ("none", "none", "none"),
     ("viscoelasticity", "none", "viscoelasticity"),
     ("rate_dependent_friction", "none", "none"),
-    (
-        "presliding_hysteresis",
-        "presliding_hysteresis",
-        "presliding_hysteresis",
-    ),
+    // On this protocol presliding acts where the needle starts back after
+    // the dwell, which the withdrawal's stick (a tent of each trial's own
+    // stiffness) now holds: at standard strength it is `none`, within the
+    // noise floor.
+    ("presliding_hysteresis", "none", "none"),
     (
         "internal_structures",
         "internal_structures",
@@ -410,7 +410,7 @@ const SNAPSHOT: [(&str, &str, &str); 9] = [
     ("depth_dependent_cutting", "none", "none"),
     ("holder_inertia", "none", "none"),
     ("sensor_drift", "sensor_drift", "sensor_drift"),
-    ("tissue_motion", "tissue_motion", "tissue_motion"),
+    ("tissue_motion", "tissue_motion", "unexplained"),
 ];
 
 #[test]
@@ -527,5 +527,33 @@ fn the_fitted_tissue_finds_every_puncture_in_its_window_and_no_worse_than_the_de
                 "{effects} seed {seed}: {kind}"
             );
         }
+    }
+}
+
+/// The insert–dwell–withdraw case: relaxation (five times the
+/// standard branch, which holds and relaxes about a third of a newton
+/// through the dwell; in three forms), the static band holding the tip's
+/// force through the dwell, the tissue dragged out as a tent, and each
+/// trial's tissue 10 % its own. The waterfall names relaxation first and
+/// leaves at most 5 % of the puncture force on the withheld trials.
+#[test]
+fn relaxation_over_a_held_dwell_and_a_dragged_tent_is_named_leaving_under_5_percent() {
+    for form in [Form::Standard, Form::Alternate, Form::Literature] {
+        let dir = tempfile::tempdir().unwrap();
+        let p = Skin {
+            effects: "viscoelasticity=5",
+            form,
+            layers: 0,
+            seed: 4,
+            spread: 0.1,
+            ..SKIN
+        }
+        .write(dir.path());
+        let (_, data) = load(dir.path(), None).unwrap();
+        let out = diagnose(&data, Nominal::Fitted);
+        let v = &out["verdict"];
+        assert_eq!(v["effects"][0]["effect"], "viscoelasticity", "{form:?}: {v}");
+        let left = v["heldout_rms_after_n"].as_f64().unwrap();
+        assert!(left <= 0.05 * p.puncture_force_n, "{form:?}: {left} N");
     }
 }

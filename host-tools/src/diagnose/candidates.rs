@@ -200,6 +200,12 @@ fn qlv(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
         let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
         let mut h = 0.0;
         for i in 0..p.trial.len() {
+            // Out of the tissue there is no tissue force, and nothing of
+            // its history is left to relax.
+            if !p.in_tissue(i) {
+                h = 0.0;
+                continue;
+            }
             if i > 0 {
                 let dt = (t[i] - t[i - 1]).max(1e-9);
                 let decay = (-dt / tau).exp();

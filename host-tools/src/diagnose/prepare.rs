@@ -94,6 +94,10 @@ pub struct Prepared {
     /// Interior structures the device's detector found: (sample index,
     /// peak position, wall force = fall of the force there).
     pub structures: Vec<(usize, f64, f64)>,
+    /// The withdrawal's stick ([`stick`]): the samples from the start of
+    /// the withdrawal to where the dragged tissue slipped; empty if it
+    /// never stuck.
+    pub stick: std::ops::Range<usize>,
     pub noise_n: f64,
     /// [`Self::for_search`]'s trial, made on first use: the searches ask
     /// for it once per grid value.
@@ -180,12 +184,24 @@ pub fn prepare(
     geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
     let parts = predict_parts_at(params, &geometry, &trial, velocity.clone());
     let n = trial.len();
-    let nominal_n = parts.total_n();
-    let residual_n: Vec<f64> = (0..n).map(|i| trial.f_n[i] - nominal_n[i]).collect();
+    let mut nominal_n = parts.total_n();
     let phase = phases(&trial, &geometry, &parts);
+    // While the withdrawing needle drags the tissue along, the force is
+    // the tent's (the stick's own corrections, per trial), not kinetic
+    // friction.
+    let stick = stick(&trial, &phase, geometry.noise_n);
+    let mut parts = parts;
+    for i in stick.clone() {
+        nominal_n[i] = 0.0;
+        parts.friction_n[i] = 0.0;
+        parts.friction_basis[i] = [0.0; 4];
+        parts.cutting_n[i] = 0.0;
+    }
+    let residual_n: Vec<f64> = (0..n).map(|i| trial.f_n[i] - nominal_n[i]).collect();
     let a_mps2 = acceleration(&trial);
     let structures = structures(&trial, params, &residual_n);
     Prepared {
+        stick,
         file,
         noise_n: geometry.noise_n,
         params: *params,
@@ -319,6 +335,21 @@ fn phases(trial: &Trial, geometry: &TrialFit, parts: &Parts) -> Vec<usize> {
         }
     }
     phase
+}
+
+/// Where a withdrawing needle dragged the tissue along (the paper's
+/// Karnopp band with a tissue of finite stiffness round the shaft): from
+/// the withdrawal's first sample until the force snaps back
+/// ([`crate::fit::trial::slipped`]); none: no stick.
+pub fn stick(trial: &Trial, phase: &[usize], noise_n: f64) -> std::ops::Range<usize> {
+    let Some(start) = phase.iter().position(|&p| p == WITHDRAWAL) else {
+        return 0..0;
+    };
+    let end = (start..phase.len())
+        .find(|&i| phase[i] != WITHDRAWAL)
+        .unwrap_or(phase.len());
+    crate::fit::trial::slipped(&trial.f_n[..end], &trial.x_m, start, noise_n)
+        .map_or(0..0, |s| start..s)
 }
 
 /// Second difference of position, m/s².

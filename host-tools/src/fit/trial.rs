@@ -54,6 +54,9 @@ pub struct TrialFit {
     /// x_s3, even before x_s1); `None` when the strokes' grid over ρ
     /// placed x_s3 there.
     pub let_go_x_m: Option<f64>,
+    /// `let_go_x_m` is where the measured force snapped back to zero
+    /// ([`snapped_free`]), not where the friction line reaches it.
+    pub let_go_snapped: bool,
     /// Relaxation of the force during the longest rest inside the tissue.
     pub dwell: Option<DwellRelaxation>,
     /// Membranes punctured after the capsule, in order.
@@ -423,9 +426,22 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         let step = |a: usize, b: usize| (x[b] - x[a]) * v[i].signum() > 0.0;
         i > 0 && i + 1 < trial.len() && step(i - 1, i) && step(i, i + 1)
     };
+    // The final retreat's stick, where the tissue was dragged along: no
+    // kinetic friction there.
+    let last_forward = (0..trial.len())
+        .rev()
+        .find(|&i| v[i] >= SLIDING_MPS)
+        .unwrap_or(0);
+    let retreat = (last_forward..trial.len()).find(|&i| v[i] <= -SLIDING_MPS);
+    let stuck = retreat
+        .and_then(|r| slipped(f, x, r, noise_n).map(|s| r..s))
+        .unwrap_or(0..0);
     for i in start..trial.len() {
         let new_tissue = x[i] >= deepest;
         deepest = deepest.max(x[i]);
+        if stuck.contains(&i) {
+            continue;
+        }
         if v[i].abs() >= SLIDING_MPS && stepping(i) {
             if new_tissue && v[i] > 0.0 && advances_after(i) {
                 advancing.push((x[i], v[i], f[i]));
@@ -523,6 +539,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         withdrawal: friction.withdrawal,
         relaxation_identified: friction.identified,
         let_go_x_m: friction.let_go_x_m,
+        let_go_snapped: friction.let_go_snapped,
         dwell,
         layers: layers_after(trial, &v, ip, noise_n),
     })
@@ -537,6 +554,7 @@ struct OneTrialFriction {
     rho: f64,
     identified: bool,
     let_go_x_m: Option<f64>,
+    let_go_snapped: bool,
     cp: f64,
     bp: f64,
     cn: f64,
@@ -600,6 +618,7 @@ fn both_ways(
         identified: true,
         // The grid over ρ is where the withdrawing needle let go.
         let_go_x_m: None,
+        let_go_snapped: false,
         cp,
         bp,
         cn,
@@ -669,6 +688,47 @@ impl Beyond {
     }
 }
 
+/// Where a needle withdrawing from `start` stopped dragging the tissue
+/// along (the paper's Karnopp band with a tissue of finite stiffness round
+/// the shaft): the first sample after the force snaps back, a rise within
+/// three samples of ten noise sd or more from a pull at least as deep,
+/// with the needle moving back through it (a needle that starts again
+/// from rest, slower, holds less by Karnopp's law too), landing on a force
+/// still pulling (kinetic friction goes on; a needle let go of reads
+/// zero). The largest such snap in `f`; `None`: it never stuck.
+pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize> {
+    let least = 10.0 * noise_n.max(1e-4);
+    let mut best: Option<(usize, f64)> = None;
+    for i in start + 3..f.len().min(x.len()).saturating_sub(5) {
+        let (low_at, low) = (i - 3..i)
+            .map(|j| (j, f[j]))
+            .fold((i, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+        let rise = f[i] - low;
+        let after = f[i..i + 5].iter().sum::<f64>() / 5.0;
+        let pulling = low <= -least && after <= -0.5 * least;
+        let moving = x[low_at.saturating_sub(3)] > x[low_at] && x[low_at] > x[i];
+        if rise >= least && pulling && moving && best.is_none_or(|b| rise > b.1) {
+            best = Some((low_at + 1, rise));
+        }
+    }
+    best.map(|b| b.0)
+}
+
+/// Where a withdrawing needle was let go with a snap (`out` in time
+/// order): the force, still pulling by ten noise sd, returns to within
+/// three and stays there for five samples or more. A pull that only
+/// friction makes fades with the length in tissue and has no snap; one
+/// that also carries what the friction line does not (a relaxing branch's
+/// offset) would otherwise move the line's zero, and with it the let-go
+/// point, millimetres away.
+fn snapped_free(out: &[Xvf], noise_n: f64) -> Option<f64> {
+    let quiet = 3.0 * noise_n;
+    let last_pull = out.iter().rposition(|s| s.2.abs() > quiet)?;
+    let (pull, free) = (out.get(last_pull)?, out.get(last_pull + 1)?);
+    let snapped = pull.2 < -10.0 * noise_n && out.len() - last_pull > 5;
+    snapped.then_some(0.5 * (pull.0 + free.0))
+}
+
 /// The level a puncture's fall reaches: the lowest mean of three
 /// consecutive samples in the 100 ms after the peak (`window[0]`). The
 /// peak of a noisy flat top can come a few samples before the capsule
@@ -721,6 +781,8 @@ fn one_way(
         (outside + c.map_or(f64::INFINITY, |c| fit.sse(&c)), c)
     };
     let mut let_go = None;
+    let snapped = snapped_free(&out, noise_n);
+    let let_go_snapped = snapped.is_some() && out.len() >= MIN_STROKE_SAMPLES;
     if out.len() >= MIN_STROKE_SAMPLES {
         let (mut best, mut best_x) = (f64::INFINITY, contact_x_m);
         for k in 0..=400 {
@@ -730,7 +792,7 @@ fn one_way(
                 (best, best_x) = (sse, x_w);
             }
         }
-        let_go = best.is_finite().then_some(best_x);
+        let_go = snapped.or(best.is_finite().then_some(best_x));
     }
     // Where the needle let go is x_s3 when it lies inside the tissue.
     let from_let_go = let_go
@@ -771,6 +833,7 @@ fn one_way(
         rho,
         identified,
         let_go_x_m: let_go,
+        let_go_snapped,
         cp: 0.0,
         bp: damping(insertion),
         cn: 0.0,

@@ -73,6 +73,13 @@ pub struct Protocol {
     /// 1.5–9 mm before first contact).
     /// 0: it lets go at x_s3, as the paper's model has it.
     pub drag_m: f64,
+    /// Stiffness of the tissue round the shaft, N/m: a needle that starts
+    /// back after a rest of a second or more drags it along as an elastic
+    /// tent, the force going from what the rest held towards the static
+    /// band's pull D_n·l at this rate per metre of travel; there the
+    /// tissue slips and the force snaps back to kinetic friction. 0: no
+    /// tent (the paper's model: the band gives way at once).
+    pub tent_n_per_m: f64,
     /// Residual tare offset of the load cell, N.
     pub tare_n: f64,
     /// Sample times, s (a rig's jittered clock with gaps); `None`: every
@@ -170,6 +177,7 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
         far_surface_x_m: None,
         layers: Vec::new(),
         drag_m: 0.0,
+        tent_n_per_m: 0.0,
         tare_n: 0.0,
         times_s: None,
         surface_x_m: surface,
@@ -233,6 +241,8 @@ pub fn insert_dwell_withdraw(
         // The tissue lets go before the stage is back at 0: a rig
         // withdraws until the force is back to zero.
         drag_m: rng.gen_range(0.0015..0.009_f64.min(surface - 0.0005).max(0.0016)),
+        // Of the order of the capsule's own stiffness at puncture.
+        tent_n_per_m: rng.gen_range(250.0..600.0),
         tare_n: 0.0,
         times_s: None,
     }
@@ -394,6 +404,11 @@ pub fn simulate_trial_in(
     let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
     let (mut last_sliding, mut friction, mut maxwell) = (0.0, 0.0, 0.0);
     let mut last_cutting = 0.0;
+    // The tent: time at rest so far, and once the needle starts back after
+    // a rest, where it started and the force the rest held.
+    let mut rest_s = 0.0;
+    let mut tent: Option<(f64, f64)> = None;
+    let mut f_rest = 0.0;
     let (mut maxwell_slow, mut a_filtered) = (0.0, 0.0);
     // Literature forms' state: the box spectrum's branches, the mount's
     // deflection and its rate.
@@ -546,6 +561,27 @@ pub fn simulate_trial_in(
                     last_cutting = cutting;
                 } else {
                     f += last_cutting.min((tissue.dp_n_per_m * l - friction).max(0.0));
+                }
+                // The tent: stuck to the shaft, the tissue follows the needle
+                // back until its pull reaches the static band, then slips.
+                if protocol.tent_n_per_m > 0.0 {
+                    if vr <= -tissue.half_band_mps && rest_s >= 1.0 {
+                        tent = Some((p, f_rest));
+                    }
+                    rest_s = if vr.abs() < tissue.half_band_mps {
+                        rest_s + dt
+                    } else {
+                        0.0
+                    };
+                    if let Some((from_m, held_n)) = tent {
+                        let pulled = held_n - protocol.tent_n_per_m * (from_m - p);
+                        if vr > -tissue.half_band_mps || pulled <= tissue.dn_n_per_m * l {
+                            tent = None;
+                        } else {
+                            f = pulled;
+                        }
+                    }
+                    f_rest = f;
                 }
                 for (k, layer) in protocol.layers.iter().enumerate() {
                     let stretch = p - (s1 + layer.depth_m);
@@ -781,6 +817,7 @@ pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
         far_surface_x_m: None,
         layers: Vec::new(),
         drag_m: 0.0,
+        tent_n_per_m: 0.0,
         tare_n: 0.0,
         times_s: None,
         segments: vec![
