@@ -552,7 +552,10 @@ fn relaxation_over_a_held_dwell_and_a_dragged_tent_is_named_leaving_under_5_perc
         let (_, data) = load(dir.path(), None).unwrap();
         let out = diagnose(&data, Nominal::Fitted);
         let v = &out["verdict"];
-        assert_eq!(v["effects"][0]["effect"], "viscoelasticity", "{form:?}: {v}");
+        assert_eq!(
+            v["effects"][0]["effect"], "viscoelasticity",
+            "{form:?}: {v}"
+        );
         let left = v["heldout_rms_after_n"].as_f64().unwrap();
         assert!(left <= 0.05 * p.puncture_force_n, "{form:?}: {left} N");
     }
