@@ -210,9 +210,8 @@ fn both_effects_of_a_pair_are_named() {
 /// The paper's protocol and nominal physics, each trial's tissue its own
 /// (stiffness, cutting and friction 20 % apart, puncture depth 10 %):
 /// spread is not missing physics, so the verdict is `none` and what is
-/// left is within 1.5 noise floors (judged with one tissue for all
-/// trials, 60 noise floors were left and called `unexplained`; with the
-/// force held in the first dwell shared, 3.6 floors stayed in the dwells).
+/// left is within 1.5 noise floors: the trials' own stiffness, cutting,
+/// friction and first-dwell level take the spread (`diagnose::SPREAD`).
 #[test]
 fn trial_to_trial_spread_alone_is_none_within_1_5_noise_floors() {
     let dir = tempfile::tempdir().unwrap();

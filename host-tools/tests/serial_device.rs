@@ -369,9 +369,11 @@ fn every_command_over_a_pty_is_answered_and_takes_effect() {
 fn needle_record_over_a_pty_gives_the_trial_csv_decode_gives_on_a_capture() {
     let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
+    // Past liver 1's 16.65 mm puncture depth, so the needle is inserted:
+    // a capsule pushed 15 mm and drawn back again is never punctured.
     let plan = Plan {
         speed_mps: 0.01,
-        depth_m: 0.015,
+        depth_m: 0.02,
         dwell_s: 0.5,
         ..Plan::PAPER
     };

@@ -2,17 +2,16 @@
 //! sharply (paper §3.1). Confirmed against the model: the peak must reach
 //! 30 % of the puncture force the tissue's model expects, and the force
 //! must fall by half the drop it expects *faster than that drop per fall
-//! window* (30 ms, [`fall_window`]): the peak it falls from leaks away at
-//! that rate once the force is below it. A puncture is the fall a
-//! capsule makes when it gives way, not a slow sag or a dip on a plateau
-//! (a fitted skin-on-muscle tissue whose drop was read too small fired on
-//! a 1 % dip two seconds before the capsule gave way, measured from an
-//! unleaking running peak). One state word, as before: the snapshot on
-//! the wire keeps its size. The event's position is where the force
-//! last stood at the peak (x_s2), its force the peak as it stood before
-//! the sample that confirmed the fall: exact for a fall within a sample,
-//! a leak per further sample low (a twelfth of the expected drop per
-//! sample at 100 Hz).
+//! window* ([`fall_window_samples`]: 30 ms, six samples at least, so
+//! 60 ms at 100 Hz): the peak it falls from leaks away at that rate once
+//! the force is below it. A puncture is the fall a capsule makes when it
+//! gives way, not a slow sag or a dip on a plateau, whatever drop a fitted
+//! tissue expects. The leak keeps the state to one peak (the snapshot on
+//! the wire keeps its size). The event's position is where the force last
+//! stood at the peak (x_s2), its force the peak as it stood before the
+//! sample that confirmed the fall: exact for a fall within a sample, a
+//! leak per further sample low (a twelfth of the expected drop per sample
+//! at 100 Hz).
 //!
 //! Beside it, the stuck-encoder check: while the capsule is loaded, force
 //! only rises when the tip advances, so a large rise with the encoder
@@ -28,7 +27,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct PunctureState {
     /// The highest force while loading, leaking away by the confirming
-    /// fall per fall window ([`fall_window`]) once the force is below it:
+    /// fall per fall window ([`fall_window_samples`]) once the force is below it:
     /// a fall counts only as far as it outruns the leak.
     peak_force: MicroNewtons,
     /// Where the force last stood at `peak_force` (x_s2 once it falls).
@@ -45,16 +44,17 @@ impl PunctureState {
     }
 }
 
-/// Samples over which a puncture's fall must come: 30 ms, three times the
-/// 10 ms of [`DetectConfig::still_samples`], two at least.
-pub fn fall_window(c: &DetectConfig) -> u32 {
+/// Samples over which a puncture's fall must come: three times the 10 ms
+/// of [`DetectConfig::still_samples`] (which is two samples at least).
+pub fn fall_window_samples(c: &DetectConfig) -> u32 {
     c.still_samples.saturating_mul(3).max(2)
 }
 
 /// One sample while loading the capsule.
 pub fn update(c: &DetectConfig, st: &mut PunctureState, s: DetectInput) -> Option<Event> {
     let before = st.peak_force;
-    let leak = MicroNewtons(c.puncture_drop.0 / fall_window(c).max(1) as i32);
+    let window = i32::try_from(fall_window_samples(c)).unwrap_or(i32::MAX);
+    let leak = MicroNewtons(c.puncture_drop.0.checked_div(window).unwrap_or(0));
     let leaked = before.sub(leak);
     if s.force >= leaked {
         st.peak_force = s.force;
@@ -137,8 +137,8 @@ mod tests {
         // The sag was slower than the leak: the peak followed it down.
         let last = f[fall_at as usize - 1];
         assert!((peak_n - last).abs() < 1e-6, "{peak_n} vs {last}");
-        // An unleaking running peak's drop fired on the sag, 70 samples
-        // early.
+        // The sag itself is a fall of the expected drop and more, only
+        // slower than a capsule's.
         let sagged = f[..fall_at as usize].iter().any(|&x| 3.0 - x >= 0.2);
         assert!(sagged);
     }

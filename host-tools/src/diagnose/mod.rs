@@ -713,10 +713,9 @@ fn backfit_rounds<'c>(
         let Ok(again) = backfit(&current, &forces, &scored.fold_theta, refit_params) else {
             break;
         };
+        let regrid = round < REGRID_ROUNDS && !forces.is_empty();
         let next = match forces.split_last() {
-            Some(((newest, _), before)) if round < REGRID_ROUNDS => {
-                score(&again, before, Some(newest))
-            }
+            Some(((newest, _), before)) if regrid => score(&again, before, Some(newest)),
             _ => score(&again, &forces, None),
         };
         // A round that makes the withheld trials worse is not kept: the
@@ -724,7 +723,7 @@ fn backfit_rounds<'c>(
         if next.rms() > scored.rms() {
             break;
         }
-        if let Some(last) = forces.last_mut() {
+        if let Some(last) = forces.last_mut().filter(|_| regrid) {
             last.1 = next.grid_value;
         }
         let change = (next.rms() - scored.rms()).abs();
@@ -1030,7 +1029,8 @@ pub fn diagnose_with_progress(
 /// alone, an effect is judged against a nominal that took up part of it,
 /// and a rival can look better beside that nominal than the effect
 /// itself. The [`BACKFIT_TRIED`] leading ones get one round each, the
-/// winner its whole backfit.
+/// winner its whole backfit from the start (the nominal's own rules for
+/// what is backfitted, a device's model never, hold for it as for one).
 fn best_backfitted<'c>(
     data: &[Prepared],
     fixed: &[(&'c Candidate, f64)],
@@ -1049,7 +1049,7 @@ fn best_backfitted<'c>(
             scored_with_backfit(data, &with(*ci, *g), nominal, BACKFIT_ROUNDS),
         ));
     }
-    let best = contenders
+    let (ci, g) = contenders
         .iter()
         .take(BACKFIT_TRIED)
         .map(|&(ci, g)| {
@@ -1057,12 +1057,15 @@ fn best_backfitted<'c>(
                 "backfitting the nominal under {}",
                 CANDIDATES[ci].effect
             ));
-            (ci, scored_with_backfit(data, &with(ci, g), nominal, 1))
+            let (scored, ..) = scored_with_backfit(data, &with(ci, g), nominal, 1);
+            (ci, g, scored.rms())
         })
-        .min_by(|a, b| a.1 .0.rms().total_cmp(&b.1 .0.rms()))?;
-    let (ci, state) = best;
-    let refit_params = nominal == Nominal::Fitted;
-    Some((ci, backfit_rounds(state, refit_params, BACKFIT_ROUNDS - 1)))
+        .min_by(|a, b| a.2.total_cmp(&b.2))
+        .map(|(ci, g, _)| (ci, g))?;
+    Some((
+        ci,
+        scored_with_backfit(data, &with(ci, g), nominal, BACKFIT_ROUNDS),
+    ))
 }
 
 /// Most effects the waterfall names.

@@ -151,9 +151,10 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Va
     let mut smallest_fall_n = f64::INFINITY;
     for (trial, fit) in fitted {
         let rate_hz = trial.rate_hz().round().clamp(1.0, f64::from(u16::MAX)) as u16;
-        let window = needle_holder::detect::puncture::fall_window(&base.at_sample_rate(rate_hz));
+        let window_samples =
+            needle_holder::detect::puncture::fall_window_samples(&base.at_sample_rate(rate_hz));
         // The detector's leaking peak ([`needle_holder::detect::puncture`]).
-        let leak_n = threshold_n / f64::from(window.max(1));
+        let leak_n = threshold_n / f64::from(window_samples.max(1));
         let mut peak_n: f64 = 0.0;
         let loaded = (0..fit.puncture_index).filter(|&i| trial.x_m[i] >= fit.contact_x_m);
         for i in loaded {

@@ -697,7 +697,7 @@ impl Beyond {
 /// still pulling (kinetic friction goes on; a needle let go of reads
 /// zero). The largest such snap in `f`; `None`: it never stuck.
 pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize> {
-    let least = 10.0 * noise_n.max(1e-4);
+    let least_n = 10.0 * noise_n.max(1e-4);
     let mut best: Option<(usize, f64)> = None;
     for i in start + 3..f.len().min(x.len()).saturating_sub(5) {
         let (low_at, low) = (i - 3..i)
@@ -705,9 +705,9 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
             .fold((i, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
         let rise = f[i] - low;
         let after = f[i..i + 5].iter().sum::<f64>() / 5.0;
-        let pulling = low <= -least && after <= -0.5 * least;
+        let pulling = low <= -least_n && after <= -0.5 * least_n;
         let moving = x[low_at.saturating_sub(3)] > x[low_at] && x[low_at] > x[i];
-        if rise >= least && pulling && moving && best.is_none_or(|b| rise > b.1) {
+        if rise >= least_n && pulling && moving && best.is_none_or(|b| rise > b.1) {
             best = Some((low_at + 1, rise));
         }
     }
@@ -715,25 +715,27 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
 }
 
 /// Where a withdrawing needle was let go with a snap (`out` in time
-/// order): the force, still pulling by ten noise sd, returns to within
-/// three and stays there for five samples or more. A pull that only
+/// order): the last sample still pulling by ten noise sd, followed at once
+/// by five or more within three noise sd of zero. A pull that only
 /// friction makes fades with the length in tissue and has no snap; one
 /// that also carries what the friction line does not (a relaxing branch's
-/// offset) would otherwise move the line's zero, and with it the let-go
-/// point, millimetres away.
+/// offset) would move the line's zero, and with it the let-go point,
+/// millimetres away.
 fn snapped_free(out: &[Xvf], noise_n: f64) -> Option<f64> {
-    let quiet = 3.0 * noise_n;
-    let last_pull = out.iter().rposition(|s| s.2.abs() > quiet)?;
-    let (pull, free) = (out.get(last_pull)?, out.get(last_pull + 1)?);
-    let snapped = pull.2 < -10.0 * noise_n && out.len() - last_pull > 5;
-    snapped.then_some(0.5 * (pull.0 + free.0))
+    let (quiet_n, pull_n) = (3.0 * noise_n, -10.0 * noise_n);
+    let last_pull = out.iter().rposition(|s| s.2 < pull_n)?;
+    let after = out.get(last_pull + 1..last_pull + 6)?;
+    let free = after.iter().all(|s| s.2.abs() <= quiet_n);
+    let (pull, first_free) = (out.get(last_pull)?, after.first()?);
+    free.then_some(0.5 * (pull.0 + first_free.0))
 }
 
 /// The level a puncture's fall reaches: the lowest mean of three
 /// consecutive samples in the 100 ms after the peak (`window[0]`). The
 /// peak of a noisy flat top can come a few samples before the capsule
-/// gives way, and a window at a fixed delay after it can end before the
-/// fall does (4.38 N was written for a skin whose force fell to 1.9 N).
+/// gives way, so a window at a fixed delay after it can end before the
+/// fall does. (Three samples' noise biases it low by about a noise sd, a
+/// hundredth of a capsule's fall.)
 fn fall_level(window: &[f64]) -> f64 {
     if window.len() < 3 {
         return window.iter().sum::<f64>() / window.len().max(1) as f64;
@@ -993,7 +995,7 @@ mod tests {
     #[test]
     fn the_fall_level_is_where_the_fall_ends_though_the_peak_came_early() {
         // The peak of a flat top three samples before the capsule gives
-        // way (100 Hz): a window from 20 ms after the peak read 4.38 N.
+        // way (100 Hz): the level is where the fall ends, not 20 ms on.
         let mut window = vec![4.80, 4.79, 4.79, 4.78, 1.95, 1.90, 1.92];
         window.extend([2.0, 2.02, 2.04, 2.06]);
         let level = fall_level(&window);

@@ -403,12 +403,12 @@ pub fn simulate_trial_in(
     let mut trial = Trial::default();
     let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
     let (mut last_sliding, mut friction, mut maxwell) = (0.0, 0.0, 0.0);
-    let mut last_cutting = 0.0;
+    let mut last_cutting_n = 0.0;
     // The tent: time at rest so far, and once the needle starts back after
     // a rest, where it started and the force the rest held.
     let mut rest_s = 0.0;
     let mut tent: Option<(f64, f64)> = None;
-    let mut f_rest = 0.0;
+    let mut rest_force_n = 0.0;
     let (mut maxwell_slow, mut a_filtered) = (0.0, 0.0);
     // Literature forms' state: the box spectrum's branches, the mount's
     // deflection and its rate.
@@ -558,15 +558,15 @@ pub fn simulate_trial_in(
                 // max(D_n, min(F_a, D_p)) of the applied force F_a): the
                 // tissue ahead of a stopped tip stays compressed.
                 if vr.abs() >= tissue.half_band_mps {
-                    last_cutting = cutting;
+                    last_cutting_n = cutting;
                 } else {
-                    f += last_cutting.min((tissue.dp_n_per_m * l - friction).max(0.0));
+                    f += last_cutting_n.min((tissue.dp_n_per_m * l - friction).max(0.0));
                 }
                 // The tent: stuck to the shaft, the tissue follows the needle
                 // back until its pull reaches the static band, then slips.
                 if protocol.tent_n_per_m > 0.0 {
                     if vr <= -tissue.half_band_mps && rest_s >= 1.0 {
-                        tent = Some((p, f_rest));
+                        tent = Some((p, rest_force_n));
                     }
                     rest_s = if vr.abs() < tissue.half_band_mps {
                         rest_s + dt
@@ -581,7 +581,7 @@ pub fn simulate_trial_in(
                             f = pulled;
                         }
                     }
-                    f_rest = f;
+                    rest_force_n = f;
                 }
                 for (k, layer) in protocol.layers.iter().enumerate() {
                     let stretch = p - (s1 + layer.depth_m);
