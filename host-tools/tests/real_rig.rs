@@ -178,6 +178,8 @@ fn fit_recovers_what_insert_dwell_withdraw_identifies() {
     // The static band from the dwell: the stop at the cutting front holds
     // D_p·l of the tip's and the shaft's force.
     within(&fit, "dp_n_per_m", p.dp_n_per_m, 0.1);
+    // And D_n from the withdrawal's stick, which gives way at D_n·l.
+    within(&fit, "dn_n_per_m", p.dn_n_per_m, 0.1);
     // Where the tissue let go, against the simulator's own drag per trial
     // (drawn within 1.5–9 mm): the fit's estimate is their mean.
     let drag = value_of(&fit["let_go_before_contact_m"]).unwrap();

@@ -515,6 +515,15 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
             dn = stronger(dn, entry, -1.0);
         }
     }
+    // The withdrawal's stick gives way where the tent's pull reaches the
+    // static band, D_n·l, l from where the withdrawing needle lets go.
+    let exit_m = friction.let_go_x_m.map(|g| g.min(relaxed_x_m));
+    if let (Some(last), Some(exit_m)) = (stuck.clone().last(), exit_m) {
+        let l = x[last] - exit_m;
+        if l >= 0.002 {
+            dn = stronger(dn, (f[last] / l, true), -1.0);
+        }
+    }
 
     Ok(TrialFit {
         noise_n,
