@@ -5,6 +5,9 @@
 //! reader and the settings loader are fuzzed in the core's
 //! `tests/device.rs`.)
 
+mod library;
+
+use library::liver1_entry;
 use std::sync::OnceLock;
 
 use host_tools::frames::{decode_all, Item};
@@ -420,18 +423,4 @@ fn a_damaged_stream_gives_only_the_devices_own_samples() {
         }
         Ok(given > 0)
     });
-}
-
-/// The library's first entry (`[liver1]`) as the text of a tissue file.
-fn liver1_entry() -> String {
-    let library = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../src/model/tissues.toml"
-    ))
-    .unwrap();
-    library
-        .split("\n[")
-        .nth(1)
-        .map(|e| format!("[{e}"))
-        .unwrap()
 }

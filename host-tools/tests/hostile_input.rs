@@ -1,6 +1,9 @@
 //! Issue 20's rows, one test each as they are fixed: bad arguments get a
 //! clear message and a non-zero exit, never silence.
 
+mod library;
+
+use library::liver1_entry;
 use std::process::Command;
 
 fn needle(args: &[&str]) -> std::process::Output {
@@ -1366,18 +1369,4 @@ fn fit_leaves_out_what_is_no_needle_insertion() {
             serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
         assert_eq!(fit["trials"], 2, "{why}: {fit}");
     }
-}
-
-/// The library's first entry (`[liver1]`) as the text of a tissue file.
-fn liver1_entry() -> String {
-    let library = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../src/model/tissues.toml"
-    ))
-    .unwrap();
-    library
-        .split("\n[")
-        .nth(1)
-        .map(|e| format!("[{e}"))
-        .unwrap()
 }
