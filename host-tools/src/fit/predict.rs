@@ -322,6 +322,13 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let least_mps = 5.0 * step_m / (k as f64 * dt);
     let jumps = jumps::velocity_steps(t, x, k, least_mps, step_m);
     let mut bounds: Vec<usize> = jumps.iter().map(|j| j.index).collect();
+    let rests = rests(x, k, step_m);
+    for edge in rests.iter().flat_map(|r| [r.start, r.end]) {
+        if edge > 0 && edge < n && bounds.iter().all(|&b| b.abs_diff(edge) > 1) {
+            bounds.push(edge);
+        }
+    }
+    bounds.sort_unstable();
     bounds.push(n);
     let mut v = vec![0.0; n];
     let mut start = 0;
@@ -357,6 +364,12 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
             uncertain.push((after, v[before], late));
         }
     }
+    let near_jump = |e: usize| jumps.iter().any(|j| j.index.abs_diff(e) <= 1);
+    uncertain.extend(
+        rests
+            .iter()
+            .flat_map(|r| settling(r.clone(), &v, k, [near_jump(r.start), near_jump(r.end)])),
+    );
     NeedleVelocity {
         v_mps: v,
         uncertain,
@@ -366,6 +379,54 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
         tissue_sd_m: 0.0,
         force_sd_n: 0.0,
     }
+}
+
+/// The runs of at least `k` samples (10 ms) that the encoder reads at one
+/// position: the needle at rest, or turning slower than it can tell. A
+/// start or stop eased in over a few samples is no jump, yet the force law
+/// steps there all the same: a velocity window reaching across the edge
+/// has the needle sliding while the encoder still reads it at rest, a
+/// newton of residual a sample where a dwell turns into a withdrawal.
+fn rests(x: &[f64], k: usize, step_m: f64) -> Vec<std::ops::Range<usize>> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    for i in 1..=x.len() {
+        if i < x.len() && (x[i] - x[start]).abs() < 0.5 * step_m {
+            continue;
+        }
+        if i - start >= k {
+            runs.push(start..i);
+        }
+        start = i;
+    }
+    runs
+}
+
+/// The samples of a rest the needle may already (or still) be moving
+/// in, below one encoder step: up to `k` at each end with the moving
+/// side's velocity, even odds, the force to settle them
+/// ([`other_side_odds`]). A turn slower than the encoder can tell is a
+/// rest between two motions, each end's half to its own side. An end at a
+/// jump (`at_jump`: start, end) is left to the jump's own placement.
+fn settling(
+    rest: std::ops::Range<usize>,
+    v: &[f64],
+    k: usize,
+    at_jump: [bool; 2],
+) -> Vec<(usize, f64, f64)> {
+    let mid = rest.start + rest.len() / 2;
+    let mut out = Vec::new();
+    if let Some(&before) = rest.start.checked_sub(1).and_then(|i| v.get(i)) {
+        if before != 0.0 && !at_jump[0] {
+            out.extend((rest.start..mid.min(rest.start + k)).map(|i| (i, before, 0.5)));
+        }
+    }
+    if let Some(&after) = v.get(rest.end) {
+        if after != 0.0 && !at_jump[1] {
+            out.extend((mid.max(rest.end.saturating_sub(k))..rest.end).map(|i| (i, after, 0.5)));
+        }
+    }
+    out
 }
 
 /// The needle's velocity at each sample, the samples next to a jump that
@@ -461,5 +522,39 @@ mod tests {
         // the nearer side, and the odds stay a probability.
         let far = other_side_odds(0.5, -0.13, sides, 0.005);
         assert!(far > 0.99 && far <= 1.0, "{far}");
+    }
+
+    #[test]
+    fn an_eased_start_from_rest_leaves_the_rest_to_the_force() {
+        // 500 Hz, 1 µm encoder: 0.2 s at rest, then a withdrawal eased in
+        // at 0.5 m/s² (the encoder reads the first step 2 ms after the
+        // needle sets off, the force law has flipped on the first sample).
+        let dt = 0.002;
+        let n = 200;
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let x_m: Vec<f64> = t_s
+            .iter()
+            .map(|&t| {
+                let moved = 0.5 * 0.5 * (t - 0.2).max(0.0).powi(2);
+                ((0.02 - moved) * 1e6).round() * 1e-6
+            })
+            .collect();
+        let trial = Trial {
+            f_n: vec![0.0; n],
+            x_m,
+            t_s,
+        };
+        let v = needle_velocity(&trial);
+        let first_moved = trial.x_m.iter().position(|&x| x < 0.02 - 5e-7).unwrap();
+        // At rest by the encoder up to its first step, and no window
+        // reaches across it ...
+        assert!(v.v_mps[..first_moved].iter().all(|&v| v == 0.0));
+        assert!(v.v_mps[first_moved..].iter().all(|&v| v < 0.0));
+        // ... but the samples just before it may already be moving: the
+        // force is to settle them, with the withdrawal's velocity.
+        let settled: Vec<usize> = v.uncertain.iter().map(|u| u.0).collect();
+        assert!(settled.contains(&(first_moved - 1)), "{settled:?}");
+        assert!(v.uncertain.iter().all(|u| u.1 < 0.0 && u.0 < first_moved));
+        assert!(settled.iter().all(|&i| i + 5 >= first_moved), "{settled:?}");
     }
 }
