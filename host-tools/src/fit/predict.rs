@@ -324,7 +324,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let mut bounds: Vec<usize> = jumps.iter().map(|j| j.index).collect();
     let rests = rests(x, k, step_m);
     for edge in rests.iter().flat_map(|r| [r.start, r.end]) {
-        if edge > 0 && edge < n && bounds.iter().all(|&b| b.abs_diff(edge) > 1) {
+        if edge > 0 && edge < n && !bounds.contains(&edge) {
             bounds.push(edge);
         }
     }
@@ -365,11 +365,14 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
         }
     }
     let near_jump = |e: usize| jumps.iter().any(|j| j.index.abs_diff(e) <= 1);
-    uncertain.extend(
-        rests
-            .iter()
-            .flat_map(|r| settling(r.clone(), &v, k, [near_jump(r.start), near_jump(r.end)])),
-    );
+    uncertain.extend(rests.iter().flat_map(|r| {
+        settling(
+            r.clone(),
+            &v,
+            (k, least_mps),
+            [near_jump(r.start), near_jump(r.end)],
+        )
+    }));
     NeedleVelocity {
         v_mps: v,
         uncertain,
@@ -402,28 +405,37 @@ fn rests(x: &[f64], k: usize, step_m: f64) -> Vec<std::ops::Range<usize>> {
     runs
 }
 
-/// The samples of a rest the needle may already (or still) be moving
-/// in, below one encoder step: up to `k` at each end with the moving
-/// side's velocity, even odds, the force to settle them
-/// ([`other_side_odds`]). A turn slower than the encoder can tell is a
-/// rest between two motions, each end's half to its own side. An end at a
-/// jump (`at_jump`: start, end) is left to the jump's own placement.
+/// The samples about a rest where the encoder cannot tell whether the
+/// needle moves, each with the velocity of its other side, even odds,
+/// the force to settle them ([`other_side_odds`]): up to `k` at each end
+/// of the rest, which may already (or still) be moving below one encoder
+/// step, and up to `k` outside it creeping slower than `creep_mps` (a
+/// stage easing to a stop reads a micrometre a sample while the tissue
+/// already holds). A turn slower than the encoder can tell is a rest
+/// between two motions, each end's half to its own side. An end at a jump
+/// (`at_jump`: start, end) is left to the jump's own placement.
 fn settling(
     rest: std::ops::Range<usize>,
     v: &[f64],
-    k: usize,
+    (k, creep_mps): (usize, f64),
     at_jump: [bool; 2],
 ) -> Vec<(usize, f64, f64)> {
     let mid = rest.start + rest.len() / 2;
+    let creeping = |i: &usize| v[*i] != 0.0 && v[*i].abs() < creep_mps;
     let mut out = Vec::new();
     if let Some(&before) = rest.start.checked_sub(1).and_then(|i| v.get(i)) {
         if before != 0.0 && !at_jump[0] {
+            let from = rest.start.saturating_sub(k);
+            let creep: Vec<usize> = (from..rest.start).rev().take_while(creeping).collect();
+            out.extend(creep.into_iter().rev().map(|i| (i, 0.0, 0.5)));
             out.extend((rest.start..mid.min(rest.start + k)).map(|i| (i, before, 0.5)));
         }
     }
     if let Some(&after) = v.get(rest.end) {
         if after != 0.0 && !at_jump[1] {
             out.extend((mid.max(rest.end.saturating_sub(k))..rest.end).map(|i| (i, after, 0.5)));
+            let to = (rest.end + k).min(v.len());
+            out.extend((rest.end..to).take_while(creeping).map(|i| (i, 0.0, 0.5)));
         }
     }
     out
