@@ -72,6 +72,11 @@ pub struct Prepared {
     pub trial: Trial,
     pub geometry: TrialFit,
     pub nominal_n: Vec<f64>,
+    /// The nominal with this trial's own corrections as the baseline
+    /// fitted them ([`super::with_fitted`]): the force the tissue exerts
+    /// as the nominal at its best has it, what relaxes. `nominal_n` until
+    /// fitted.
+    pub fitted_n: Vec<f64>,
     pub residual_n: Vec<f64>,
     /// Index into [`PHASES`].
     pub phase: Vec<usize>,
@@ -133,13 +138,9 @@ impl Prepared {
         self.search.get_or_init(|| {
             let (trial, geometry, velocity) =
                 thinned(&self.trial, &self.geometry, &self.velocity, step);
-            Box::new(prepare(
-                self.file.clone(),
-                trial,
-                geometry,
-                &self.params,
-                velocity,
-            ))
+            let mut p = prepare(self.file.clone(), trial, geometry, &self.params, velocity);
+            p.fitted_n = crate::trial::every(&self.fitted_n, step);
+            Box::new(p)
         })
     }
 
@@ -189,7 +190,7 @@ pub fn prepare(
     // While the withdrawing needle drags the tissue along, the force is
     // the tent's (the stick's own corrections, per trial), not kinetic
     // friction.
-    let stick = stick(&trial, &phase, geometry.noise_n);
+    let stick = stick(&trial, &phase, &parts.friction_n, geometry.noise_n);
     let mut parts = parts;
     for i in stick.clone() {
         nominal_n[i] = 0.0;
@@ -202,6 +203,7 @@ pub fn prepare(
     let structures = structures(&trial, params, &residual_n);
     Prepared {
         stick,
+        fitted_n: nominal_n.clone(),
         file,
         noise_n: geometry.noise_n,
         params: *params,
@@ -339,15 +341,26 @@ fn phases(trial: &Trial, geometry: &TrialFit, parts: &Parts) -> Vec<usize> {
 
 /// Where a withdrawing needle dragged the tissue along (the paper's
 /// Karnopp band with a tissue of finite stiffness round the shaft): from
-/// the withdrawal's first sample until the force snaps back
-/// ([`crate::fit::trial::slipped`]); none: no stick.
-pub fn stick(trial: &Trial, phase: &[usize], noise_n: f64) -> std::ops::Range<usize> {
-    let Some(start) = phase.iter().position(|&p| p == WITHDRAWAL) else {
+/// the needle's first step out (the withdrawal's first sample, or the
+/// dwell's last ones where the nominal already pulls the needle out:
+/// it sets off before the phases call it moving) until the force snaps
+/// back ([`crate::fit::trial::slipped`]); none: no stick.
+pub fn stick(
+    trial: &Trial,
+    phase: &[usize],
+    friction_n: &[f64],
+    noise_n: f64,
+) -> std::ops::Range<usize> {
+    let Some(first) = phase.iter().position(|&p| p == WITHDRAWAL) else {
         return 0..0;
     };
-    let end = (start..phase.len())
+    let end = (first..phase.len())
         .find(|&i| phase[i] != WITHDRAWAL)
         .unwrap_or(phase.len());
+    let mut start = first;
+    while start > 0 && phase[start - 1] == DWELL && friction_n[start - 1] < 0.0 {
+        start -= 1;
+    }
     crate::fit::trial::slipped(&trial.f_n[..end], &trial.x_m, start, noise_n)
         .map_or(0..0, |s| start..s)
 }

@@ -699,7 +699,7 @@ impl Beyond {
 
 /// Where a needle withdrawing from `start` stopped dragging the tissue
 /// along (the paper's Karnopp band with a tissue of finite stiffness round
-/// the shaft): the first sample after the force snaps back, a rise within
+/// the shaft): the first sample past halfway up the force's snap back, a rise within
 /// three samples of ten noise sd or more from a pull at least as deep,
 /// with the needle moving back through it (a needle that starts again
 /// from rest, slower, holds less by Karnopp's law too), landing on a force
@@ -717,7 +717,12 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
         let pulling = low <= -least_n && after <= -0.5 * least_n;
         let moving = x[low_at.saturating_sub(3)] > x[low_at] && x[low_at] > x[i];
         if rise >= least_n && pulling && moving && best.is_none_or(|b| rise > b.1) {
-            best = Some((low_at + 1, rise));
+            // The first sample past halfway up the snap, not the one after
+            // the deepest pull: which of the last stuck samples reads
+            // deepest is the noise's choice.
+            let halfway = low + 0.5 * rise;
+            let slip = (low_at + 1..=i).find(|&j| f[j] > halfway).unwrap_or(i);
+            best = Some((slip, rise));
         }
     }
     best.map(|b| b.0)
