@@ -357,14 +357,18 @@ fn a_decoded_stream_names_the_drift_and_the_device_models_gap_has_it_closest() {
     assert!(num(&host["verdict"]["shrink"]) > 0.5);
     // Against the firmware's own model (its residual stream): what the
     // device's online geometry misses in the dwell and at the reversals
-    // leaves most of the gap open, so the verdict is `unexplained`, with
-    // the drift the closest candidate.
+    // leaves the gap open (not explained), the drift the first effect
+    // named or, if none is significant, the closest candidate.
     let device = diagnose_live(&["--device-model"]);
     let v = &device["verdict"];
     println!("against the device's model: {v}");
     let closest = v["closest"].as_array().unwrap();
-    assert_eq!(v["effect"], "unexplained", "{v}");
+    assert_eq!(v["explained"], false, "{v}");
     assert_eq!(closest[0], "sensor_drift", "{v}");
+    assert!(
+        v["effect"] == "unexplained" || v["effect"] == "sensor_drift",
+        "{v}"
+    );
 }
 
 #[test]

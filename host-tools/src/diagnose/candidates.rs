@@ -57,7 +57,7 @@ pub const CANDIDATES: [Candidate; 8] = [
             16.0, 17.0, 18.0, 19.0, 20.0, 21.0, 22.0, 23.0, 24.0, 25.0, 26.0, 27.0, 28.0, 29.0,
             30.0, 31.0, 32.0, 33.0, 34.0, 35.0, 36.0, 37.0, 38.0, 39.0,
         ],
-        linear: &["gain"],
+        linear: &["capsule_gain", "gain"],
         columns: relaxation,
         grid_params: spectrum_params,
         backfit: Backfit::Force,
@@ -178,22 +178,54 @@ fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
 /// tissue relaxes 34–41 % of a held force in 5 s at rest, which no
 /// motion-driven branch can do: the needle stands still.
 fn relaxation(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
-    if g >= QLV_FROM {
+    let col = if g >= QLV_FROM {
         qlv(p, g - QLV_FROM)
     } else {
         maxwell(p, g)
+    };
+    capsule_and_shaft(p, &col)
+}
+
+/// A column split in two, the capsule's part (loading) and the rest: the
+/// capsule is a membrane, what the shaft and tip shear after it is the
+/// tissue beneath, and the two need not relax alike.
+fn capsule_and_shaft(p: &Prepared, col: &[f64]) -> Vec<Vec<f64>> {
+    let (mut capsule, mut rest) = (vec![0.0; col.len()], vec![0.0; col.len()]);
+    for (i, &c) in col.iter().enumerate() {
+        if p.phase[i] == LOADING {
+            capsule[i] = c;
+        } else {
+            rest[i] = c;
+        }
     }
+    vec![capsule, rest]
 }
 
 /// QLV with a reduced relaxation function G(t) = 1 − γ·(1 − Σ_k e^{−t/τ_k}/K)
-/// acting on the nominal force F: σ = F − γ·(F − h), h_k the part of F's
+/// acting on the tissue's force F as the baseline fitted it on the trial
+/// ([`Prepared::fitted_n`]): σ = F − γ·(F − h), h_k the part of F's
 /// history not yet relaxed (dh_k/dt = dF/dt − h_k/τ_k), so the column is
 /// −(F − h) and γ its coefficient. Exact over each step for F linear in
 /// it, so jittered clocks and gaps cost nothing.
-fn qlv(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
+///
+/// A needle sliding through tissue meets fresh tissue at its tip and
+/// along its shaft all the time: what it shears has had no time to relax,
+/// so nothing of a sliding force has relaxed (h = F), and the force it
+/// holds once it stops relaxes from there. The capsule, stretched without
+/// sliding, relaxes as it loads; so does a tissue dragged along on
+/// withdrawal (the stick). Read the other way — every force relaxing
+/// from its whole history — a steady insertion's force would be relaxed
+/// already when the needle stops, and the force held at rest would rise
+/// back, where tissue is seen to fall 34–41 % in 5 s.
+fn qlv(p: &Prepared, g: f64) -> Vec<f64> {
     let (tau_s, decades) = spectrum_at(g);
     let branches = (2.0 * decades) as i32;
-    let f = |i: usize| if p.in_tissue(i) { p.nominal_n[i] } else { 0.0 };
+    let f = |i: usize| if p.in_tissue(i) { p.fitted_n[i] } else { 0.0 };
+    let sliding = |i: usize| {
+        p.phase[i] != LOADING
+            && p.velocity.v_mps[i].abs() >= p.params.half_band_mps
+            && !p.stick.contains(&i)
+    };
     let t = &p.trial.t_s;
     let mut col = vec![0.0; p.trial.len()];
     for b in -branches / 2..=branches / 2 {
@@ -206,6 +238,10 @@ fn qlv(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
                 h = 0.0;
                 continue;
             }
+            if sliding(i) {
+                h = f(i);
+                continue;
+            }
             if i > 0 {
                 let dt = (t[i] - t[i - 1]).max(1e-9);
                 let decay = (-dt / tau).exp();
@@ -214,14 +250,14 @@ fn qlv(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
             col[i] -= (f(i) - h) / f64::from(branches + 1);
         }
     }
-    vec![col]
+    col
 }
 
 /// Maxwell branches spread evenly in log τ over the spectrum's width
 /// (half a decade apart), each state dm/dt = v − m/τ_k in tissue, summed
 /// with equal stiffness. Each step is integrated exactly for a velocity
 /// held over it, so a rig's jittered clock and its gaps cost nothing.
-fn maxwell(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
+fn maxwell(p: &Prepared, g: f64) -> Vec<f64> {
     let (tau_s, decades) = spectrum_at(g);
     let branches = (2.0 * decades) as i32;
     let mut col = vec![0.0; p.trial.len()];
@@ -231,7 +267,7 @@ fn maxwell(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
             *c += m / f64::from(branches + 1);
         }
     }
-    vec![col]
+    col
 }
 
 fn maxwell_branch(p: &Prepared, tau_s: f64) -> Vec<f64> {

@@ -202,8 +202,14 @@ fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
         .iter()
         .take_while(|&&ph| ph == DWELL)
         .count();
+    // Only where the nominal holds: a dwell's first samples can still be
+    // sliding by the encoder (a stage easing to a stop), and there the
+    // trial's own friction and cutting answer.
+    let at_rest = |i: usize| p.velocity.v_mps[i].abs() < p.params.half_band_mps;
     for (i, h) in held.iter_mut().enumerate().skip(start).take(in_dwell) {
-        *h = p.friction_n[i] + p.cutting[i] * p.params.cutting_force_n;
+        if at_rest(i) {
+            *h = p.friction_n[i] + p.cutting[i] * p.params.cutting_force_n;
+        }
     }
     held
 }
@@ -352,6 +358,9 @@ pub struct Scored {
     /// Linear parameters fitted on each fold's training trials (trial j
     /// is withheld in fold j mod k).
     pub fold_theta: Vec<Vec<f64>>,
+    /// Each trial's linear parameters: its own spread columns fitted on
+    /// it, the shared ones from all trials.
+    pub trial_theta: Vec<Vec<f64>>,
 }
 
 impl Scored {
@@ -437,6 +446,10 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         fold_theta.push(shared);
     }
     let (gi, mut theta) = best_fit(&|_| true);
+    let trial_theta = totals[gi]
+        .iter()
+        .map(|g| per.for_trial(g, &theta))
+        .collect();
     // The spread columns reported as their mean over the trials.
     for &i in &SPREAD {
         let own: Vec<f64> = totals[gi]
@@ -453,7 +466,27 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         grid_value: grid[gi],
         theta,
         fold_theta,
+        trial_theta,
     }
+}
+
+/// `data` with each trial's [`Prepared::fitted_n`]: the nominal plus the
+/// corrections the baseline fitted on it. An effect that acts on the
+/// tissue's force (relaxation) acts on this one, not on the pooled
+/// nominal's: a trial whose tissue holds more through its dwell relaxes
+/// more.
+pub fn with_fitted(mut data: Vec<Prepared>) -> Vec<Prepared> {
+    let baseline = score(&data, &[], None);
+    for (p, theta) in data.iter_mut().zip(&baseline.trial_theta) {
+        let mut fitted = p.nominal_n.clone();
+        for (col, th) in columns(p, &[]).iter().zip(theta) {
+            for (f, c) in fitted.iter_mut().zip(col) {
+                *f += th * c;
+            }
+        }
+        p.fitted_n = fitted;
+    }
+    data
 }
 
 /// Shrink of held-out RMS and the paired t of per-trial improvements,
@@ -624,11 +657,13 @@ fn nominal_again(
         .map(|r| (&r.seen, &r.geometry, &r.velocity))
         .collect();
     params.relaxation = prepare::fit_relaxation(&triples, &params);
-    Ok(refits
-        .into_iter()
-        .zip(data)
-        .map(|(r, p)| prepare(p.file.clone(), r.kept, r.geometry, &params, r.velocity))
-        .collect())
+    Ok(with_fitted(
+        refits
+            .into_iter()
+            .zip(data)
+            .map(|(r, p)| prepare(p.file.clone(), r.kept, r.geometry, &params, r.velocity))
+            .collect(),
+    ))
 }
 
 /// Most rounds of [`backfit`]; it stops sooner once a round changes the
@@ -857,6 +892,7 @@ pub fn diagnose_with_progress(
     progress: &mut dyn FnMut(&str),
 ) -> Value {
     progress("scoring the baseline and every candidate on withheld trials");
+    let data = &with_fitted(data.to_vec());
     let baseline = score(data, &[], None);
     let mut ranked: Vec<(usize, Scored, f64, f64)> = CANDIDATES
         .iter()
