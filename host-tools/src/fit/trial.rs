@@ -164,8 +164,9 @@ fn noise(f: &[f64]) -> f64 {
 /// The capsule puncture: the first sharp fall (below 60 % of the running
 /// peak, the peak well above noise) with the needle further in than at the
 /// peak — a force that falls at rest (a tissue relaxing through a dwell,
-/// cutting stopping with the needle) is no puncture; returns the peak's
-/// index.
+/// cutting stopping with the needle) is no puncture, and neither is a
+/// spike without a loading curve before it (a holder's inertia as the
+/// drive sets off, a knock); returns the peak's index.
 fn find_puncture(f: &[f64], x: &[f64], noise_n: f64) -> Option<usize> {
     let mut peak = 0;
     for i in 0..f.len() {
@@ -173,10 +174,22 @@ fn find_puncture(f: &[f64], x: &[f64], noise_n: f64) -> Option<usize> {
             peak = i;
         }
         if f[peak] > 0.1 + 10.0 * noise_n && f[i] < 0.6 * f[peak] && x[i] > x[peak] {
-            return Some(peak);
+            if loading_samples(f, peak, noise_n) >= MIN_LOADING_SAMPLES {
+                return Some(peak);
+            }
+            peak = i;
         }
     }
     None
+}
+
+/// Fewest samples of the rise into a puncture that make a loading curve.
+const MIN_LOADING_SAMPLES: usize = 20;
+
+/// The samples of the rise into the peak at `ip`, above the noise.
+fn loading_samples(f: &[f64], ip: usize, noise_n: f64) -> usize {
+    let thr = (6.0 * noise_n).max(0.02 * f[ip]);
+    f[..ip].iter().rev().take_while(|&&fj| fj > thr).count()
 }
 
 /// Gauss–Newton on f = d/(a·d + b), d = x − x_s1, in force space, over
@@ -309,11 +322,8 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
 
     // Loading curve: the rise into the peak, above the noise.
     let thr = (6.0 * noise_n).max(0.02 * f[ip]);
-    let mut j0 = ip;
-    while j0 > 0 && f[j0 - 1] > thr {
-        j0 -= 1;
-    }
-    if ip - j0 < 20 {
+    let j0 = ip - loading_samples(f, ip, noise_n);
+    if ip - j0 < MIN_LOADING_SAMPLES {
         bail!("too few samples on the loading curve before the puncture");
     }
     // General quadratic through the rise; its root below the data is x_s1.
@@ -1036,5 +1046,18 @@ mod tests {
         leap.x_m[3000..].iter_mut().for_each(|x| *x += 5.0);
         let err = check_drive_speed(&leap).unwrap_err().to_string();
         assert!(err.contains("x_m moves 5.0000 m"), "{err}");
+    }
+
+    #[test]
+    fn a_spike_as_the_drive_sets_off_is_no_puncture() {
+        // A rigid holder's inertia: one sample of 0.3 N as the needle
+        // starts to move, before it reaches the tissue.
+        let clean = liver();
+        let mut knocked = clean.clone();
+        let start = knocked.x_m.iter().position(|&x| x > 0.0).unwrap();
+        knocked.f_n[start] += 0.3;
+        let (a, b) = (fit_trial(&clean).unwrap(), fit_trial(&knocked).unwrap());
+        assert_eq!(a.puncture_index, b.puncture_index);
+        assert!(b.puncture_index > start + MIN_LOADING_SAMPLES);
     }
 }
