@@ -109,8 +109,8 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
     Candidate {
         effect: "sensor_drift",
-        grid_name: "none",
-        grid: &[0.0],
+        grid_name: "settling_tau_s",
+        grid: &[0.0, 10.0, 30.0, 100.0],
         linear: &["rate_n_per_s"],
         columns: drift,
         grid_params: grid_as_named,
@@ -430,9 +430,26 @@ fn lag(mut signal: Vec<f64>, tau_s: f64, rate_hz: f64) -> Vec<f64> {
     signal
 }
 
-/// An offset growing in time since the recording began.
-fn drift(p: &Prepared, _: f64) -> Vec<Vec<f64>> {
-    vec![p.trial.t_s.iter().map(|t| t - p.trial.t_s[0]).collect()]
+/// An offset growing in time since the recording began: at a steady
+/// rate (`tau_s` 0), or settling to a new zero with time constant `tau_s`
+/// as a bridge warms up (a first-order thermal approach over tens of
+/// seconds), τ·(1 − e^{−t/τ}) so the coefficient is the rate at the start
+/// in either case.
+fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
+    let t0 = p.trial.t_s.first().copied().unwrap_or(0.0);
+    vec![p
+        .trial
+        .t_s
+        .iter()
+        .map(|t| {
+            let t = t - t0;
+            if tau_s > 0.0 {
+                tau_s * (1.0 - (-t / tau_s).exp())
+            } else {
+                t
+            }
+        })
+        .collect()]
 }
 
 /// Tissue motion grid: frequency (breathing, 0.15–0.4 Hz) × amplitude.

@@ -322,7 +322,8 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let least_mps = 5.0 * step_m / (k as f64 * dt);
     let jumps = jumps::velocity_steps(t, x, k, least_mps, step_m);
     let mut bounds: Vec<usize> = jumps.iter().map(|j| j.index).collect();
-    let rests = rests(x, k, step_m);
+    let least_rest = k.max((LEAST_STOP_S / dt).round() as usize);
+    let rests = rests(x, least_rest, step_m);
     for edge in rests.iter().flat_map(|r| [r.start, r.end]) {
         if edge > 0 && edge < n && !bounds.contains(&edge) {
             bounds.push(edge);
@@ -384,8 +385,14 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     }
 }
 
-/// The runs of at least `k` samples (10 ms) that the encoder reads at one
-/// position: the needle at rest, or turning slower than it can tell. A
+/// Shortest run at one encoder position that is a stop (a dwell, as
+/// `needle diagnose` calls one). Shorter runs are motion too slow for the
+/// encoder to read each sample (crawling a micrometre per 10 ms, a
+/// 0.2 Hz stroke turning), which a window across them measures.
+const LEAST_STOP_S: f64 = 0.1;
+
+/// The runs of at least `k` samples that the encoder reads at one
+/// position: the needle at rest. A
 /// start or stop eased in over a few samples is no jump, yet the force law
 /// steps there all the same: a velocity window reaching across the edge
 /// has the needle sliding while the encoder still reads it at rest, a

@@ -162,7 +162,8 @@ fn noise(f: &[f64]) -> f64 {
 }
 
 /// The capsule puncture: the first sharp fall (below 60 % of the running
-/// peak, the peak well above noise) with the needle further in than at the
+/// peak, or by a quarter of it within three samples; the peak well above
+/// noise) with the needle further in than at the
 /// peak — a force that falls at rest (a tissue relaxing through a dwell,
 /// cutting stopping with the needle) is no puncture, and neither is a
 /// spike without a loading curve before it (a holder's inertia as the
@@ -173,7 +174,12 @@ fn find_puncture(f: &[f64], x: &[f64], noise_n: f64) -> Option<usize> {
         if f[i] > f[peak] {
             peak = i;
         }
-        if f[peak] > 0.1 + 10.0 * noise_n && f[i] < 0.6 * f[peak] && x[i] > x[peak] {
+        // Fallen far, or fallen fast: a quarter of the peak within three
+        // samples (a membrane over stiff tissue gives way to 60-80 % of
+        // its peak, and that fall is as sudden).
+        let fast = i >= 3 && f[i - 3] - f[i] > 0.25 * f[peak] && f[i] < 0.8 * f[peak];
+        let fallen = f[i] < 0.6 * f[peak] || fast;
+        if f[peak] > 0.1 + 10.0 * noise_n && fallen && x[i] > x[peak] {
             if loading_samples(f, peak, noise_n) >= MIN_LOADING_SAMPLES {
                 return Some(peak);
             }
