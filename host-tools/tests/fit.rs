@@ -234,3 +234,23 @@ fn the_plot_shows_measured_and_fitted_force_with_the_events() {
     }
     assert!(text.matches("<polyline").count() >= 2, "two force curves");
 }
+
+/// `puncture_detection` reads the fitted trials as the device's detector
+/// would with the fitted tissue: nothing before the peak comes near
+/// firing it, and every capsule's fall clears the fall it needs.
+#[test]
+fn fit_says_how_far_its_puncture_threshold_stands_from_each_trial() {
+    let out = fit(&LIVER1, &[], 5);
+    let d = &out["puncture_detection"];
+    let num = |k: &str| d[k].as_f64().unwrap_or_else(|| panic!("{k}: {d}"));
+    assert!(num("margin_to_early_n") > 0.0, "{d}");
+    assert!(num("margin_to_miss_n") > 0.0, "{d}");
+    assert!(
+        num("largest_fall_before_peak_n") < num("threshold_n"),
+        "{d}"
+    );
+    // Liver 1 falls from 2.3 N to 0.66 N: most of it clears the half of
+    // it the detector asks.
+    let fall = num("smallest_puncture_fall_n");
+    assert!(fall > num("threshold_n") && fall < 1.7, "{d}");
+}

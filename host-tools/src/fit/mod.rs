@@ -139,38 +139,59 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
 }
 
 /// How far to trust the puncture detector with the fitted tissue, on the
-/// fitted trials themselves: its threshold (the fall that confirms a
-/// puncture, from a peak that leaks away by it per 30 ms), the largest
-/// such fall while loading before each trial's peak (what would fire it
-/// early), and the smallest capsule fall (what must fire it), with the
-/// margins between them.
+/// fitted trials themselves, as the detector reads them
+/// ([`needle_holder::detect::puncture::fall`]: the fall below a peak that
+/// leaks away by the expected drop per 30 ms, against the fall that
+/// confirms a puncture from that peak): the largest fall while loading
+/// before each trial's peak, with its margin to firing early, and the
+/// smallest capsule fall within the detector's fall window after the
+/// peak, with its margin to being missed.
 fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Value {
-    let base = needle_holder::detect::DetectConfig::for_tissue(params);
-    let threshold_n = f64::from(base.puncture_drop.0) * 1e-6;
-    let mut largest_before_n: f64 = 0.0;
-    let mut smallest_fall_n = f64::INFINITY;
+    use needle_holder::detect::{puncture, DetectConfig, DetectInput};
+    use needle_holder::protocol::Phase;
+    use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
+    let base = DetectConfig::for_tissue(params);
+    let n = |m: MicroNewtons| f64::from(m.0) * 1e-6;
+    let (mut largest_before_n, mut to_early_n) = (0.0_f64, f64::INFINITY);
+    let (mut smallest_fall_n, mut to_miss_n) = (f64::INFINITY, f64::INFINITY);
     for (trial, fit) in fitted {
         let rate_hz = trial.rate_hz().round().clamp(1.0, f64::from(u16::MAX)) as u16;
-        let window_samples =
-            needle_holder::detect::puncture::fall_window_samples(&base.at_sample_rate(rate_hz));
-        // The detector's leaking peak ([`needle_holder::detect::puncture`]).
-        let leak_n = threshold_n / f64::from(window_samples.max(1));
-        let mut peak_n: f64 = 0.0;
-        let loaded = (0..fit.puncture_index).filter(|&i| trial.x_m[i] >= fit.contact_x_m);
+        let c = base.at_sample_rate(rate_hz);
+        let mut st = puncture::PunctureState::default();
+        let (mut fall_n, mut fall_margin_n) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+        // The peak the fit reports can stand a few samples before the
+        // fall on a flat top: the fall is looked for over the detector's
+        // own window after it.
+        let window = puncture::fall_window_samples(&c) as usize;
+        let last = (fit.puncture_index + window + 2).min(trial.len());
+        let loaded = (0..last).filter(|&i| trial.x_m[i] >= fit.contact_x_m);
         for i in loaded {
-            let leaked_n = peak_n - leak_n;
-            largest_before_n = largest_before_n.max(leaked_n - trial.f_n[i]);
-            peak_n = leaked_n.max(trial.f_n[i]);
+            let s = DetectInput {
+                index: u32::try_from(i).unwrap_or(u32::MAX),
+                phase: Phase::Loading,
+                x: Nanometres::from_m(trial.x_m[i]),
+                v: NanometresPerSecond(0),
+                force: MicroNewtons::from_n(trial.f_n[i]),
+                at_cutting_front: false,
+            };
+            let f = puncture::fall(&c, &mut st, &s);
+            if i <= fit.puncture_index {
+                largest_before_n = largest_before_n.max(n(f.drop));
+                to_early_n = to_early_n.min(n(f.needed) - n(f.drop));
+            } else if n(f.drop) - n(f.needed) > fall_margin_n {
+                (fall_n, fall_margin_n) = (n(f.drop), n(f.drop) - n(f.needed));
+            }
         }
-        smallest_fall_n = smallest_fall_n.min(fit.puncture_force_n - fit.puncture_drop_to_n);
+        smallest_fall_n = smallest_fall_n.min(fall_n);
+        to_miss_n = to_miss_n.min(fall_margin_n);
     }
     json!({
-        "threshold_n": threshold_n,
+        "threshold_n": n(base.puncture_drop),
         "largest_fall_before_peak_n": largest_before_n,
-        "margin_to_early_n": threshold_n - largest_before_n,
+        "margin_to_early_n": to_early_n,
         "smallest_puncture_fall_n": smallest_fall_n,
-        "margin_to_miss_n": smallest_fall_n - threshold_n,
-        "note": "on the fitted trials: a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
+        "margin_to_miss_n": to_miss_n,
+        "note": "on the fitted trials, as the device's detector reads them: threshold_n is the expected fall; from a smaller peak a quarter of it confirms; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
     })
 }
 
