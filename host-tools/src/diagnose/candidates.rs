@@ -230,6 +230,7 @@ fn qlv(p: &Prepared, g: f64) -> Vec<f64> {
     let mut col = vec![0.0; p.trial.len()];
     for b in -branches / 2..=branches / 2 {
         let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
+        let mut decay = Decay::new(tau);
         let mut h = 0.0;
         for i in 0..p.trial.len() {
             // Out of the tissue there is no tissue force, and nothing of
@@ -244,13 +245,41 @@ fn qlv(p: &Prepared, g: f64) -> Vec<f64> {
             }
             if i > 0 {
                 let dt = (t[i] - t[i - 1]).max(1e-9);
-                let decay = (-dt / tau).exp();
+                let decay = decay.over(dt);
                 h = h * decay + (f(i) - f(i - 1)) / dt * tau * (1.0 - decay);
             }
             col[i] -= (f(i) - h) / f64::from(branches + 1);
         }
     }
     col
+}
+
+/// e^{−dt/τ} for one τ, computed again only when the step changes (by
+/// more than a part in 10⁹): a clocked recording repeats its step, and
+/// the exponential was a seventh of a diagnosis's time.
+struct Decay {
+    tau_s: f64,
+    dt_s: f64,
+    factor: f64,
+}
+
+impl Decay {
+    fn new(tau_s: f64) -> Self {
+        Self {
+            tau_s,
+            dt_s: 0.0,
+            factor: 1.0,
+        }
+    }
+
+    fn over(&mut self, dt_s: f64) -> f64 {
+        // Times stored as multiples of a step differ in their last bits.
+        if (dt_s - self.dt_s).abs() > 1e-9 * dt_s {
+            self.dt_s = dt_s;
+            self.factor = (-dt_s / self.tau_s).exp();
+        }
+        self.factor
+    }
 }
 
 /// Maxwell branches spread evenly in log τ over the spectrum's width
@@ -272,11 +301,12 @@ fn maxwell(p: &Prepared, g: f64) -> Vec<f64> {
 
 fn maxwell_branch(p: &Prepared, tau_s: f64) -> Vec<f64> {
     let t = &p.trial.t_s;
+    let mut decay = Decay::new(tau_s);
     let mut m = 0.0;
     (0..p.trial.len())
         .map(|i| {
             m = if p.in_tissue(i) && i > 0 {
-                let decay = (-(t[i] - t[i - 1]) / tau_s).exp();
+                let decay = decay.over(t[i] - t[i - 1]);
                 m * decay + p.velocity.v_mps[i] * tau_s * (1.0 - decay)
             } else {
                 0.0
