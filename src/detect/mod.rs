@@ -46,7 +46,9 @@ pub struct DetectConfig {
     pub contact_offset: Nanometres,
     /// Smallest peak that counts as a capsule puncture.
     pub puncture_min_peak: MicroNewtons,
-    /// Fall, within 30 ms, that confirms a puncture.
+    /// Fall, within 30 ms, that confirms a puncture from the force the
+    /// tissue expects (half its expected drop); from a smaller peak a
+    /// quarter of the peak suffices ([`puncture::needed_drop`]).
     pub puncture_drop: MicroNewtons,
     /// Least rise of the force that can be an interior structure.
     pub structure_rise: MicroNewtons,

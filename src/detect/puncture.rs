@@ -95,8 +95,9 @@ pub fn update(c: &DetectConfig, st: &mut PunctureState, s: DetectInput) -> Optio
     })
 }
 
-/// The fall that confirms a puncture from a peak of `peak`: the drop the
-/// tissue expects, or a quarter of the peak if that is less — a capsule
+/// The fall that confirms a puncture from a peak of `peak`: half the drop
+/// the tissue expects ([`DetectConfig::puncture_drop`]), or a quarter of
+/// the peak if that is less — a capsule
 /// that gives way at half the force the tissue's model expects (the
 /// paper's liver: 2.30 ± 0.83 N) falls as suddenly, by as large a share
 /// of its force — never under twice the contact force (the noise).

@@ -171,10 +171,11 @@ fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
 
 /// Viscoelasticity in either of its two readings: a branch the needle's
 /// motion loads (k·m, the Maxwell element beside the nominal's springs;
-/// gain in N/m), or relaxation of every force the tissue exerts (Fung's
-/// quasi-linear viscoelasticity on the nominal's own force: the
-/// capsule's before the puncture, the shaft's friction and cutting after,
-/// in motion as at rest; gain the fraction that relaxes away). Real
+/// gains in N/m), or relaxation of the force the tissue exerts (Fung's
+/// quasi-linear viscoelasticity on each trial's fitted force, [`qlv`]:
+/// the capsule's as it loads, a held force from the stop, the dragged
+/// tissue's; gains the fraction that relaxes away). Either with one gain
+/// for the capsule and one for the rest ([`capsule_and_shaft`]). Real
 /// tissue relaxes 34–41 % of a held force in 5 s at rest, which no
 /// motion-driven branch can do: the needle stands still.
 fn relaxation(p: &Prepared, g: f64) -> Vec<Vec<f64>> {

@@ -99,9 +99,9 @@ pub struct Prepared {
     /// Interior structures the device's detector found: (sample index,
     /// peak position, wall force = fall of the force there).
     pub structures: Vec<(usize, f64, f64)>,
-    /// The withdrawal's stick ([`stick`]): the samples from the start of
-    /// the withdrawal to where the dragged tissue slipped; empty if it
-    /// never stuck.
+    /// The withdrawal's stick ([`stick`]): the samples from the needle's
+    /// first step out (up to 10 ms before the withdrawal phase) to where
+    /// the dragged tissue slipped; empty if it never stuck.
     pub stick: std::ops::Range<usize>,
     pub noise_n: f64,
     /// [`Self::for_search`]'s trial, made on first use: the searches ask
@@ -357,8 +357,16 @@ pub fn stick(
     let end = (first..phase.len())
         .find(|&i| phase[i] != WITHDRAWAL)
         .unwrap_or(phase.len());
+    // At most 10 ms back: the samples the velocity leaves to the force
+    // ([`crate::fit::predict::needle_velocity`]), not a dwell entered by
+    // drifting back.
+    let most_back = ((0.01 * trial.rate_hz()).round() as usize).max(3);
     let mut start = first;
-    while start > 0 && phase[start - 1] == DWELL && friction_n[start - 1] < 0.0 {
+    while start > 0
+        && first - start < most_back
+        && phase[start - 1] == DWELL
+        && friction_n[start - 1] < 0.0
+    {
         start -= 1;
     }
     crate::fit::trial::slipped(&trial.f_n[..end], &trial.x_m, start, noise_n)

@@ -175,11 +175,22 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Va
                 at_cutting_front: false,
             };
             let f = puncture::fall(&c, &mut st, &s);
+            // Below its least peak the detector does not fire at all.
+            let armed = f.peak >= c.puncture_min_peak;
             if i <= fit.puncture_index {
-                largest_before_n = largest_before_n.max(n(f.drop));
-                to_early_n = to_early_n.min(n(f.needed) - n(f.drop));
-            } else if n(f.drop) - n(f.needed) > fall_margin_n {
-                (fall_n, fall_margin_n) = (n(f.drop), n(f.drop) - n(f.needed));
+                if armed {
+                    largest_before_n = largest_before_n.max(n(f.drop));
+                    to_early_n = to_early_n.min(n(f.needed) - n(f.drop));
+                }
+            } else {
+                let margin_n = if armed {
+                    n(f.drop) - n(f.needed)
+                } else {
+                    n(f.peak) - n(c.puncture_min_peak)
+                };
+                if margin_n > fall_margin_n {
+                    (fall_n, fall_margin_n) = (n(f.drop), margin_n);
+                }
             }
         }
         smallest_fall_n = smallest_fall_n.min(fall_n);
@@ -191,7 +202,7 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Va
         "margin_to_early_n": to_early_n,
         "smallest_puncture_fall_n": smallest_fall_n,
         "margin_to_miss_n": to_miss_n,
-        "note": "on the fitted trials, as the device's detector reads them: threshold_n is the expected fall; from a smaller peak a quarter of it confirms; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
+        "note": "on the fitted trials, as the device's detector reads them: threshold_n is half the expected fall; from a smaller peak a quarter of the peak confirms, and below its least peak (30 % of the puncture force) nothing fires; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
     })
 }
 

@@ -448,9 +448,11 @@ fn settling(
     out
 }
 
-/// The needle's velocity at each sample, the samples next to a jump that
-/// may lie on its other side: (sample, velocity on the other side,
-/// probability), and the jumps themselves.
+/// The needle's velocity at each sample, the samples that may lie on the
+/// other side of a jump or of a rest's edge: (sample, velocity on the
+/// other side, probability; the force settles them where
+/// [`Self::force_sd_n`] is known, else the probability mixes both), and
+/// the jumps themselves.
 #[derive(Clone, Debug, Default)]
 pub struct NeedleVelocity {
     pub v_mps: Vec<f64>,
