@@ -586,7 +586,13 @@ fn plot_first_trial(dir: &Path, fit: &Value, toml: &str, path: &Path) -> Result<
     let trial = crate::trial::read_for_analysis(&dir.join(first), None)?.trial;
     let geometry = fit_trial(&trial)?;
     let params = fitted_tissue(toml)?;
-    let model = predict::predict(&params, &geometry, &trial);
+    // As the diagnosis draws it: the force settles the samples the
+    // encoder cannot place (beside a jump, at a rest's edges).
+    let velocity = predict::NeedleVelocity {
+        force_sd_n: geometry.noise_n,
+        ..predict::needle_velocity(&trial)
+    };
+    let model = predict::predict_parts_at(&params, &geometry, &trial, velocity).total_n();
     let measured: Vec<(f64, f64)> = trial
         .x_m
         .iter()
