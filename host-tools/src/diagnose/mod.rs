@@ -475,7 +475,13 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
 /// tissue's force (relaxation) acts on this one, not on the pooled
 /// nominal's: a trial whose tissue holds more through its dwell relaxes
 /// more.
-pub fn with_fitted(mut data: Vec<Prepared>) -> Vec<Prepared> {
+pub fn with_fitted(data: Vec<Prepared>) -> Vec<Prepared> {
+    fitted_and_baseline(data).0
+}
+
+/// [`with_fitted`], with the baseline it scored (which `fitted_n` does
+/// not change: no correction column reads it).
+fn fitted_and_baseline(mut data: Vec<Prepared>) -> (Vec<Prepared>, Scored) {
     let baseline = score(&data, &[], None);
     for (p, theta) in data.iter_mut().zip(&baseline.trial_theta) {
         let mut fitted = p.nominal_n.clone();
@@ -486,7 +492,7 @@ pub fn with_fitted(mut data: Vec<Prepared>) -> Vec<Prepared> {
         }
         p.fitted_n = fitted;
     }
-    data
+    (data, baseline)
 }
 
 /// Shrink of held-out RMS and the paired t of per-trial improvements,
@@ -892,8 +898,8 @@ pub fn diagnose_with_progress(
     progress: &mut dyn FnMut(&str),
 ) -> Value {
     progress("scoring the baseline and every candidate on withheld trials");
-    let data = &with_fitted(data.to_vec());
-    let baseline = score(data, &[], None);
+    let (data, baseline) = fitted_and_baseline(data.to_vec());
+    let data = &data;
     let mut ranked: Vec<(usize, Scored, f64, f64)> = CANDIDATES
         .iter()
         .enumerate()

@@ -360,7 +360,7 @@ pub fn stick(
     // At most 10 ms back: the samples the velocity leaves to the force
     // ([`crate::fit::predict::needle_velocity`]), not a dwell entered by
     // drifting back.
-    let most_back = ((0.01 * trial.rate_hz()).round() as usize).max(3);
+    let most_back = crate::fit::predict::window_samples(trial.rate_hz());
     let mut start = first;
     while start > 0
         && first - start < most_back

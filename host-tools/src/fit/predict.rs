@@ -310,9 +310,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     }
     let (t, x) = (&trial.t_s, &trial.x_m);
     let dt = 1.0 / trial.rate_hz();
-    // 10 ms, but three samples at least: a jump is placed where lines
-    // through the samples either side cross, and a line needs two.
-    let k = ((0.01 / dt).round() as usize).max(3);
+    let k = window_samples(trial.rate_hz());
     // Five encoder steps over a 10 ms window: above the two steps
     // quantisation can make of a smooth motion's contrast, and below the
     // stop of a 1 mm/s insertion read to 1 µm (ten steps, 1 mm/s, missed
@@ -385,26 +383,34 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     }
 }
 
+/// The half-width of the velocity windows, samples: 10 ms, but three
+/// samples at least (a jump is placed where lines through the samples
+/// either side cross, and a line needs two). Also how far either side of
+/// a rest's edge the force settles what the encoder cannot.
+pub fn window_samples(rate_hz: f64) -> usize {
+    ((0.01 * rate_hz).round() as usize).max(3)
+}
+
 /// Shortest run at one encoder position that is a stop (a dwell, as
 /// `needle diagnose` calls one). Shorter runs are motion too slow for the
 /// encoder to read each sample (crawling a micrometre per 10 ms, a
 /// 0.2 Hz stroke turning), which a window across them measures.
 const LEAST_STOP_S: f64 = 0.1;
 
-/// The runs of at least `k` samples that the encoder reads at one
-/// position: the needle at rest. A
-/// start or stop eased in over a few samples is no jump, yet the force law
-/// steps there all the same: a velocity window reaching across the edge
-/// has the needle sliding while the encoder still reads it at rest, a
-/// newton of residual a sample where a dwell turns into a withdrawal.
-fn rests(x: &[f64], k: usize, step_m: f64) -> Vec<std::ops::Range<usize>> {
+/// The runs of at least `least` samples that the encoder reads at one
+/// position: the needle at rest. A start or stop eased in over a few
+/// samples is no jump, yet the force law steps there all the same: a
+/// velocity window reaching across the edge has the needle sliding while
+/// the encoder still reads it at rest, a newton of residual a sample
+/// where a dwell turns into a withdrawal.
+fn rests(x: &[f64], least: usize, step_m: f64) -> Vec<std::ops::Range<usize>> {
     let mut runs = Vec::new();
     let mut start = 0;
     for i in 1..=x.len() {
         if i < x.len() && (x[i] - x[start]).abs() < 0.5 * step_m {
             continue;
         }
-        if i - start >= k {
+        if i - start >= least {
             runs.push(start..i);
         }
         start = i;
@@ -418,9 +424,9 @@ fn rests(x: &[f64], k: usize, step_m: f64) -> Vec<std::ops::Range<usize>> {
 /// of the rest, which may already (or still) be moving below one encoder
 /// step, and up to `k` outside it creeping slower than `creep_mps` (a
 /// stage easing to a stop reads a micrometre a sample while the tissue
-/// already holds). A turn slower than the encoder can tell is a rest
-/// between two motions, each end's half to its own side. An end at a jump
-/// (`at_jump`: start, end) is left to the jump's own placement.
+/// already holds). A rest shorter than 2·`k` gives each end its own
+/// half. An end at a jump (`at_jump`: start, end) is left to the jump's
+/// own placement.
 fn settling(
     rest: std::ops::Range<usize>,
     v: &[f64],

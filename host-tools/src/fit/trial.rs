@@ -192,9 +192,16 @@ fn find_puncture(f: &[f64], x: &[f64], noise_n: f64) -> Option<usize> {
 /// Fewest samples of the rise into a puncture that make a loading curve.
 const MIN_LOADING_SAMPLES: usize = 20;
 
-/// The samples of the rise into the peak at `ip`, above the noise.
+/// The force above which a rise into a peak of `peak_n` is loading
+/// curve: six noise sd, or 2 % of the peak.
+fn loading_threshold_n(peak_n: f64, noise_n: f64) -> f64 {
+    (6.0 * noise_n).max(0.02 * peak_n)
+}
+
+/// The samples of the rise into the peak at `ip`, above
+/// [`loading_threshold_n`].
 fn loading_samples(f: &[f64], ip: usize, noise_n: f64) -> usize {
-    let thr = (6.0 * noise_n).max(0.02 * f[ip]);
+    let thr = loading_threshold_n(f[ip], noise_n);
     f[..ip].iter().rev().take_while(|&&fj| fj > thr).count()
 }
 
@@ -327,11 +334,12 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     };
 
     // Loading curve: the rise into the peak, above the noise.
-    let thr = (6.0 * noise_n).max(0.02 * f[ip]);
-    let j0 = ip - loading_samples(f, ip, noise_n);
-    if ip - j0 < MIN_LOADING_SAMPLES {
+    let thr = loading_threshold_n(f[ip], noise_n);
+    let rise = loading_samples(f, ip, noise_n);
+    if rise < MIN_LOADING_SAMPLES {
         bail!("too few samples on the loading curve before the puncture");
     }
+    let j0 = ip - rise;
     // General quadratic through the rise; its root below the data is x_s1.
     let mut quad = Lsq::<3>::default();
     for j in j0..=ip {
