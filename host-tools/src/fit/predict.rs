@@ -34,12 +34,6 @@ pub struct Parts {
     pub friction_basis: Vec<[f64; 4]>,
 }
 
-/// Expected force at every sample of `trial` under `params`, with the
-/// surface positions found by the fit.
-pub fn predict(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Vec<f64> {
-    predict_parts(params, geometry, trial).total_n()
-}
-
 impl Parts {
     /// The model's whole force at every sample.
     pub fn total_n(&self) -> Vec<f64> {
@@ -49,14 +43,12 @@ impl Parts {
     }
 }
 
-/// [`predict`], term by term.
-pub fn predict_parts(params: &TissueParams, geometry: &TrialFit, trial: &Trial) -> Parts {
-    predict_parts_at(params, geometry, trial, needle_velocity(trial))
-}
-
-/// [`predict_parts`] at a needle velocity already known (from
-/// [`needle_velocity`]): the velocity is most of the cost, and a caller
-/// evaluating one trial under many parameters needs it once.
+/// The expected force at every sample of `trial` under `params`, term by
+/// term, with the surface positions found by the fit, at a needle
+/// velocity already known (from [`needle_velocity`], with the load cell's
+/// noise where the force is to settle what the encoder cannot): the
+/// velocity is most of the cost, and a caller evaluating one trial under
+/// many parameters needs it once.
 pub fn predict_parts_at(
     params: &TissueParams,
     geometry: &TrialFit,
