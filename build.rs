@@ -7,6 +7,9 @@ use std::fmt::Write as _;
 
 const LIBRARY: &str = "src/model/tissues.toml";
 
+/// Keys an entry may leave out (`Option`s in `TissueParams`).
+const OPTIONAL: [&str; 2] = ["puncture_force_sd_n", "puncture_drop_sd_n"];
+
 /// The memory map `memory.x` includes, per board.
 const QEMU_MEMORY: &str = "/* lm3s6965evb: 256 KiB flash at 0, 64 KiB SRAM; mps2-an386 has more of
    both at the same addresses, so this fits it too (and thumbv6m builds). */
@@ -58,10 +61,22 @@ fn main() {
                     };
                     writeln!(out, "    stiffness_law: StiffnessLaw::{variant},").unwrap();
                 }
-                (key, toml::Value::Float(v)) => writeln!(out, "    {key}: {v:?},").unwrap(),
-                (key, toml::Value::Integer(v)) => writeln!(out, "    {key}: {v}.0,").unwrap(),
+                (key, toml::Value::Float(_) | toml::Value::Integer(_)) => {
+                    let v = match value {
+                        toml::Value::Float(v) => format!("{v:?}"),
+                        other => format!("{other}.0"),
+                    };
+                    if OPTIONAL.contains(&key) {
+                        writeln!(out, "    {key}: Some({v}),").unwrap();
+                    } else {
+                        writeln!(out, "    {key}: {v},").unwrap();
+                    }
+                }
                 (key, other) => panic!("{LIBRARY}: [{name}] {key} = {other}: not a number"),
             }
+        }
+        for key in OPTIONAL.iter().filter(|k| !entry.contains_key(**k)) {
+            writeln!(out, "    {key}: None,").unwrap();
         }
         writeln!(out, "}};").unwrap();
         writeln!(

@@ -162,6 +162,20 @@ impl TissueModel {
         bad(d.exit_drop.0 >= 0, "cutting_force_n", NEG)?;
         bad(d.stuck_rise.0 > 0, "puncture_force_n", POS)?;
         bad(self.expected_peak.0 > 0, "puncture_force_n", POS)?;
+        // Half a drop deeper than the force it falls from (a negative
+        // fall-to force, or a negative spread of the fall), unless the
+        // noise floor (twice the contact force) set it.
+        bad(
+            d.puncture_drop.0 <= self.expected_peak.0 / 2
+                || d.puncture_drop.0 <= d.contact_force.0.saturating_mul(2),
+            "puncture_drop_to_n",
+            "must not be negative (a fall deeper than puncture_force_n)",
+        )?;
+        bad(
+            d.puncture_min_peak.0 <= self.expected_peak.0,
+            "puncture_force_sd_n",
+            "must not be negative (it arms the detector above puncture_force_n)",
+        )?;
         // A touch must be told before the capsule gives way: a contact
         // threshold at or above the puncture force detects nothing.
         bad(
@@ -309,7 +323,7 @@ mod tests {
     #[test]
     fn one_check_refuses_what_the_device_would_and_contradictions() {
         type Spoil = fn(&mut TissueParams);
-        let cases: [(Spoil, &str); 4] = [
+        let cases: [(Spoil, &str); 7] = [
             // 1 nN is 0 µN on the device.
             (|p| p.contact_force_n = 1e-9, "contact_force_n"),
             // 1 pm/s is 0 nm/s on the device.
@@ -318,6 +332,10 @@ mod tests {
             (|p| p.contact_force_n = 3.0, "contact_force_n"),
             // The fall cannot end above the peak.
             (|p| p.puncture_drop_to_n = 2.5, "puncture_drop_to_n"),
+            // A drop deeper than the force it falls from.
+            (|p| p.puncture_drop_to_n = -0.5, "puncture_drop_to_n"),
+            (|p| p.puncture_force_sd_n = Some(-0.2), "puncture_force_sd_n"),
+            (|p| p.puncture_drop_sd_n = Some(-0.2), "puncture_drop_sd_n"),
         ];
         for (spoil, field) in cases {
             let mut p = LIVER1;
@@ -326,6 +344,28 @@ mod tests {
             assert_eq!(got, Err(field), "{p:?}");
         }
         assert!(TissueModel::validated(&LIVER1).is_ok());
+    }
+
+    /// What a host that skipped the parameters' check would upload: the
+    /// device's own check names the key all the same.
+    #[test]
+    fn the_device_refuses_contradicting_detector_figures_by_key() {
+        type Spoil = fn(&mut TissueParams);
+        let cases: [(Spoil, &str); 3] = [
+            (|p| p.puncture_drop_to_n = -1.0, "puncture_drop_to_n"),
+            (|p| p.puncture_force_sd_n = Some(-0.2), "puncture_force_sd_n"),
+            // The device holds the fall that confirms, not its parts: a
+            // negative spread it can tell once it puts that fall past half
+            // the peak.
+            (|p| p.puncture_drop_sd_n = Some(-0.6), "puncture_drop_to_n"),
+        ];
+        for (spoil, field) in cases {
+            let mut p = LIVER1;
+            spoil(&mut p);
+            let mut model = LIBRARY_MODELS[0];
+            model.detect = DetectConfig::for_tissue(&p);
+            assert_eq!(model.check().map_err(|e| e.field), Err(field), "{p:?}");
+        }
     }
 
     use super::*;
@@ -337,8 +377,13 @@ mod tests {
             assert_eq!(tissue.check(), Ok(()), "{name}");
         }
         type Spoil = fn(&mut TissueModel);
-        let cases: [(Spoil, &str); 6] = [
+        let cases: [(Spoil, &str); 8] = [
             (|t| t.model.friction.cn.0 = 1, "cn_n_per_m"),
+            (
+                |t| t.detect.puncture_min_peak = t.expected_peak.add(MicroNewtons(1)),
+                "puncture_force_sd_n",
+            ),
+            (|t| t.detect.puncture_drop = t.expected_peak, "puncture_drop_to_n"),
             (
                 |t| t.model.friction.half_band = NanometresPerSecond(0),
                 "half_band_mps",

@@ -195,6 +195,23 @@ mod tests {
                 "[liver1]",
             ),
             ("[liver1\n".to_owned(), "t.toml:1:"),
+            // Detector figures that contradict each other.
+            (
+                good.replacen("puncture_drop_to_n = 0.6579", "puncture_drop_to_n = -0.2", 1),
+                "[liver1] `puncture_drop_to_n` is negative",
+            ),
+            (
+                good.replacen("puncture_force_sd_n = 0.83", "puncture_force_sd_n = -0.83", 1),
+                "[liver1] `puncture_force_sd_n` is negative",
+            ),
+            (
+                good.replacen(
+                    "puncture_force_sd_n = 0.83",
+                    "puncture_force_sd_n = 0.83\npuncture_drop_sd_n = -0.1",
+                    1,
+                ),
+                "[liver1] `puncture_drop_sd_n` is negative",
+            ),
         ];
         for (text, expected) in cases {
             let path = dir.path().join("t.toml");

@@ -518,6 +518,18 @@ fn the_fitted_tissue_finds_every_puncture_in_its_window_and_no_worse_than_the_de
         }
         .write(dir.path());
         let fit = fit_dataset(dir.path()).unwrap();
+        // The tissue carries the fall the trials made and the spreads the
+        // detector takes its margins from.
+        let tissue = host_tools::fit::fitted_tissue(&to_toml(&fit)).unwrap();
+        let truth = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap().params;
+        let fallen_to = tissue.puncture_drop_to_n;
+        assert!(
+            (fallen_to - truth.puncture_drop_to_n).abs() < 0.2 * truth.puncture_force_n,
+            "{effects}: falls to {fallen_to} N"
+        );
+        for sd in [tissue.puncture_force_sd_n, tissue.puncture_drop_sd_n] {
+            assert!(sd.is_some_and(|sd| sd > 0.0), "{effects}: {tissue:?}");
+        }
         let fitted = detect_with_fitted(dir.path(), &fit);
         let default = detect_dataset(dir.path(), &DeviceConfig::default()).unwrap();
         for kind in ["puncture", "structure"] {

@@ -23,16 +23,38 @@ use crate::protocol::{Event, EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// The fall that confirms a puncture, N: half the drop the tissue
-/// expects, and no less than twice the contact force (ten noise sd when
-/// `needle fit --toml` set it), so a tissue whose fall was read small
-/// (an artery rolling over) does not fire on noise.
+/// expects less the drop's spread between insertions
+/// (`puncture_drop_sd_n`, 0 when not measured) — half a drop two spreads
+/// short of the expected one — and no less than twice the contact force
+/// (ten noise sd when `needle fit --toml` set it), so a tissue whose fall
+/// was read small (an artery rolling over) does not fire on noise.
 const fn puncture_drop_n(p: &TissueParams) -> f64 {
-    let half_drop_n = 0.5 * (p.puncture_force_n - p.puncture_drop_to_n);
+    let spread_n = match p.puncture_drop_sd_n {
+        Some(sd_n) => sd_n,
+        None => 0.0,
+    };
+    let half_drop_n = 0.5 * (p.puncture_force_n - p.puncture_drop_to_n) - spread_n;
     let floor_n = 2.0 * p.contact_force_n;
     if half_drop_n > floor_n {
         half_drop_n
     } else {
         floor_n
+    }
+}
+
+/// The least peak a capsule's puncture can fall from, N: 30 % of the
+/// expected force (a capsule may give way far below it: liver 1 is
+/// 2.30 ± 0.83 N), and no less than four spreads below it when the
+/// tissue's spread is measured (`puncture_force_sd_n`, as `needle fit`
+/// writes it) — a peak that far under every fitted trial's is a dip on
+/// the climb, not this tissue's capsule.
+const fn puncture_min_peak_n(p: &TissueParams) -> f64 {
+    let share_n = 0.3 * p.puncture_force_n;
+    match p.puncture_force_sd_n {
+        Some(sd_n) if p.puncture_force_n - 4.0 * sd_n > share_n => {
+            p.puncture_force_n - 4.0 * sd_n
+        }
+        _ => share_n,
     }
 }
 
@@ -47,8 +69,9 @@ pub struct DetectConfig {
     /// Smallest peak that counts as a capsule puncture.
     pub puncture_min_peak: MicroNewtons,
     /// Fall, within 30 ms, that confirms a puncture from the force the
-    /// tissue expects (half its expected drop); from a smaller peak a
-    /// quarter of the peak suffices ([`puncture::needed_drop`]).
+    /// tissue expects (half its expected drop less the drop's spread:
+    /// [`puncture_drop_n`]); from a smaller peak a quarter of the peak
+    /// suffices ([`puncture::needed_drop`]).
     pub puncture_drop: MicroNewtons,
     /// Least rise of the force that can be an interior structure.
     pub structure_rise: MicroNewtons,
@@ -74,7 +97,8 @@ pub struct DetectConfig {
 impl DetectConfig {
     /// Thresholds for a tissue: contact at its `contact_force_n`; puncture
     /// once the force has peaked above 30 % of the expected puncture force
-    /// and fallen by half the expected drop within 30 ms
+    /// (or four measured spreads under it: [`puncture_min_peak_n`]) and
+    /// fallen by half the expected drop within 30 ms
     /// ([`puncture_drop_n`]); exit at half the cutting
     /// force; a stuck encoder once the force has risen by a quarter of the
     /// puncture force without the encoder moving; a structure's rise and
@@ -87,7 +111,7 @@ impl DetectConfig {
         Self {
             contact_force,
             contact_offset: Stiffness::from_params(p).deformation_at(contact_force),
-            puncture_min_peak: MicroNewtons::from_n(0.3 * p.puncture_force_n),
+            puncture_min_peak: MicroNewtons::from_n(puncture_min_peak_n(p)),
             puncture_drop: MicroNewtons::from_n(puncture_drop_n(p)),
             // Vessel walls in liver give way at 0.15 N and more (paper §3,
             // Figs. 2–3); 10–20× the 5–10 mN noise this is tuned for.

@@ -57,6 +57,7 @@ pub fn thinned(
         trial.thinned(step),
         TrialFit {
             puncture_index: geometry.puncture_index / step.max(1),
+            fallen_index: geometry.fallen_index / step.max(1),
             ..geometry.clone()
         },
         velocity.thinned(step),

@@ -159,11 +159,11 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Va
         let c = base.at_sample_rate(rate_hz);
         let mut st = puncture::PunctureState::default();
         let (mut fall_n, mut fall_margin_n) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
-        // The peak the fit reports can stand a few samples before the
-        // fall on a flat top: the fall is looked for over the detector's
-        // own window after it.
+        // The peak the fit reports can stand samples before the fall on
+        // a flat top: the fall is looked for up to the detector's own
+        // window past the fall.
         let window = puncture::fall_window_samples(&c) as usize;
-        let last = (fit.puncture_index + window + 2).min(trial.len());
+        let last = (fit.fallen_index.max(fit.puncture_index) + window + 2).min(trial.len());
         let loaded = (0..last).filter(|&i| trial.x_m[i] >= fit.contact_x_m);
         for i in loaded {
             let s = DetectInput {
@@ -197,12 +197,13 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Va
         to_miss_n = to_miss_n.min(fall_margin_n);
     }
     json!({
-        "threshold_n": n(base.puncture_drop),
+        "threshold_n": n(puncture::needed_drop(&base, MicroNewtons::from_n(params.puncture_force_n))),
+        "least_peak_n": n(base.puncture_min_peak),
         "largest_fall_before_peak_n": largest_before_n,
         "margin_to_early_n": to_early_n,
         "smallest_puncture_fall_n": smallest_fall_n,
         "margin_to_miss_n": to_miss_n,
-        "note": "on the fitted trials, as the device's detector reads them: threshold_n is half the expected fall; from a smaller peak a quarter of the peak confirms, and below its least peak (30 % of the puncture force) nothing fires; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
+        "note": "on the fitted trials, as the device's detector reads them: threshold_n is the fall that confirms from the expected peak (half the expected fall less its spread); from a smaller peak a quarter of the peak confirms, and below least_peak_n (30 % of the puncture force, or four spreads of it under it) nothing fires; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
     })
 }
 
@@ -312,6 +313,7 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
         "puncture_force_n": estimate(&col(|t| t.puncture_force_n)),
         "puncture_depth_m": estimate(&col(|t| t.puncture_depth_m)),
         "puncture_drop_to_n": estimate(&col(|t| t.puncture_drop_to_n)),
+        "puncture_drop_n": estimate(&col(|t| t.puncture_force_n - t.puncture_drop_to_n)),
         "cutting_force_n": cutting,
         "cp_n_per_m": cp,
         "cn_n_per_m": cn,
@@ -506,6 +508,24 @@ pub fn to_toml(fit: &Value) -> String {
         }
         out += &format!("{key} = {value:?}\n");
         written.push((key, value));
+    }
+    out + &spreads(fit)
+}
+
+/// The spreads between trials the puncture detector takes its margins
+/// from (the keys may be left out: one trial has none).
+fn spreads(fit: &Value) -> String {
+    let mut out = String::new();
+    for (key, of) in [
+        ("puncture_force_sd_n", "puncture_force_n"),
+        ("puncture_drop_sd_n", "puncture_drop_n"),
+    ] {
+        match fit[of].get("sd").and_then(Value::as_f64) {
+            Some(sd) => out += &format!("{key} = {sd:?}\n"),
+            None => {
+                out += &format!("{NOTE} {key} is left out: one trial has no spread\n")
+            }
+        }
     }
     out
 }

@@ -16,7 +16,11 @@ pub struct TrialFit {
     pub noise_n: f64,
     /// x_s1 (where the stiffness curve starts).
     pub contact_x_m: f64,
+    /// The puncture's peak.
     pub puncture_index: usize,
+    /// The first sample that had fallen from it (a flat top can stand
+    /// 20 samples before the fall).
+    pub fallen_index: usize,
     pub puncture_x_m: f64,
     pub puncture_force_n: f64,
     pub puncture_depth_m: f64,
@@ -167,8 +171,9 @@ fn noise(f: &[f64]) -> f64 {
 /// peak — a force that falls at rest (a tissue relaxing through a dwell,
 /// cutting stopping with the needle) is no puncture, and neither is a
 /// spike without a loading curve before it (a holder's inertia as the
-/// drive sets off, a knock); returns the peak's index.
-fn find_puncture(f: &[f64], x: &[f64], noise_n: f64) -> Option<usize> {
+/// drive sets off, a knock); returns the peak's index and the first
+/// sample that had fallen.
+fn find_puncture(f: &[f64], x: &[f64], noise_n: f64) -> Option<(usize, usize)> {
     let mut peak = 0;
     for i in 0..f.len() {
         if f[i] > f[peak] {
@@ -181,7 +186,7 @@ fn find_puncture(f: &[f64], x: &[f64], noise_n: f64) -> Option<usize> {
         let fallen = f[i] < 0.6 * f[peak] || fast;
         if f[peak] > 0.1 + 10.0 * noise_n && fallen && x[i] > x[peak] {
             if loading_samples(f, peak, noise_n) >= MIN_LOADING_SAMPLES {
-                return Some(peak);
+                return Some((peak, i));
             }
             peak = i;
         }
@@ -329,7 +334,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let (x, f) = (&trial.x_m, &trial.f_n);
     let v = velocity(trial);
     let noise_n = noise(f);
-    let Some(ip) = find_puncture(f, x, noise_n) else {
+    let Some((ip, fallen)) = find_puncture(f, x, noise_n) else {
         bail!("no capsule puncture (no peak followed by a sharp drop)");
     };
 
@@ -422,7 +427,10 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
 
     let rate = trial.rate_hz();
     let after = |s: f64| ip.saturating_add((s * rate) as usize).min(trial.len() - 1);
-    let puncture_drop_to_n = fall_level(&f[ip..=after(0.1).max(ip)]);
+    // A flat top can stand 20 samples before the fall: the level is read
+    // over 100 ms past whichever comes later, the peak's window or the fall.
+    let fall_end = fallen.saturating_add((0.1 * rate) as usize).min(trial.len() - 1);
+    let puncture_drop_to_n = fall_level(&f[ip..=after(0.1).max(fall_end)]);
 
     // Friction and x_s3: strokes inside the cut track, plus the samples
     // after the needle left (which must read zero): grid over ρ.
@@ -553,6 +561,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         noise_n,
         contact_x_m,
         puncture_index: ip,
+        fallen_index: fallen,
         puncture_x_m: x_s2,
         puncture_force_n: f[ip],
         puncture_depth_m: x_s2 - contact_x_m,
@@ -769,10 +778,8 @@ fn snapped_free(out: &[Xvf], noise_n: f64) -> Option<f64> {
 }
 
 /// The level a puncture's fall reaches: the lowest mean of three
-/// consecutive samples in the 100 ms after the peak (`window[0]`). The
-/// peak of a noisy flat top can come a few samples before the capsule
-/// gives way, so a window at a fixed delay after it can end before the
-/// fall does. (Three samples' noise biases it low by about a noise sd, a
+/// consecutive samples in `window`, from the peak (`window[0]`) to 100 ms
+/// past the fall. (Three samples' noise biases it low by about a noise sd, a
 /// hundredth of a capsule's fall.)
 fn fall_level(window: &[f64]) -> f64 {
     if window.len() < 3 {
@@ -1060,6 +1067,25 @@ mod tests {
         leap.x_m[3000..].iter_mut().for_each(|x| *x += 5.0);
         let err = check_drive_speed(&leap).unwrap_err().to_string();
         assert!(err.contains("x_m moves 5.0000 m"), "{err}");
+    }
+
+    #[test]
+    fn the_fall_is_read_where_it_comes_however_long_the_flat_top_before_it() {
+        // The capsule yields: the force stands at its peak for 30 samples
+        // (the 100 ms after the peak) before it falls.
+        let clean = liver();
+        let fit = fit_trial(&clean).unwrap();
+        let (ip, fallen) = (fit.puncture_index, fit.fallen_index);
+        assert!(fallen > ip);
+        let mut flat = clean.clone();
+        let top = flat.f_n[ip];
+        flat.f_n.splice(ip..ip, std::iter::repeat(top).take(30));
+        let n = flat.f_n.len();
+        flat.f_n.truncate(n - 30);
+        let flat_fit = fit_trial(&flat).unwrap();
+        assert!(flat_fit.fallen_index >= ip + 30);
+        let (a, b) = (fit.puncture_drop_to_n, flat_fit.puncture_drop_to_n);
+        assert!((a - b).abs() < 0.05, "{a} vs {b} (the peak {top})");
     }
 
     #[test]
