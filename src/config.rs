@@ -334,7 +334,10 @@ mod tests {
             (|p| p.puncture_drop_to_n = 2.5, "puncture_drop_to_n"),
             // A drop deeper than the force it falls from.
             (|p| p.puncture_drop_to_n = -0.5, "puncture_drop_to_n"),
-            (|p| p.puncture_force_sd_n = Some(-0.2), "puncture_force_sd_n"),
+            (
+                |p| p.puncture_force_sd_n = Some(-0.2),
+                "puncture_force_sd_n",
+            ),
             (|p| p.puncture_drop_sd_n = Some(-0.2), "puncture_drop_sd_n"),
         ];
         for (spoil, field) in cases {
@@ -353,7 +356,10 @@ mod tests {
         type Spoil = fn(&mut TissueParams);
         let cases: [(Spoil, &str); 3] = [
             (|p| p.puncture_drop_to_n = -1.0, "puncture_drop_to_n"),
-            (|p| p.puncture_force_sd_n = Some(-0.2), "puncture_force_sd_n"),
+            (
+                |p| p.puncture_force_sd_n = Some(-0.2),
+                "puncture_force_sd_n",
+            ),
             // The device holds the fall that confirms, not its parts: a
             // negative spread it can tell once it puts that fall past half
             // the peak.
@@ -383,7 +389,10 @@ mod tests {
                 |t| t.detect.puncture_min_peak = t.expected_peak.add(MicroNewtons(1)),
                 "puncture_force_sd_n",
             ),
-            (|t| t.detect.puncture_drop = t.expected_peak, "puncture_drop_to_n"),
+            (
+                |t| t.detect.puncture_drop = t.expected_peak,
+                "puncture_drop_to_n",
+            ),
             (
                 |t| t.model.friction.half_band = NanometresPerSecond(0),
                 "half_band_mps",

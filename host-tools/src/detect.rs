@@ -40,6 +40,11 @@ pub struct DetectArgs {
     /// Target depth past the surface for `--assist depth`, mm.
     #[arg(long, default_value_t = 30.0)]
     pub target_depth_mm: f64,
+    /// Write the device's own samples per trial into this directory, one
+    /// CSV each under the trial's name, in `needle decode --csv`'s
+    /// columns (t_s,x_m,f_n,v_mps,model_n,residual_n,phase).
+    #[arg(long, value_name = "OUT_DIR")]
+    pub samples: Option<PathBuf>,
 }
 
 /// Parse `--assist`.
@@ -97,6 +102,17 @@ pub struct TrialDetection {
 /// fault's or the assist's, whichever comes first, as the device latches
 /// it) and the faults it raises.
 pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
+    detect_trial_samples(trial, config, |_| {})
+}
+
+/// [`detect_trial`], handing each sample the device computed to
+/// `on_sample` as a row of `needle decode --csv`'s columns, in the file's
+/// times and coordinates.
+pub fn detect_trial_samples(
+    trial: &Trial,
+    config: &DeviceConfig,
+    mut on_sample: impl FnMut([String; 7]),
+) -> TrialDetection {
     let rate = trial.rate_hz().round().clamp(1.0, 65_535.0) as u16;
     let mut config = config.with_sample_rate(rate);
     // A recording may have lost samples (a rig's gaps of up to 70 ms); the
@@ -136,6 +152,10 @@ pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
         };
         let out = config.step(&mut state, raw);
         let t = |index: u32| trial.t_s[index as usize];
+        let mut row = crate::decode::csv_row(&out.sample, 0, rate);
+        row[0] = format!("{:.6}", trial.t_s[i]);
+        row[1] = format!("{:.9}", x0_m + out.sample.x.as_m());
+        on_sample(row);
         if let Some(e) = out.event {
             found.events.push(Detected {
                 kind: event_name(e.kind),
@@ -380,6 +400,61 @@ fn read_truth(dir: &Path) -> Result<Option<Truth>> {
 
 /// Detect over a dataset; with truth.json, also score. Returns the JSON.
 pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
+    detect_dataset_to(dir, config, None)
+}
+
+/// Where `--samples` writes: a directory of its own, made if missing,
+/// that holds no CSV yet (a trial's samples beside the trials would be
+/// read as a trial by the next command, and one written over would be
+/// lost).
+fn samples_dir(dir: &Path, out: &Path) -> Result<()> {
+    let shown = out.display();
+    if out.exists() && !out.is_dir() {
+        anyhow::bail!("{shown}: --samples names a file, not a directory");
+    }
+    if out.is_dir() {
+        if crate::input::same_file(dir, out) {
+            anyhow::bail!("{shown}: --samples names the dataset itself: its trials would be read as trials by the next command; name another directory");
+        }
+        let held = crate::trial::dataset_files(out).unwrap_or_default();
+        if let Some(first) = held.first() {
+            anyhow::bail!(
+                "{shown}: --samples already holds {} CSV file(s) ({}): name an empty or new directory",
+                held.len(),
+                first.display()
+            );
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("{shown}: cannot create"))
+}
+
+/// One trial's samples to `out/NAME`, written as `NAME.part` and renamed
+/// once whole.
+fn write_samples(out: &Path, name: &str, rows: &[[String; 7]]) -> Result<()> {
+    let path = out.join(name);
+    let part = out.join(format!("{name}.part"));
+    let write = || -> std::io::Result<()> {
+        let mut w = csv::Writer::from_path(&part)?;
+        w.write_record(crate::decode::CSV_HEADER)?;
+        for row in rows {
+            w.write_record(row)?;
+        }
+        w.flush()?;
+        std::fs::rename(&part, &path)
+    };
+    write().with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// [`detect_dataset`], writing each trial's device samples into
+/// `samples` when given.
+pub fn detect_dataset_to(
+    dir: &Path,
+    config: &DeviceConfig,
+    samples: Option<&Path>,
+) -> Result<Value> {
+    if let Some(out) = samples {
+        samples_dir(dir, out)?;
+    }
     let truth = read_truth(dir)?;
     let kinds = ["contact", "puncture", "structure", "exit"];
     let mut total: Vec<KindScore> = score(&[], &[], 1.0, &kinds);
@@ -389,9 +464,16 @@ pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
         warn_if_truth_disagrees(dir, truth, &dataset, &unreadable);
     }
     for (file, trial) in dataset {
-        let detection = detect_trial(&trial, config);
-        let events = &detection.events;
         let name = crate::trial::name_of(&file);
+        let mut rows = Vec::new();
+        let detection = match samples {
+            Some(_) => detect_trial_samples(&trial, config, |row| rows.push(row)),
+            None => detect_trial(&trial, config),
+        };
+        if let Some(out) = samples {
+            write_samples(out, &name, &rows)?;
+        }
+        let events = &detection.events;
         if let Some(t) = truth
             .as_ref()
             .and_then(|t| t.trials.iter().find(|t| t.file == name))
@@ -483,7 +565,7 @@ pub fn run(args: &DetectArgs) -> Result<()> {
         );
     }
     config.assist.target_depth = depth;
-    let out = detect_dataset(&args.dir, &config)?;
+    let out = detect_dataset_to(&args.dir, &config, args.samples.as_deref())?;
     if let Some(eval) = out.get("evaluation").and_then(Value::as_array) {
         crate::note!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");
         crate::note!("|---|---|---|---|---|---|---|");

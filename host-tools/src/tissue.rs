@@ -197,11 +197,19 @@ mod tests {
             ("[liver1\n".to_owned(), "t.toml:1:"),
             // Detector figures that contradict each other.
             (
-                good.replacen("puncture_drop_to_n = 0.6579", "puncture_drop_to_n = -0.2", 1),
+                good.replacen(
+                    "puncture_drop_to_n = 0.6579",
+                    "puncture_drop_to_n = -0.2",
+                    1,
+                ),
                 "[liver1] `puncture_drop_to_n` is negative",
             ),
             (
-                good.replacen("puncture_force_sd_n = 0.83", "puncture_force_sd_n = -0.83", 1),
+                good.replacen(
+                    "puncture_force_sd_n = 0.83",
+                    "puncture_force_sd_n = -0.83",
+                    1,
+                ),
                 "[liver1] `puncture_force_sd_n` is negative",
             ),
             (

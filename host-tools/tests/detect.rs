@@ -209,3 +209,83 @@ fn assist_halts_at_the_event_sample_and_at_the_target_depth() {
     }
     assert!(parse_assist("puncture,warp").is_err());
 }
+
+/// `needle detect DIR --samples OUT`: the device's own samples for every
+/// trial of a recording that never went through a device, in `needle
+/// decode --csv`'s columns and the file's times and positions, with the
+/// model's prediction and its residual; never over the dataset, never
+/// over earlier output.
+#[test]
+fn detect_writes_the_devices_samples_per_trial_beside_no_trial() {
+    use host_tools::sim::{simulate_dataset, Sensor};
+    use needle_holder::model::params::LIVER1;
+    let sensor = Sensor {
+        rate_hz: 500.0,
+        noise_n: 0.005,
+        encoder_m: 1e-6,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    simulate_dataset(dir.path(), "t", &LIVER1, &[], 2, 4, &sensor).unwrap();
+    let out = dir.path().join("device");
+    let needle = |out: &std::path::Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_needle"))
+            .args(["detect", "--samples"])
+            .arg(out)
+            .arg(dir.path())
+            .output()
+            .unwrap()
+    };
+    let run = needle(&out);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let trials = host_tools::trial::dataset_files(dir.path()).unwrap();
+    assert_eq!(trials.len(), 2);
+    for input in &trials {
+        let name = input.file_name().unwrap();
+        let recorded = host_tools::trial::read(input).unwrap();
+        let mut rows = csv::Reader::from_path(out.join(name)).unwrap();
+        assert_eq!(
+            rows.headers().unwrap().iter().collect::<Vec<_>>(),
+            host_tools::decode::CSV_HEADER
+        );
+        let rows: Vec<csv::StringRecord> = rows.records().map(Result::unwrap).collect();
+        assert_eq!(rows.len(), recorded.len());
+        let num = |r: &csv::StringRecord, k: usize| r[k].parse::<f64>().unwrap();
+        let mut predicted = 0;
+        for (i, r) in rows.iter().enumerate() {
+            assert!((num(r, 0) - recorded.t_s[i]).abs() < 1e-6);
+            // The encoder's micrometre and the load cell's counts.
+            assert!((num(r, 1) - recorded.x_m[i]).abs() < 2e-6, "{i}");
+            assert!((num(r, 2) - recorded.f_n[i]).abs() < 1e-3, "{i}");
+            // The residual is the measured force less the model's.
+            assert!((num(r, 5) - (num(r, 2) - num(r, 4))).abs() < 2e-6, "{i}");
+            predicted += usize::from(num(r, 4).abs() > 0.1);
+        }
+        assert!(predicted > rows.len() / 4, "the model predicts a force");
+        let phases: std::collections::BTreeSet<&str> = rows.iter().map(|r| &r[6]).collect();
+        assert!(
+            phases.contains("loading") && phases.len() >= 3,
+            "{phases:?}"
+        );
+    }
+    // Again into the same directory: refused, the first output kept.
+    let before = std::fs::read(out.join(trials[0].file_name().unwrap())).unwrap();
+    let again = needle(&out);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("already holds 2 CSV"));
+    assert_eq!(
+        std::fs::read(out.join(trials[0].file_name().unwrap())).unwrap(),
+        before
+    );
+    // Into the dataset itself: refused, nothing added.
+    let into = needle(dir.path());
+    assert!(!into.status.success());
+    assert!(String::from_utf8_lossy(&into.stderr).contains("names the dataset itself"));
+    assert_eq!(
+        host_tools::trial::dataset_files(dir.path()).unwrap().len(),
+        2
+    );
+}

@@ -521,7 +521,9 @@ fn the_fitted_tissue_finds_every_puncture_in_its_window_and_no_worse_than_the_de
         // The tissue carries the fall the trials made and the spreads the
         // detector takes its margins from.
         let tissue = host_tools::fit::fitted_tissue(&to_toml(&fit)).unwrap();
-        let truth = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap().params;
+        let truth = host_tools::tissue::resolve(Some("skin_phantom"), None)
+            .unwrap()
+            .params;
         let fallen_to = tissue.puncture_drop_to_n;
         assert!(
             (fallen_to - truth.puncture_drop_to_n).abs() < 0.2 * truth.puncture_force_n,

@@ -51,9 +51,7 @@ const fn puncture_drop_n(p: &TissueParams) -> f64 {
 const fn puncture_min_peak_n(p: &TissueParams) -> f64 {
     let share_n = 0.3 * p.puncture_force_n;
     match p.puncture_force_sd_n {
-        Some(sd_n) if p.puncture_force_n - 4.0 * sd_n > share_n => {
-            p.puncture_force_n - 4.0 * sd_n
-        }
+        Some(sd_n) if p.puncture_force_n - 4.0 * sd_n > share_n => p.puncture_force_n - 4.0 * sd_n,
         _ => share_n,
     }
 }

@@ -522,9 +522,7 @@ fn spreads(fit: &Value) -> String {
     ] {
         match fit[of].get("sd").and_then(Value::as_f64) {
             Some(sd) => out += &format!("{key} = {sd:?}\n"),
-            None => {
-                out += &format!("{NOTE} {key} is left out: one trial has no spread\n")
-            }
+            None => out += &format!("{NOTE} {key} is left out: one trial has no spread\n"),
         }
     }
     out

@@ -429,7 +429,9 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let after = |s: f64| ip.saturating_add((s * rate) as usize).min(trial.len() - 1);
     // A flat top can stand 20 samples before the fall: the level is read
     // over 100 ms past whichever comes later, the peak's window or the fall.
-    let fall_end = fallen.saturating_add((0.1 * rate) as usize).min(trial.len() - 1);
+    let fall_end = fallen
+        .saturating_add((0.1 * rate) as usize)
+        .min(trial.len() - 1);
     let puncture_drop_to_n = fall_level(&f[ip..=after(0.1).max(fall_end)]);
 
     // Friction and x_s3: strokes inside the cut track, plus the samples
@@ -1079,7 +1081,7 @@ mod tests {
         assert!(fallen > ip);
         let mut flat = clean.clone();
         let top = flat.f_n[ip];
-        flat.f_n.splice(ip..ip, std::iter::repeat(top).take(30));
+        flat.f_n.splice(ip..ip, std::iter::repeat_n(top, 30));
         let n = flat.f_n.len();
         flat.f_n.truncate(n - 30);
         let flat_fit = fit_trial(&flat).unwrap();
