@@ -9,6 +9,7 @@ use needle_holder::assist::{target_depth_is_valid, AssistModes};
 use needle_holder::config::DeviceConfig;
 use needle_holder::hal::LoadCellAdc;
 use needle_holder::pipeline::{PipelineState, RawSample};
+use needle_holder::protocol::Sample;
 use needle_holder::replay::ReplayAdc;
 use needle_holder::units::Nanometres;
 use serde::{Deserialize, Serialize};
@@ -102,16 +103,15 @@ pub struct TrialDetection {
 /// fault's or the assist's, whichever comes first, as the device latches
 /// it) and the faults it raises.
 pub fn detect_trial(trial: &Trial, config: &DeviceConfig) -> TrialDetection {
-    detect_trial_samples(trial, config, |_| {})
+    detect_trial_samples(trial, config, |_, _| {})
 }
 
 /// [`detect_trial`], handing each sample the device computed to
-/// `on_sample` as a row of `needle decode --csv`'s columns, in the file's
-/// times and coordinates.
+/// `on_sample` with its row of the file.
 pub fn detect_trial_samples(
     trial: &Trial,
     config: &DeviceConfig,
-    mut on_sample: impl FnMut([String; 7]),
+    mut on_sample: impl FnMut(usize, &Sample),
 ) -> TrialDetection {
     let rate = trial.rate_hz().round().clamp(1.0, 65_535.0) as u16;
     let mut config = config.with_sample_rate(rate);
@@ -152,10 +152,7 @@ pub fn detect_trial_samples(
         };
         let out = config.step(&mut state, raw);
         let t = |index: u32| trial.t_s[index as usize];
-        let mut row = crate::decode::csv_row(&out.sample, 0, rate);
-        row[0] = format!("{:.6}", trial.t_s[i]);
-        row[1] = format!("{:.9}", x0_m + out.sample.x.as_m());
-        on_sample(row);
+        on_sample(i, &out.sample);
         if let Some(e) = out.event {
             found.events.push(Detected {
                 kind: event_name(e.kind),
@@ -428,6 +425,16 @@ fn samples_dir(dir: &Path, out: &Path) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("{shown}: cannot create"))
 }
 
+/// The device's sample at row `i` of `trial` in `needle decode --csv`'s
+/// columns, in the file's time and coordinates (the device counts
+/// positions from its first sample).
+fn sample_row(trial: &Trial, i: usize, s: &Sample) -> [String; 7] {
+    let mut row = crate::decode::csv_row(s, 0, 1);
+    row[0] = format!("{:.6}", trial.t_s[i]);
+    row[1] = format!("{:.9}", trial.x_m[0] + s.x.as_m());
+    row
+}
+
 /// One trial's samples to `out/NAME`, written as `NAME.part` and renamed
 /// once whole.
 fn write_samples(out: &Path, name: &str, rows: &[[String; 7]]) -> Result<()> {
@@ -467,7 +474,9 @@ pub fn detect_dataset_to(
         let name = crate::trial::name_of(&file);
         let mut rows = Vec::new();
         let detection = match samples {
-            Some(_) => detect_trial_samples(&trial, config, |row| rows.push(row)),
+            Some(_) => detect_trial_samples(&trial, config, |i, s| {
+                rows.push(sample_row(&trial, i, s));
+            }),
             None => detect_trial(&trial, config),
         };
         if let Some(out) = samples {
