@@ -25,18 +25,24 @@ use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 /// The fall that confirms a puncture, N: half the drop the tissue
 /// expects less the drop's spread between insertions
 /// (`puncture_drop_sd_n`, 0 when not measured) — half a drop two spreads
-/// short of the expected one — and no less than twice the contact force
-/// (ten noise sd when `needle fit --toml` set it), so a tissue whose fall
-/// was read small (an artery rolling over) does not fire on noise.
+/// short of the expected one — but no less than a quarter of the drop (a
+/// spread read as large as the drop itself would leave the noise to
+/// confirm), and no less than twice the contact force (ten noise sd when
+/// `needle fit --toml` set it), so a tissue whose fall was read small (an
+/// artery rolling over) does not fire on noise.
 const fn puncture_drop_n(p: &TissueParams) -> f64 {
+    let drop_n = p.puncture_force_n - p.puncture_drop_to_n;
     let spread_n = match p.puncture_drop_sd_n {
         Some(sd_n) => sd_n,
         None => 0.0,
     };
-    let half_drop_n = 0.5 * (p.puncture_force_n - p.puncture_drop_to_n) - spread_n;
+    let mut fall_n = 0.5 * drop_n - spread_n;
+    if fall_n < 0.25 * drop_n {
+        fall_n = 0.25 * drop_n;
+    }
     let floor_n = 2.0 * p.contact_force_n;
-    if half_drop_n > floor_n {
-        half_drop_n
+    if fall_n > floor_n {
+        fall_n
     } else {
         floor_n
     }
@@ -44,15 +50,32 @@ const fn puncture_drop_n(p: &TissueParams) -> f64 {
 
 /// The least peak a capsule's puncture can fall from, N: 30 % of the
 /// expected force (a capsule may give way far below it: liver 1 is
-/// 2.30 ± 0.83 N), and no less than four spreads below it when the
-/// tissue's spread is measured (`puncture_force_sd_n`, as `needle fit`
-/// writes it) — a peak that far under every fitted trial's is a dip on
-/// the climb, not this tissue's capsule.
+/// 2.30 ± 0.83 N); when the tissue's spread is measured
+/// (`puncture_force_sd_n`, as `needle fit` writes it), four spreads
+/// under it — a peak that far under every fitted trial's is a dip on the
+/// climb, not this tissue's capsule — but never above three quarters of
+/// it: a spread read from a few trials, or from a simulation whose every
+/// trial is alike, can be far smaller than the tissue's own.
 const fn puncture_min_peak_n(p: &TissueParams) -> f64 {
-    let share_n = 0.3 * p.puncture_force_n;
+    let f_n = p.puncture_force_n;
+    let (share_n, most_n) = (0.3 * f_n, 0.75 * f_n);
     match p.puncture_force_sd_n {
-        Some(sd_n) if p.puncture_force_n - 4.0 * sd_n > share_n => p.puncture_force_n - 4.0 * sd_n,
-        _ => share_n,
+        Some(sd_n) => {
+            let spread_n = f_n - 4.0 * sd_n;
+            // A negative spread is no tissue's: left uncapped, it arms the
+            // detector above the force, which the device's check refuses.
+            let capped_n = if spread_n < most_n || sd_n < 0.0 {
+                spread_n
+            } else {
+                most_n
+            };
+            if capped_n > share_n {
+                capped_n
+            } else {
+                share_n
+            }
+        }
+        None => share_n,
     }
 }
 

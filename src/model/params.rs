@@ -39,15 +39,16 @@ pub struct TissueParams {
     pub puncture_drop_to_n: f64,
     /// Spread (sd) of the puncture force from insertion to insertion, N
     /// (≥ 0); `None` when not measured. The puncture detector arms no
-    /// lower than four of them below the expected force (and never above
-    /// 30 % of it): a capsule the fitted trials never saw give way so
-    /// early is not this tissue's.
+    /// lower than four of them below the expected force (within 30–75 %
+    /// of it): a capsule the fitted trials never saw give way so early is
+    /// not this tissue's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub puncture_force_sd_n: Option<f64>,
     /// Spread (sd) of the puncture's fall (`puncture_force_n −
     /// puncture_drop_to_n`) from insertion to insertion, N (≥ 0); `None`
     /// when not measured (taken as 0). The detector confirms a fall of
-    /// half the drop less one spread: half the drop two spreads short.
+    /// half the drop less one spread (half the drop two spreads short),
+    /// no less than a quarter of the drop.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub puncture_drop_sd_n: Option<f64>,
     /// Surface relaxation ρ in x_s3 = x_s1 + ρ·(x_s2 − x_s1), 0–1.

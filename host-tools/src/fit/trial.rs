@@ -18,8 +18,8 @@ pub struct TrialFit {
     pub contact_x_m: f64,
     /// The puncture's peak.
     pub puncture_index: usize,
-    /// The first sample that had fallen from it (a flat top can stand
-    /// 20 samples before the fall).
+    /// Where the force's fall from it begins: its first sharp step (a flat
+    /// top can stand 20 samples before the fall).
     pub fallen_index: usize,
     pub puncture_x_m: f64,
     pub puncture_force_n: f64,
@@ -428,8 +428,14 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let rate = trial.rate_hz();
     let after = |s: f64| ip.saturating_add((s * rate) as usize).min(trial.len() - 1);
     // A flat top can stand 20 samples before the fall: the level is read
-    // over 100 ms past whichever comes later, the peak's window or the fall.
-    let fall_end = fallen
+    // over 100 ms past whichever comes later, the peak's window or the
+    // fall's first sharp step (what find_puncture took for fallen can be
+    // a later event where the capsule's own fall was small).
+    let step_n = (10.0 * noise_n).max(0.05 * f[ip]);
+    let fall_start = (ip + 1..=fallen)
+        .find(|&i| f[i - 1] - f[i] > step_n)
+        .unwrap_or(fallen);
+    let fall_end = fall_start
         .saturating_add((0.1 * rate) as usize)
         .min(trial.len() - 1);
     let puncture_drop_to_n = fall_level(&f[ip..=after(0.1).max(fall_end)]);
@@ -563,7 +569,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         noise_n,
         contact_x_m,
         puncture_index: ip,
-        fallen_index: fallen,
+        fallen_index: fall_start,
         puncture_x_m: x_s2,
         puncture_force_n: f[ip],
         puncture_depth_m: x_s2 - contact_x_m,
