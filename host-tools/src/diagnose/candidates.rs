@@ -221,6 +221,54 @@ fn capsule_and_shaft(p: &Prepared, col: &[f64]) -> Vec<Vec<f64>> {
 fn qlv(p: &Prepared, g: f64) -> Vec<f64> {
     let (tau_s, decades) = spectrum_at(g);
     let branches = (2.0 * decades) as i32;
+    let steps = qlv_steps(p);
+    let mut col = vec![0.0; p.trial.len()];
+    for b in -branches / 2..=branches / 2 {
+        let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
+        let mut decay = Decay::new(tau);
+        let mut h = 0.0;
+        for (c, step) in col.iter_mut().zip(&steps) {
+            match *step {
+                // Out of the tissue there is no tissue force, and nothing
+                // of its history is left to relax.
+                QlvStep::Out => h = 0.0,
+                QlvStep::Sliding { f_n } => h = f_n,
+                QlvStep::Held {
+                    f_n,
+                    dt_s,
+                    rate_n_per_s,
+                } => {
+                    if dt_s > 0.0 {
+                        let decay = decay.over(dt_s);
+                        h = h * decay + rate_n_per_s * tau * (1.0 - decay);
+                    }
+                    *c -= (f_n - h) / f64::from(branches + 1);
+                }
+            }
+        }
+    }
+    col
+}
+
+/// One sample as every branch of [`qlv`] reads it, worked out once for
+/// all of them (the branches were a quarter of a diagnosis's time).
+#[derive(Clone, Copy)]
+enum QlvStep {
+    Out,
+    /// Sliding through fresh tissue: nothing of the force has relaxed.
+    Sliding {
+        f_n: f64,
+    },
+    /// Loading the capsule, held, or dragging the tissue: the force, the
+    /// step since the sample before (0 for the first) and its rate.
+    Held {
+        f_n: f64,
+        dt_s: f64,
+        rate_n_per_s: f64,
+    },
+}
+
+fn qlv_steps(p: &Prepared) -> Vec<QlvStep> {
     let f = |i: usize| if p.in_tissue(i) { p.fitted_n[i] } else { 0.0 };
     let sliding = |i: usize| {
         p.phase[i] != LOADING
@@ -228,58 +276,60 @@ fn qlv(p: &Prepared, g: f64) -> Vec<f64> {
             && !p.stick.contains(&i)
     };
     let t = &p.trial.t_s;
-    let mut col = vec![0.0; p.trial.len()];
-    for b in -branches / 2..=branches / 2 {
-        let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
-        let mut decay = Decay::new(tau);
-        let mut h = 0.0;
-        for i in 0..p.trial.len() {
-            // Out of the tissue there is no tissue force, and nothing of
-            // its history is left to relax.
+    (0..p.trial.len())
+        .map(|i| {
             if !p.in_tissue(i) {
-                h = 0.0;
-                continue;
+                QlvStep::Out
+            } else if sliding(i) {
+                QlvStep::Sliding { f_n: f(i) }
+            } else if i == 0 {
+                QlvStep::Held {
+                    f_n: f(i),
+                    dt_s: 0.0,
+                    rate_n_per_s: 0.0,
+                }
+            } else {
+                let dt_s = (t[i] - t[i - 1]).max(1e-9);
+                QlvStep::Held {
+                    f_n: f(i),
+                    dt_s,
+                    rate_n_per_s: (f(i) - f(i - 1)) / dt_s,
+                }
             }
-            if sliding(i) {
-                h = f(i);
-                continue;
-            }
-            if i > 0 {
-                let dt = (t[i] - t[i - 1]).max(1e-9);
-                let decay = decay.over(dt);
-                h = h * decay + (f(i) - f(i - 1)) / dt * tau * (1.0 - decay);
-            }
-            col[i] -= (f(i) - h) / f64::from(branches + 1);
-        }
-    }
-    col
+        })
+        .collect()
 }
 
-/// e^{−dt/τ} for one τ, computed again only when the step changes (by
-/// more than a part in 10⁹): a clocked recording repeats its step, and
-/// the exponential was a seventh of a diagnosis's time.
+/// e^{−dt/τ} for one τ, computed again only for a step neither of the
+/// last two (by more than a part in 10⁹): a clocked recording repeats
+/// its step, or alternates between two when its times are written to the
+/// microsecond (1.512 and 1.513 ms at 661 Hz), and the exponential was a
+/// seventh of a diagnosis's time.
 struct Decay {
     tau_s: f64,
-    dt_s: f64,
-    factor: f64,
+    /// (step, factor), the latest first.
+    seen: [(f64, f64); 2],
 }
 
 impl Decay {
     fn new(tau_s: f64) -> Self {
         Self {
             tau_s,
-            dt_s: 0.0,
-            factor: 1.0,
+            seen: [(0.0, 1.0); 2],
         }
     }
 
     fn over(&mut self, dt_s: f64) -> f64 {
         // Times stored as multiples of a step differ in their last bits.
-        if (dt_s - self.dt_s).abs() > 1e-9 * dt_s {
-            self.dt_s = dt_s;
-            self.factor = (-dt_s / self.tau_s).exp();
+        let same = |(step, _): (f64, f64)| (dt_s - step).abs() <= 1e-9 * dt_s;
+        if same(self.seen[0]) {
+            return self.seen[0].1;
         }
-        self.factor
+        if !same(self.seen[1]) {
+            self.seen[1] = (dt_s, (-dt_s / self.tau_s).exp());
+        }
+        self.seen.swap(0, 1);
+        self.seen[0].1
     }
 }
 
@@ -290,31 +340,29 @@ impl Decay {
 fn maxwell(p: &Prepared, g: f64) -> Vec<f64> {
     let (tau_s, decades) = spectrum_at(g);
     let branches = (2.0 * decades) as i32;
+    // What every branch reads: the step into each sample in tissue (None
+    // out of it, and for the first) and the velocity over it.
+    let t = &p.trial.t_s;
+    let steps: Vec<Option<(f64, f64)>> = (0..p.trial.len())
+        .map(|i| (p.in_tissue(i) && i > 0).then(|| (t[i] - t[i - 1], p.velocity.v_mps[i])))
+        .collect();
     let mut col = vec![0.0; p.trial.len()];
     for b in -branches / 2..=branches / 2 {
         let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
-        for (c, m) in col.iter_mut().zip(maxwell_branch(p, tau)) {
+        let mut decay = Decay::new(tau);
+        let mut m = 0.0;
+        for (c, step) in col.iter_mut().zip(&steps) {
+            m = match *step {
+                Some((dt_s, v_mps)) => {
+                    let decay = decay.over(dt_s);
+                    m * decay + v_mps * tau * (1.0 - decay)
+                }
+                None => 0.0,
+            };
             *c += m / f64::from(branches + 1);
         }
     }
     col
-}
-
-fn maxwell_branch(p: &Prepared, tau_s: f64) -> Vec<f64> {
-    let t = &p.trial.t_s;
-    let mut decay = Decay::new(tau_s);
-    let mut m = 0.0;
-    (0..p.trial.len())
-        .map(|i| {
-            m = if p.in_tissue(i) && i > 0 {
-                let decay = decay.over(t[i] - t[i - 1]);
-                m * decay + p.velocity.v_mps[i] * tau_s * (1.0 - decay)
-            } else {
-                0.0
-            };
-            m
-        })
-        .collect()
 }
 
 /// Sliding damping l·v·(|v|/v_ref)^q beside l·v itself. At rest the

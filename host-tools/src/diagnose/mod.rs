@@ -248,6 +248,30 @@ fn phase_runs(phase: &[usize]) -> Vec<(usize, std::ops::Range<usize>)> {
     runs
 }
 
+/// Where within `r` a column is not zero (empty when it is zero all
+/// through): most columns act in some phases or stretches only, and a
+/// product over zeros is no work worth doing.
+fn support(c: &[f64], r: &std::ops::Range<usize>) -> std::ops::Range<usize> {
+    let run = &c[r.clone()];
+    match run.iter().position(|&v| v != 0.0) {
+        None => r.start..r.start,
+        Some(first) => {
+            let last = run.iter().rposition(|&v| v != 0.0).unwrap_or(first);
+            r.start + first..r.start + last + 1
+        }
+    }
+}
+
+/// Σ a·b over where both columns can be non-zero.
+fn dot_over(a: &[f64], sa: &std::ops::Range<usize>, b: &[f64], sb: &std::ops::Range<usize>) -> f64 {
+    let r = sa.start.max(sb.start)..sa.end.min(sb.end);
+    if r.is_empty() {
+        0.0
+    } else {
+        dot(&a[r.clone()], &b[r])
+    }
+}
+
 /// Σ a·b in four interleaved sums: one running sum waits on each add
 /// (floating point is not reassociated for it), four keep the adder busy.
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -274,24 +298,40 @@ fn grams(data: &[Prepared], fixed: &[Vec<Vec<f64>>]) -> Vec<[Gram; PHASES.len()]
             let mut g: [Gram; PHASES.len()] = std::array::from_fn(|_| Gram::new(n));
             for (ph, r) in phase_runs(&p.phase) {
                 let gp = &mut g[ph];
-                let y = &p.residual_n[r.clone()];
+                let y = &p.residual_n;
+                let within: Vec<_> = cols.iter().map(|c| support(c, &r)).collect();
                 for (k, ck) in cols.iter().enumerate() {
-                    let ck = &ck[r.clone()];
                     for (l, cl) in cols.iter().enumerate().skip(k) {
-                        let v = dot(ck, &cl[r.clone()]);
+                        let v = dot_over(ck, &within[k], cl, &within[l]);
                         gp.ata[k * n + l] += v;
                         if l != k {
                             gp.ata[l * n + k] += v;
                         }
                     }
-                    gp.aty[k] += dot(ck, y);
+                    gp.aty[k] += dot_over(ck, &within[k], y, &r);
                 }
-                gp.yy += dot(y, y);
+                gp.yy += dot(&y[r.clone()], &y[r.clone()]);
                 gp.count += r.len();
             }
             g
         })
         .collect()
+}
+
+/// Where each of a trial's columns is not zero, per phase run
+/// ([`phase_runs`]): `runs[run][column]`.
+struct Supports {
+    runs: Vec<Vec<std::ops::Range<usize>>>,
+}
+
+impl Supports {
+    fn of(p: &Prepared, cols: &[Vec<f64>]) -> Self {
+        let runs = phase_runs(&p.phase)
+            .into_iter()
+            .map(|(_, r)| cols.iter().map(|c| support(c, &r)).collect())
+            .collect();
+        Self { runs }
+    }
 }
 
 /// `base` (the sums of the `fixed` columns) with the columns of
@@ -300,36 +340,38 @@ fn grams(data: &[Prepared], fixed: &[Vec<Vec<f64>>]) -> Vec<[Gram; PHASES.len()]
 fn extended(
     data: &[Prepared],
     fixed: &[Vec<Vec<f64>>],
+    fixed_supports: &[Supports],
     base: &[[Gram; PHASES.len()]],
     extra: impl Fn(&Prepared) -> Vec<Vec<f64>>,
 ) -> Vec<[Gram; PHASES.len()]> {
     data.iter()
         .zip(fixed)
+        .zip(fixed_supports)
         .zip(base)
-        .map(|((p, fixed), base)| {
+        .map(|(((p, fixed), supports), base)| {
             let extra = extra(p);
             let mut g: [Gram; PHASES.len()] =
                 std::array::from_fn(|ph| base[ph].with_columns(extra.len()));
             let nf = fixed.len();
-            for (ph, r) in phase_runs(&p.phase) {
+            for ((ph, r), fixed_within) in phase_runs(&p.phase).into_iter().zip(&supports.runs) {
                 let gp = &mut g[ph];
                 let n = gp.n;
+                let within: Vec<_> = extra.iter().map(|c| support(c, &r)).collect();
                 for (e, ce) in extra.iter().enumerate() {
-                    let ce = &ce[r.clone()];
-                    // Most effects act in some phases only.
-                    if ce.iter().all(|&v| v == 0.0) {
+                    let se = &within[e];
+                    if se.is_empty() {
                         continue;
                     }
                     let row = nf + e;
                     for (f, cf) in fixed.iter().enumerate() {
-                        let v = dot(ce, &cf[r.clone()]);
+                        let v = dot_over(ce, se, cf, &fixed_within[f]);
                         gp.ata[row * n + f] += v;
                         gp.ata[f * n + row] += v;
                     }
                     for (e2, c2) in extra.iter().enumerate() {
-                        gp.ata[row * n + nf + e2] += dot(ce, &c2[r.clone()]);
+                        gp.ata[row * n + nf + e2] += dot_over(ce, se, c2, &within[e2]);
                     }
-                    gp.aty[row] += dot(ce, &p.residual_n[r.clone()]);
+                    gp.aty[row] += dot_over(ce, se, &p.residual_n, &r);
                 }
             }
             g
@@ -390,10 +432,16 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     let base = grams(data, &fixed_cols);
     let per_grid: Vec<Vec<[Gram; PHASES.len()]>> = match cand {
         None => vec![base],
-        Some(c) => grid
-            .iter()
-            .map(|&g| extended(data, &fixed_cols, &base, |p| (c.columns)(p, g)))
-            .collect(),
+        Some(c) => {
+            let supports: Vec<Supports> = data
+                .iter()
+                .zip(&fixed_cols)
+                .map(|(p, cols)| Supports::of(p, cols))
+                .collect();
+            grid.iter()
+                .map(|&g| extended(data, &fixed_cols, &supports, &base, |p| (c.columns)(p, g)))
+                .collect()
+        }
     };
     let k = folds(data.len());
     let per = PerTrial {
