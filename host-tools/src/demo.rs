@@ -49,7 +49,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| firmware::repo_root().join("target").join("demo"));
-    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    crate::input::create_out_dir(&dir)?;
     let (trial, truth) = sim::insertion(&tissue, &plan);
     let config = DeviceConfig::default();
     let replay = sim::to_replay(

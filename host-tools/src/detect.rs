@@ -422,7 +422,7 @@ fn samples_dir(dir: &Path, out: &Path) -> Result<()> {
             );
         }
     }
-    std::fs::create_dir_all(out).with_context(|| format!("{shown}: cannot create"))
+    crate::input::create_out_dir(out)
 }
 
 /// The device's sample at row `i` of `trial` in `needle decode --csv`'s

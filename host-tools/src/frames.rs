@@ -110,21 +110,42 @@ pub struct StreamStats {
     pub restarts: u64,
 }
 
-/// The stream speaks a protocol version this needle cannot read.
+/// The stream speaks a protocol version this needle cannot read, or
+/// contradicts itself about its version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VersionMismatch {
+    /// The version a header or status names (or whose framing a newer
+    /// device's frames pass).
     pub found: u16,
+    /// The version whose framing the frame passed.
+    pub framed_as: u16,
 }
 
 impl std::fmt::Display for VersionMismatch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "the device speaks protocol version {}, this needle reads versions 2 and {}: rebuild one to match the other",
-            self.found, PROTOCOL_VERSION
-        )
+        let readable = [2, PROTOCOL_VERSION].contains(&self.found);
+        if readable && self.found != self.framed_as {
+            write!(
+                f,
+                "a frame of protocol version {} says version {}: the stream contradicts itself (a corrupt capture, or a build that changed its frames without a new PROTOCOL_VERSION)",
+                self.framed_as, self.found
+            )
+        } else {
+            write!(
+                f,
+                "the device speaks protocol version {}, this needle reads versions 2 and {}: rebuild one to match the other",
+                self.found, PROTOCOL_VERSION
+            )
+        }
     }
 }
+
+/// Frames in a row that must pass a newer version's framing before the
+/// stream is taken for that version's: a run of bytes passes one of
+/// [`NEWER_VERSIONS`] CRCs by chance once in 4 000 frames.
+const NEWER_IN_A_ROW: u32 = 3;
+/// Versions past this build's tried on a frame no known version reads.
+const NEWER_VERSIONS: u16 = 16;
 
 impl std::error::Error for VersionMismatch {}
 
@@ -141,6 +162,9 @@ pub struct StreamDecoder {
     resume_at: Option<u32>,
     reconstructor: Reconstructor,
     stats: StreamStats,
+    /// A newer version whose framing the last frames passed, and how many
+    /// in a row.
+    newer: Option<(u16, u32)>,
 }
 
 impl StreamDecoder {
@@ -215,10 +239,34 @@ impl StreamDecoder {
                 }
             },
             Err(_) => {
+                self.newer_version(chunk)?;
                 self.skip(chunk.len() + 1, "CRC mismatch", on_item);
                 Ok(())
             }
         }
+    }
+
+    /// A newer device's frames fail every CRC this build knows: after
+    /// [`NEWER_IN_A_ROW`] frames in a row that pass one newer version's,
+    /// the stream is that version's (not noise, nor a wrong baud rate).
+    fn newer_version(&mut self, chunk: &[u8]) -> Result<(), VersionMismatch> {
+        match newer_framing(chunk) {
+            Some(v) => {
+                let run = match self.newer {
+                    Some((seen, n)) if seen == v => n + 1,
+                    _ => 1,
+                };
+                self.newer = Some((v, run));
+                if run >= NEWER_IN_A_ROW {
+                    return Err(VersionMismatch {
+                        found: v,
+                        framed_as: v,
+                    });
+                }
+            }
+            None => self.newer = None,
+        }
+        Ok(())
     }
 
     /// End of stream: whatever is pending is an incomplete frame.
@@ -415,8 +463,26 @@ fn check_version(found: u16, expected: u16) -> Result<(), VersionMismatch> {
     if found == expected {
         Ok(())
     } else {
-        Err(VersionMismatch { found })
+        Err(VersionMismatch {
+            found,
+            framed_as: expected,
+        })
     }
+}
+
+/// The newer protocol version whose framing `chunk` passes, if any: the
+/// implied version byte of a later build's CRC.
+fn newer_framing(chunk: &[u8]) -> Option<u16> {
+    (PROTOCOL_VERSION + 1..=PROTOCOL_VERSION + NEWER_VERSIONS).find(|&v| {
+        let mut buffer = [0u8; MAX_ENCODED_FRAME];
+        let check = |b: &[u8]| {
+            let mut digest = FRAME_CRC.digest();
+            digest.update(&[v as u8]);
+            digest.update(b);
+            digest.finalize()
+        };
+        wire::unframe(chunk, &mut buffer, check).is_ok()
+    })
 }
 
 /// Decode a whole byte slice; returns the items and the counters.
@@ -665,6 +731,38 @@ mod tests {
         ));
     }
 
+    /// `frame` as a build of protocol `version` frames it (its CRC over
+    /// that implied version byte).
+    fn bytes_of_version(frame: &Frame<'_>, version: u8) -> Vec<u8> {
+        let mut raw = postcard::to_stdvec(frame).unwrap();
+        let mut digest = FRAME_CRC.digest();
+        digest.update(&[version]);
+        digest.update(&raw);
+        raw.extend(digest.finalize().to_le_bytes());
+        let mut framed = cobs::encode_vec(&raw);
+        framed.push(0);
+        framed
+    }
+
+    #[test]
+    fn a_newer_devices_stream_is_named_as_one_not_as_noise() {
+        // Every frame fails this build's CRC; three in a row pass version
+        // 5's. Two do not yet decide it.
+        let frame = Frame::Header(Header {
+            protocol_version: 5,
+            sample_rate_hz: 500,
+        });
+        let two: Vec<u8> = (0..2).flat_map(|_| bytes_of_version(&frame, 5)).collect();
+        assert!(decode_all(&two).is_ok());
+        let three: Vec<u8> = (0..3).flat_map(|_| bytes_of_version(&frame, 5)).collect();
+        let err = decode_all(&three).unwrap_err();
+        assert_eq!((err.found, err.framed_as), (5, 5));
+        assert!(
+            err.to_string().contains("speaks protocol version 5"),
+            "{err}"
+        );
+    }
+
     #[test]
     fn another_protocol_version_is_refused() {
         let header = |v| {
@@ -673,8 +771,12 @@ mod tests {
                 sample_rate_hz: 500,
             })
         };
-        let err = decode_all(FrameEncoder::default().encode(&header(4))).unwrap_err();
-        assert_eq!(err.found, 4);
+        let err = decode_all(FrameEncoder::default().encode(&header(9))).unwrap_err();
+        assert_eq!(err.found, 9);
+        assert!(err.to_string().contains("reads versions 2 and"), "{err}");
+        // A version this needle reads, named in another's frame.
+        let err = decode_all(FrameEncoder::default().encode(&header(2))).unwrap_err();
+        assert!(err.to_string().contains("contradicts itself"), "{err}");
         let v1 = v2_bytes(&v2::Frame::Header(v2::Header {
             protocol_version: 1,
             sample_rate_hz: 500,

@@ -33,7 +33,22 @@ pub fn read_small_text(path: &Path) -> Result<String> {
     if size > MOST_TEXT_BYTES {
         bail!("{shown}: {size} bytes, more than the {MOST_TEXT_BYTES} such a file may have");
     }
-    std::fs::read_to_string(path).with_context(|| format!("{shown}: cannot read"))
+    let bytes = std::fs::read(path).with_context(|| format!("{shown}: cannot read"))?;
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let bytes = e.as_bytes();
+        let line = bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+        let column = at
+            - bytes[..at]
+                .iter()
+                .rposition(|&b| b == b'\n')
+                .map_or(0, |i| i + 1)
+            + 1;
+        anyhow::anyhow!(
+            "{shown}:{line}: not UTF-8 text (byte 0x{:02x} at column {column})",
+            bytes[at]
+        )
+    })
 }
 
 /// A capture (`needle decode FILE`) is a file or a pipe, read as it
@@ -124,6 +139,22 @@ pub fn out_dir(dir: &Path) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Make the output directory `dir` (and its parents) if missing. A
+/// dangling link is named as one: creating it fails with "File exists",
+/// which says nothing of where the link points.
+pub fn create_out_dir(dir: &Path) -> Result<()> {
+    let shown = dir.display();
+    let link = std::fs::symlink_metadata(dir).is_ok_and(|m| m.file_type().is_symlink());
+    if link && !dir.exists() {
+        let target = std::fs::read_link(dir).unwrap_or_default();
+        bail!(
+            "{shown}: a link to {}, which does not exist: make that directory, or name another",
+            target.display()
+        );
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("{shown}: cannot create"))
 }
 
 /// Whether `a` and `b` name one file (the same path, a link, or the same

@@ -63,8 +63,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     }
     // Created once a device has answered: a port with no device behind
     // it left an empty directory.
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("{}: cannot create", args.out.display()))?;
+    crate::input::create_out_dir(&args.out)?;
     // One recording into a directory at a time (two replaced each other's
     // trials, both saying they succeeded); and, the lock taken, the
     // directory checked again: another may have recorded into it since.

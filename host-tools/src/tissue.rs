@@ -78,11 +78,12 @@ pub fn parse(text: &str, path: &Path) -> Result<Vec<Tissue>> {
             toml::Value::Table(entry)
                 .try_into()
                 .map_err(|e: toml::de::Error| {
-                    anyhow!(
-                        "{shown}:{}: [{name}] {}",
-                        section_line(text, &name),
-                        e.message()
-                    )
+                    // An unknown key is named at its own line.
+                    let line = unknown_field(e.message()).map_or_else(
+                        || section_line(text, &name),
+                        |k| key_line(text, Some(&name), k),
+                    );
+                    anyhow!("{shown}:{line}: [{name}] {}", e.message())
                 })?;
         // The device's own check too, in its fixed point: one validation.
         needle_holder::config::TissueModel::validated(&params).map_err(|e| {
@@ -135,11 +136,23 @@ fn section_line(text: &str, name: &str) -> usize {
         .map_or(0, |i| i + 1)
 }
 
-/// Line of `key = …` inside section `name` (or at top level), else the
-/// section's own line.
+/// The key a deserialiser's "unknown field `key`, expected …" names.
+fn unknown_field(message: &str) -> Option<&str> {
+    let rest = message.strip_prefix("unknown field `")?;
+    rest.split('`').next()
+}
+
+/// Line of `key = …` (or of a `[name.key]` table) inside section `name`
+/// (or at top level), else the section's own line.
 fn key_line(text: &str, section: Option<&str>, key: &str) -> usize {
     // `start` is the header's 1-based line, so skipping it starts below it.
     let start = section.map_or(0, |s| section_line(text, s));
+    if let Some(s) = section {
+        let header = format!("[{s}.{key}]");
+        if let Some(i) = text.lines().position(|l| l.trim() == header) {
+            return i + 1;
+        }
+    }
     for (i, line) in text.lines().enumerate().skip(start) {
         if line.trim_start().starts_with('[') {
             break;
@@ -230,6 +243,31 @@ mod tests {
                 "{err} lacks {expected}"
             );
         }
+        // An unknown key, a nested table and bytes that are no text are
+        // named at their own line.
+        let unknown = good.replacen("relaxation = 0.5", "relaxation = 0.5\nbogus_key = 1.0", 1);
+        let nested = format!("{good}\n[liver1.extra]\nx = 1\n");
+        let mut binary = good.clone().into_bytes();
+        binary.splice(0..0, *b"# \xff\n");
+        for (bytes, line_of) in [
+            (unknown.clone().into_bytes(), "bogus_key = 1.0"),
+            (nested.clone().into_bytes(), "[liver1.extra]"),
+        ] {
+            let text = String::from_utf8(bytes.clone()).unwrap();
+            let line = text.lines().position(|l| l == line_of).unwrap() + 1;
+            std::fs::write(dir.path().join("t.toml"), &bytes).unwrap();
+            let err = format!("{:#}", load(&dir.path().join("t.toml")).unwrap_err());
+            assert!(
+                err.contains(&format!("t.toml:{line}:")),
+                "{err} lacks line {line}"
+            );
+        }
+        std::fs::write(dir.path().join("t.toml"), &binary).unwrap();
+        let err = format!("{:#}", load(&dir.path().join("t.toml")).unwrap_err());
+        assert!(
+            err.contains("t.toml:1: not UTF-8 text (byte 0xff at column 3)"),
+            "{err}"
+        );
         // The line points at the offending key.
         let text = good.replacen("dp_n_per_m = 30.4", "dp_n_per_m = -30.4", 1);
         let line = text

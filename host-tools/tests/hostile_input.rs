@@ -735,6 +735,23 @@ fn outputs_that_cannot_be_written_name_their_path_in_words() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(err.contains("afile: is a file, not a directory"), "{err}");
+    // Issue 29 row 11: `--out` a dangling link said "File exists".
+    let link = dir.path().join("dangling");
+    std::os::unix::fs::symlink(dir.path().join("gone"), &link).unwrap();
+    let link = link.to_str().unwrap();
+    for args in [
+        vec!["simulate", "--out", link, "--trials", "1"],
+        vec!["detect", d, "--samples", link],
+    ] {
+        let out = needle(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            err.contains("dangling: a link to") && err.contains("gone, which does not exist"),
+            "{err}"
+        );
+        assert!(!err.contains("File exists"), "{err}");
+    }
 }
 
 #[test]

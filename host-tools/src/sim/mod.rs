@@ -1224,8 +1224,7 @@ impl Dataset<'_> {
     /// seed, same bytes.
     pub fn write(&self, dir: &Path) -> Result<usize> {
         crate::input::out_dir(dir)?;
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        crate::input::create_out_dir(dir)?;
         // One simulation at a time in a directory (two at once shared the
         // staging and each removed the other's files); the lock goes with
         // the process, however it ends.
