@@ -35,7 +35,7 @@ pub enum Action {
     Tissue {
         /// Library name (see `needle device tissues`) or path to a .toml file.
         tissue: String,
-        /// Which entry of the file (default: its first).
+        /// Which entry of the file (needed when it holds more than one).
         #[arg(long)]
         name: Option<String>,
     },
@@ -112,16 +112,33 @@ pub fn command_of(action: &Action) -> Result<Command> {
 
 /// A library name selects on the device; a file's entry is uploaded.
 fn tissue_command(tissue: &str, name: Option<&str>) -> Result<Command> {
+    let path = PathBuf::from(tissue);
     if let Some(i) = LIBRARY.iter().position(|(n, _)| *n == tissue) {
+        if path.exists() {
+            crate::note!(
+                "needle device: {tissue} is the device's library entry; the file of that name here is not read (name it ./{tissue} to upload it)"
+            );
+        }
         return Ok(Command::SelectTissue(i as u8));
     }
-    let path = PathBuf::from(tissue);
     if !path.exists() {
         let names: Vec<&str> = LIBRARY.iter().map(|(n, _)| *n).collect();
         bail!(
             "{tissue}: neither a tissue in the device's library ({}) nor a file",
             names.join(", ")
         );
+    }
+    if name.is_none() {
+        let entries = crate::tissue::load(&path)?;
+        if entries.len() > 1 {
+            let names: Vec<&str> = entries.iter().map(|t| t.name.as_str()).collect();
+            bail!(
+                "{}: holds {} tissues ({}): say which with --name",
+                path.display(),
+                entries.len(),
+                names.join(", ")
+            );
+        }
     }
     let entry = crate::tissue::resolve(name, Some(&path))?;
     // The device takes tissues in fixed point: the conversion (and its

@@ -797,6 +797,15 @@ fn needle_device_checks_its_arguments_before_the_port() {
     let tmp = tempfile::tempdir().unwrap();
     let scratch = tmp.path().join("x");
     let scratch = scratch.to_str().unwrap();
+    // Issue 29 row 11: a file of several tissues with no --name uploaded
+    // its first without a word.
+    let library = tmp.path().join("several.toml");
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../src/model/tissues.toml"),
+    )
+    .unwrap();
+    std::fs::write(&library, text).unwrap();
+    let library = library.to_str().unwrap();
     let out = needle(&["device", "tissues"]);
     assert!(out.status.success());
     assert!(String::from_utf8_lossy(&out.stdout).contains("liver1"));
@@ -821,6 +830,10 @@ fn needle_device_checks_its_arguments_before_the_port() {
         (
             &["device", "--port", "/dev/null", "tissue", "spleen"],
             "spleen: neither a tissue",
+        ),
+        (
+            &["device", "--port", "/dev/null", "tissue", library],
+            "several.toml: holds 5 tissues (liver1, liver1_journal, liver1_rational, liver2, skin_phantom): say which with --name",
         ),
         // An empty list meant `none`; baud 0 means "hang up" to a tty.
         (
