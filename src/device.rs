@@ -295,7 +295,9 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             return Err(CommandError::NeedleInTissue);
         }
         let Some(zero) = self.zero.mean_counts() else {
-            return Err(CommandError::out_of_range("no reading yet"));
+            return Err(CommandError::out_of_range(
+                crate::protocol::command::NO_READING_YET,
+            ));
         };
         let limit = self.config.load_cell.full_scale_counts.unsigned_abs() / 20;
         if zero.unsigned_abs() > limit {

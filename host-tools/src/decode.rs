@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::faults::Faults;
+use needle_holder::protocol::command::NO_READING_YET;
 use needle_holder::protocol::{CommandError, EventKind, HaltReason, Phase, Sample, TissueSource};
 
 use crate::frames::{Item, Message, Missing, StreamDecoder, StreamStats};
@@ -690,6 +691,10 @@ pub fn command_error(e: &CommandError) -> String {
         CommandError::InvalidTissue { field, problem } => {
             format!("tissue rejected: `{field}` {problem}")
         }
+        CommandError::OutOfRange { field } if field.as_str() == NO_READING_YET => {
+            "the load cell has given no reading yet to make its zero of: tare again in a moment"
+                .into()
+        }
         CommandError::OutOfRange { field } => format!("{field} is out of range"),
         CommandError::NeedleInTissue => "the needle is in tissue: withdraw it before taring".into(),
         CommandError::LoadOnNeedle { force } => format!(
@@ -760,5 +765,19 @@ pub fn halt_reason_name(reason: HaltReason) -> &'static str {
         HaltReason::Exit => "exit",
         HaltReason::TargetDepth => "target_depth",
         HaltReason::SpeedLimit => "speed_limit",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tare_before_any_reading_says_so_and_not_out_of_range() {
+        let said = command_error(&CommandError::out_of_range(NO_READING_YET));
+        assert!(said.contains("no reading yet"), "{said}");
+        assert!(!said.contains("out of range"), "{said}");
+        let other = command_error(&CommandError::out_of_range("depth"));
+        assert_eq!(other, "depth is out of range");
     }
 }

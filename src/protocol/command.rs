@@ -116,6 +116,11 @@ impl From<DecodeError> for CommandError {
     }
 }
 
+/// The [`CommandError::OutOfRange`] field of a tare asked for before the
+/// load cell's first readings: nothing is out of range, there is nothing
+/// yet to make the zero of.
+pub const NO_READING_YET: &str = "no reading yet";
+
 impl CommandError {
     /// An [`Self::OutOfRange`] naming `field`.
     pub fn out_of_range(field: &str) -> Self {
