@@ -408,6 +408,8 @@ struct Output {
     /// Samples (and their segments) that arrived before the sample rate
     /// was known.
     pending: Vec<(u32, Sample)>,
+    /// Rates later frames gave against the one in use, each said once.
+    disagreeing: Vec<u16>,
 }
 
 /// Samples held back waiting for the stream to give its rate: a status
@@ -425,6 +427,7 @@ impl Output {
             rate_hz: None,
             fallback_hz: rate_hz,
             pending: Vec::new(),
+            disagreeing: Vec::new(),
         }
     }
 
@@ -442,11 +445,13 @@ impl Output {
             // Snapshots are for the decoder; a status line says the same.
             Item::Frame(Message::Snapshot(_)) => {}
             Item::Frame(frame) => {
-                if let Message::Header(h) = &frame {
-                    self.learn_rate(h.sample_rate_hz)?;
-                }
-                if let Message::Status(s) = &frame {
-                    self.learn_rate(s.sample_rate_hz)?;
+                match &frame {
+                    Message::Header(h) => self.learn_rate(h.sample_rate_hz, "header")?,
+                    Message::Status(s) => self.learn_rate(s.sample_rate_hz, "status")?,
+                    Message::Config(c) => {
+                        self.learn_rate(c.config.velocity.sample_rate_hz, "configuration")?
+                    }
+                    _ => {}
                 }
                 writeln!(
                     self.text,
@@ -495,8 +500,19 @@ impl Output {
         Ok(())
     }
 
-    fn learn_rate(&mut self, rate_hz: u16) -> Result<()> {
-        if rate_hz == 0 || self.rate_hz.is_some() {
+    /// The rate a frame (`from`) gives: the first one sets the times; a
+    /// later frame that says otherwise is named, once per rate (a header
+    /// of 65 535 Hz beside a configuration of 500 Hz compressed the times
+    /// 131-fold without a word).
+    fn learn_rate(&mut self, rate_hz: u16, from: &str) -> Result<()> {
+        if rate_hz == 0 {
+            return Ok(());
+        }
+        if let Some(used) = self.rate_hz {
+            if rate_hz != used && !self.disagreeing.contains(&rate_hz) {
+                self.disagreeing.push(rate_hz);
+                crate::note!("decode: a {from} frame says {rate_hz} Hz where the stream said {used} Hz before: the times stay at {used} Hz; the capture contradicts itself (a corrupt header, or frames from two devices)");
+            }
             return Ok(());
         }
         if let Some(given) = self.fallback_hz.filter(|&g| g != rate_hz) {

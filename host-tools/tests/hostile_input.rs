@@ -969,6 +969,28 @@ fn decode_takes_the_streams_rate_over_rate_hz_and_never_writes_to_its_stdout() {
     assert_eq!(times(&csv)[1], 0.002);
     let err = refused(&["decode", cap.to_str().unwrap(), "--csv", "/dev/stdout"]);
     assert!(err.contains("--csv names standard output"), "{err}");
+    // Issue 29 row 11: a header of 65 535 Hz before a 500 Hz device's
+    // configuration and status compressed the times without a word.
+    use needle_holder::protocol::{Frame, FrameEncoder, Header, PROTOCOL_VERSION};
+    let mut lying = FrameEncoder::default()
+        .encode(&Frame::Header(Header {
+            protocol_version: PROTOCOL_VERSION,
+            sample_rate_hz: 65_535,
+        }))
+        .to_vec();
+    lying.extend(twin_capture(1.0));
+    std::fs::write(&cap, lying).unwrap();
+    let out = needle(&["decode", cap.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("frame says 500 Hz where the stream said 65535 Hz before"),
+        "{err}"
+    );
+    assert_eq!(
+        err.matches("where the stream said").count(),
+        1,
+        "said once: {err}"
+    );
 }
 
 #[test]
