@@ -3,6 +3,8 @@
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -81,6 +83,15 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         )?),
         None => None,
     };
+    // Ctrl-C, SIGTERM and SIGHUP end a decode to a CSV as its input's end
+    // would: the rows in hand written whole, the segments listed.
+    let stop = Arc::new(AtomicBool::new(false));
+    if args.csv.is_some() {
+        let flag = stop.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+            .context("cannot catch Ctrl-C, SIGTERM and SIGHUP")?;
+    }
+    let stopped = || stop.load(Ordering::SeqCst);
     let mut out = Output::new(args.csv.as_deref(), args.file.as_deref(), args.rate_hz);
     let mut decoder = StreamDecoder::new();
     let feed = |bytes: &[u8], decoder: &mut StreamDecoder, out: &mut Output| -> Result<()> {
@@ -89,7 +100,7 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         items.into_iter().try_for_each(|item| out.item(item))
     };
     if let Some(path) = &args.file {
-        read_blocks(path, |block| feed(block, &mut decoder, &mut out))?;
+        read_blocks(path, &stopped, |block| feed(block, &mut decoder, &mut out))?;
     } else if let Some(port) = &args.port {
         let mut serial = serialport::new(port, args.baud)
             .timeout(Duration::from_millis(100))
@@ -97,7 +108,7 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
             .with_context(|| format!("{port}: cannot open serial port"))?;
         let deadline = read_for.and_then(|d| Instant::now().checked_add(d));
         let mut buf = [0u8; 4096];
-        while deadline.is_none_or(|d| Instant::now() < d) {
+        while deadline.is_none_or(|d| Instant::now() < d) && !stopped() {
             match serial.read(&mut buf) {
                 Ok(0) => break,
                 Ok(n) => feed(&buf[..n], &mut decoder, &mut out)?,
@@ -107,6 +118,9 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         }
     }
     let mut tail = Vec::new();
+    if stopped() {
+        crate::note!("decode: stopped by a signal; what was read is written");
+    }
     let stats = decoder.finish(|item| tail.push(item));
     tail.into_iter().try_for_each(|item| out.item(item))?;
     out.finish(&stats)?;
@@ -136,14 +150,18 @@ fn csv_lock_path(csv: &Path) -> std::path::PathBuf {
 /// Read a capture a block at a time into `each` (memory bounded whatever
 /// the capture's size, time linear in it), with a progress line on stderr
 /// every second while it lasts.
-fn read_blocks(path: &Path, mut each: impl FnMut(&[u8]) -> Result<()>) -> Result<()> {
+fn read_blocks(
+    path: &Path,
+    stopped: &dyn Fn() -> bool,
+    mut each: impl FnMut(&[u8]) -> Result<()>,
+) -> Result<()> {
     let shown = path.display();
     crate::input::not_a_device(path)?;
     let mut file = std::fs::File::open(path).with_context(|| format!("{shown}: cannot read"))?;
     let total = file.metadata().map_or(0, |m| m.len());
     let mut block = vec![0u8; 1 << 16];
     let (mut done, mut last_shown, mut progressed) = (0u64, Instant::now(), false);
-    loop {
+    while !stopped() {
         let n = match file.read(&mut block) {
             Ok(0) => break,
             Ok(n) => n,
@@ -284,6 +302,20 @@ struct SegmentedCsv {
     open: Option<(u32, csv::Writer<std::fs::File>)>,
     /// Samples written to each file created, in order.
     written: Vec<(PathBuf, u64)>,
+    /// Whether [`Self::finish`] listed the segments.
+    listed: bool,
+}
+
+/// A decode that fails part way (a stream with too many segments, a
+/// segment's name taken, a full disk) lists the segments it wrote all the
+/// same, so that the next decode to the same `--csv` removes them.
+impl Drop for SegmentedCsv {
+    fn drop(&mut self) {
+        if !self.listed {
+            let _ = self.close();
+            let _ = self.list_segments();
+        }
+    }
 }
 
 impl SegmentedCsv {
@@ -293,6 +325,7 @@ impl SegmentedCsv {
             capture: capture.map(Path::to_path_buf),
             open: None,
             written: Vec::new(),
+            listed: false,
         }
     }
 
@@ -375,6 +408,7 @@ impl SegmentedCsv {
     fn finish(&mut self) -> Result<()> {
         self.close()?;
         self.list_segments()?;
+        self.listed = true;
         let total: u64 = self.written.iter().map(|(_, n)| n).sum();
         match self.written.as_slice() {
             [] => crate::note!("no sample to write: {} not written", self.base.display()),
