@@ -105,10 +105,26 @@ fn record(
     until: Option<Instant>,
 ) -> Result<()> {
     let mut shown = Instant::now();
+    let mut asked: Option<Instant> = None;
     while !stop.load(Ordering::SeqCst) && !link.closed() && until.is_none_or(|u| Instant::now() < u)
     {
         for item in link.poll()? {
             recorder.item(item)?;
+        }
+        // A device that restarted (or was told by another program to
+        // stop) streams no more until asked: recording on in silence
+        // waited forever. Asked again, at most once a second.
+        if std::mem::take(&mut recorder.stream_off)
+            && asked.is_none_or(|a| a.elapsed() >= Duration::from_secs(1))
+        {
+            asked = Some(Instant::now());
+            let answer = match link.command(Command::Stream(true))? {
+                Ok(()) => "asked for it again".to_owned(),
+                Err(e) => format!("asked for it again, refused: {}", command_error(&e)),
+            };
+            recorder.line(&format!(
+                "the device's stream is off (it restarted, or another program turned it off): {answer}"
+            ));
         }
         if shown.elapsed() >= Duration::from_millis(500) {
             recorder.progress();
@@ -174,6 +190,9 @@ struct Recorder {
     /// Samples before the needle was first seen out of tissue: the tail of
     /// an insertion under way when the recording began, no trial.
     before_out: Option<u64>,
+    /// A status frame said the device's stream is off (it restarted, or
+    /// another program turned it off) since [`record`] last looked.
+    stream_off: bool,
 }
 
 impl Recorder {
@@ -185,6 +204,7 @@ impl Recorder {
             current: None,
             written: 0,
             before_out: Some(0),
+            stream_off: false,
         }
     }
 
@@ -192,7 +212,10 @@ impl Recorder {
         match item {
             Item::Sample(s) => self.sample(s)?,
             Item::Frame(Message::Header(h)) => self.learn_rate(h.sample_rate_hz)?,
-            Item::Frame(Message::Status(s)) => self.learn_rate(s.sample_rate_hz)?,
+            Item::Frame(Message::Status(s)) => {
+                self.stream_off |= !s.streaming;
+                self.learn_rate(s.sample_rate_hz)?
+            }
             Item::Frame(frame @ (Message::Event(_) | Message::Halt(_) | Message::Reply(_))) => {
                 self.line(&describe(&frame, self.rate_hz))
             }

@@ -759,3 +759,56 @@ fn garbage_from_the_host_does_not_disturb_the_samples() {
     );
     assert!(corrupted_replies > 0, "the garbage was read and refused");
 }
+
+#[test]
+fn needle_record_asks_for_the_stream_again_when_it_stops() {
+    // Issue 29 row 7: a device that restarted (its stream off until asked)
+    // left `needle record` waiting forever in silence. Here another
+    // program turns the stream off mid-insertion.
+    use std::io::Write;
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let out = dir.path().join("recorded");
+    let (mut record, lines) = record_until_loading(&device.port, &out);
+    let off = Encoder::<256>::default()
+        .encode(&needle_holder::protocol::CommandFrame {
+            seq: 3 << 29,
+            command: Command::Stream(false),
+        })
+        .to_vec();
+    let mut pty = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&device.port)
+        .unwrap();
+    pty.write_all(&[&[0][..], &off].concat()).unwrap();
+    let until = Instant::now() + Duration::from_secs(20);
+    let said = loop {
+        assert!(
+            Instant::now() < until,
+            "record never said the stream stopped"
+        );
+        if let Ok(line) = lines.recv_timeout(Duration::from_millis(200)) {
+            if line.contains("the device's stream is off") {
+                break line;
+            }
+        }
+    };
+    assert!(
+        said.contains("asked for it again") && !said.contains("refused"),
+        "{said}"
+    );
+    // Samples arrive again: the stream grows by more than heartbeats.
+    let before = std::fs::metadata(out.join("stream.bin")).unwrap().len();
+    std::thread::sleep(Duration::from_secs(2));
+    let after = std::fs::metadata(out.join("stream.bin")).unwrap().len();
+    assert!(after > before + 2000, "{before} -> {after} bytes");
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(unsafe { libc::kill(record.id() as i32, libc::SIGINT) }, 0);
+    let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
+        .unwrap()
+        .expect("needle record stops at the signal");
+    assert!(status.success());
+    drop(device);
+}
