@@ -164,10 +164,11 @@ impl TissueModel {
         bad(self.expected_peak.0 > 0, "puncture_force_n", POS)?;
         // Half a drop deeper than the force it falls from (a negative
         // fall-to force, or a negative spread of the fall), unless the
-        // noise floor (twice the contact force) set it.
+        // noise floor (twice the contact force) set it. A micronewton of
+        // slack each: half a force and twice one are rounded apart.
         bad(
-            d.puncture_drop.0 <= self.expected_peak.0 / 2
-                || d.puncture_drop.0 <= d.contact_force.0.saturating_mul(2),
+            d.puncture_drop.0 <= self.expected_peak.0 / 2 + 1
+                || d.puncture_drop.0 <= d.contact_force.0.saturating_mul(2).saturating_add(1),
             "puncture_drop_to_n",
             "must not be negative (a fall deeper than puncture_force_n)",
         )?;
@@ -347,6 +348,23 @@ mod tests {
             assert_eq!(got, Err(field), "{p:?}");
         }
         assert!(TissueModel::validated(&LIVER1).is_ok());
+    }
+
+    /// A fall to zero (a one-trial fit clamps a fall level a hair below
+    /// zero to 0.0) is a valid tissue, whatever rounding does to half an
+    /// odd number of micronewtons.
+    #[test]
+    fn a_fall_to_zero_is_no_drop_deeper_than_the_force() {
+        for force_n in [2.304001, 2.304, 1.000003, 0.7] {
+            let p = TissueParams {
+                puncture_force_n: force_n,
+                puncture_drop_to_n: 0.0,
+                puncture_force_sd_n: None,
+                puncture_drop_sd_n: None,
+                ..LIVER1
+            };
+            assert_eq!(TissueModel::validated(&p).map(|_| ()), Ok(()), "{force_n}");
+        }
     }
 
     /// What a host that skipped the parameters' check would upload: the

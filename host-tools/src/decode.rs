@@ -88,8 +88,14 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     if args.csv.is_some() {
         let flag = stop.clone();
-        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-            .context("cannot catch Ctrl-C, SIGTERM and SIGHUP")?;
+        // A second signal ends it at once: a read from a pipe that sends
+        // nothing is not interrupted by the first.
+        ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        })
+        .context("cannot catch Ctrl-C, SIGTERM and SIGHUP")?;
     }
     let stopped = || stop.load(Ordering::SeqCst);
     let mut out = Output::new(args.csv.as_deref(), args.file.as_deref(), args.rate_hz);
@@ -575,7 +581,7 @@ impl Output {
         if self.pending.len() >= MOST_PENDING {
             match self.fallback_hz {
                 Some(given) => self.use_rate(given)?,
-                None => bail!("{MOST_PENDING} samples and no header or status frame gave the sample rate: pass --rate-hz"),
+                None => bail!("{MOST_PENDING} samples and no header, status or configuration frame gave the sample rate: pass --rate-hz"),
             }
         }
         Ok(())

@@ -435,21 +435,34 @@ fn sample_row(trial: &Trial, i: usize, s: &Sample) -> [String; 7] {
     row
 }
 
-/// One trial's samples to `out/NAME`, written as `NAME.part` and renamed
-/// once whole.
-fn write_samples(out: &Path, name: &str, rows: &[[String; 7]]) -> Result<()> {
+/// One trial through the device, its samples written to `out/NAME` as
+/// they come (as `NAME.part`, renamed once whole; removed if a write
+/// fails, which ends the run naming the file).
+fn detect_writing_samples(
+    trial: &Trial,
+    config: &DeviceConfig,
+    out: &Path,
+    name: &str,
+) -> Result<TrialDetection> {
     let path = out.join(name);
     let part = out.join(format!("{name}.part"));
-    let write = || -> std::io::Result<()> {
-        let mut w = csv::Writer::from_path(&part)?;
-        w.write_record(crate::decode::CSV_HEADER)?;
-        for row in rows {
-            w.write_record(row)?;
+    let failed = || format!("{}: cannot write", path.display());
+    let mut w = csv::Writer::from_path(&part).with_context(failed)?;
+    let mut result = w.write_record(crate::decode::CSV_HEADER);
+    let detection = detect_trial_samples(trial, config, |i, s| {
+        if result.is_ok() {
+            result = w.write_record(sample_row(trial, i, s));
         }
-        w.flush()?;
-        std::fs::rename(&part, &path)
-    };
-    write().with_context(|| format!("{}: cannot write", path.display()))
+    });
+    let whole = result
+        .map_err(std::io::Error::from)
+        .and_then(|()| w.flush())
+        .and_then(|()| std::fs::rename(&part, &path));
+    if let Err(e) = whole {
+        let _ = std::fs::remove_file(&part);
+        return Err(e).with_context(failed);
+    }
+    Ok(detection)
 }
 
 /// [`detect_dataset`], writing each trial's device samples into
@@ -472,16 +485,10 @@ pub fn detect_dataset_to(
     }
     for (file, trial) in dataset {
         let name = crate::trial::name_of(&file);
-        let mut rows = Vec::new();
         let detection = match samples {
-            Some(_) => detect_trial_samples(&trial, config, |i, s| {
-                rows.push(sample_row(&trial, i, s));
-            }),
+            Some(out) => detect_writing_samples(&trial, config, out, &name)?,
             None => detect_trial(&trial, config),
         };
-        if let Some(out) = samples {
-            write_samples(out, &name, &rows)?;
-        }
         let events = &detection.events;
         if let Some(t) = truth
             .as_ref()

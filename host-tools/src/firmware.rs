@@ -321,18 +321,26 @@ pub struct QemuLive {
     pub port: String,
     /// The defmt bytes QEMU printed (semihosting), once it has exited.
     defmt: std::thread::JoinHandle<Vec<u8>>,
+    /// Where QEMU's monitor listens ([`Self::reset`]).
+    monitor: tempfile::TempDir,
 }
 
 impl QemuLive {
     /// Start `elf` (a QEMU board) replaying `replay` live.
     pub fn start(board: Board, elf: &Path, replay: &Path) -> Result<Self> {
         let cmd = qemu_command(board, elf, replay, Serial::Pty, &[]);
+        // A monitor on a socket, so that a test can press reset.
+        let monitor = tempfile::tempdir().context("cannot create a temporary directory")?;
+        let socket = monitor.path().join("monitor.sock");
+        let on_socket = format!("unix:{},server=on,wait=off", socket.display());
         // `--live` goes before the replay's path on the command line.
         let args: Vec<std::ffi::OsString> = cmd
             .get_args()
             .map(|a| {
                 let text = a.to_string_lossy();
-                if text.starts_with("enable=on,target=native,arg=needle-holder,") {
+                if text == "none" {
+                    on_socket.clone().into()
+                } else if text.starts_with("enable=on,target=native,arg=needle-holder,") {
                     text.replacen("arg=needle-holder,", "arg=needle-holder,arg=--live,", 1)
                         .into()
                 } else {
@@ -372,7 +380,43 @@ impl QemuLive {
             let _ = child.kill();
             bail!("QEMU did not say which pseudo-terminal it made");
         };
-        Ok(Self { child, port, defmt })
+        Ok(Self {
+            child,
+            port,
+            defmt,
+            monitor,
+        })
+    }
+
+    /// Press the board's reset (QEMU's `system_reset`): the firmware
+    /// starts again, and a live replay waits for the host's first command
+    /// as at power-on.
+    pub fn reset(&self) -> Result<()> {
+        use std::io::Write;
+        let socket = self.monitor.path().join("monitor.sock");
+        let mut monitor = std::os::unix::net::UnixStream::connect(&socket)
+            .with_context(|| format!("{}: no QEMU monitor", socket.display()))?;
+        monitor.set_read_timeout(Some(Duration::from_secs(2)))?;
+        // A command sent before the monitor's first prompt is lost.
+        let prompt = |monitor: &mut std::os::unix::net::UnixStream| -> Result<()> {
+            let mut seen = Vec::new();
+            let mut buf = [0u8; 256];
+            while !seen.ends_with(b"(qemu) ") {
+                let n =
+                    std::io::Read::read(monitor, &mut buf).context("QEMU's monitor is silent")?;
+                if n == 0 {
+                    bail!("QEMU's monitor closed");
+                }
+                seen.extend_from_slice(&buf[..n]);
+            }
+            Ok(())
+        };
+        prompt(&mut monitor)?;
+        monitor
+            .write_all(b"system_reset\n")
+            .context("cannot write to QEMU's monitor")?;
+        // The next prompt: done.
+        prompt(&mut monitor)
     }
 
     /// Wait for QEMU to exit (the replay's end); its defmt bytes.

@@ -222,22 +222,29 @@ impl StreamDecoder {
     ) -> Result<(), VersionMismatch> {
         let mut buffer = [0u8; MAX_ENCODED_FRAME];
         match protocol::decode(chunk, &mut buffer) {
-            Ok(frame) => return self.accept(frame, chunk, on_item),
+            Ok(frame) => {
+                self.newer = None;
+                return self.accept(frame, chunk, on_item);
+            }
             Err(DecodeError::Crc) => {}
             Err(_) => {
+                self.newer = None;
                 self.skip(chunk.len() + 1, "undecodable frame", on_item);
                 return Ok(());
             }
         }
         let mut buffer = [0u8; MAX_ENCODED_FRAME];
         match wire::unframe(chunk, &mut buffer, |b| FRAME_CRC.checksum(b)) {
-            Ok(body) => match wire::parse::<v2::Frame>(body) {
-                Ok(frame) => self.accept_v2(frame, on_item),
-                Err(_) => {
-                    self.skip(chunk.len() + 1, "undecodable frame", on_item);
-                    Ok(())
+            Ok(body) => {
+                self.newer = None;
+                match wire::parse::<v2::Frame>(body) {
+                    Ok(frame) => self.accept_v2(frame, on_item),
+                    Err(_) => {
+                        self.skip(chunk.len() + 1, "undecodable frame", on_item);
+                        Ok(())
+                    }
                 }
-            },
+            }
             Err(_) => {
                 self.newer_version(chunk)?;
                 self.skip(chunk.len() + 1, "CRC mismatch", on_item);
@@ -754,6 +761,15 @@ mod tests {
         });
         let two: Vec<u8> = (0..2).flat_map(|_| bytes_of_version(&frame, 5)).collect();
         assert!(decode_all(&two).is_ok());
+        // This build's own frame between them: not three in a row.
+        let own = FrameEncoder::default()
+            .encode(&Frame::Header(Header {
+                protocol_version: PROTOCOL_VERSION,
+                sample_rate_hz: 500,
+            }))
+            .to_vec();
+        let broken: Vec<u8> = [two.clone(), own, bytes_of_version(&frame, 5)].concat();
+        assert!(decode_all(&broken).is_ok());
         let three: Vec<u8> = (0..3).flat_map(|_| bytes_of_version(&frame, 5)).collect();
         let err = decode_all(&three).unwrap_err();
         assert_eq!((err.found, err.framed_as), (5, 5));

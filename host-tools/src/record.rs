@@ -96,6 +96,10 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     Ok(())
 }
 
+/// How long a device may send nothing at all (its status heartbeat comes
+/// twice a second at 500 Hz) before `record` asks it to stream.
+const SILENCE: Duration = Duration::from_secs(3);
+
 /// Read the device into `recorder` until a signal, `until`, or the
 /// device goes away.
 fn record(
@@ -106,24 +110,39 @@ fn record(
 ) -> Result<()> {
     let mut shown = Instant::now();
     let mut asked: Option<Instant> = None;
+    let mut heard = Instant::now();
     while !stop.load(Ordering::SeqCst) && !link.closed() && until.is_none_or(|u| Instant::now() < u)
     {
         for item in link.poll()? {
+            heard = Instant::now();
             recorder.item(item)?;
         }
-        // A device that restarted (or was told by another program to
-        // stop) streams no more until asked: recording on in silence
-        // waited forever. Asked again, at most once a second.
+        // Nothing at all, not even a heartbeat: a device that was reset
+        // and waits for its host (the QEMU replay does) is asked to stream.
+        if heard.elapsed() >= SILENCE && asked.is_none_or(|a| a.elapsed() >= SILENCE) {
+            recorder.stream_off = true;
+            recorder.line(&format!(
+                "nothing from the device for {} s (reset, or unplugged and back?)",
+                SILENCE.as_secs()
+            ));
+        }
+        // A device told by another program to stop streaming (or one that
+        // came back with its stream off) sends no samples until asked:
+        // recording on in silence waited forever. Asked again, at most
+        // once a second.
         if std::mem::take(&mut recorder.stream_off)
             && asked.is_none_or(|a| a.elapsed() >= Duration::from_secs(1))
         {
             asked = Some(Instant::now());
-            let answer = match link.command(Command::Stream(true))? {
-                Ok(()) => "asked for it again".to_owned(),
-                Err(e) => format!("asked for it again, refused: {}", command_error(&e)),
+            // No answer (the device going away, say) ends nothing here:
+            // the loop's own checks close the trial as they would have.
+            let answer = match link.command(Command::Stream(true)) {
+                Ok(Ok(())) => "asked for it again".to_owned(),
+                Ok(Err(e)) => format!("asked for it again, refused: {}", command_error(&e)),
+                Err(e) => format!("asked for it again, no answer: {e:#}"),
             };
             recorder.line(&format!(
-                "the device's stream is off (it restarted, or another program turned it off): {answer}"
+                "the device's stream is off (another program turned it off, or the device came back with it off): {answer}"
             ));
         }
         if shown.elapsed() >= Duration::from_millis(500) {
@@ -190,8 +209,8 @@ struct Recorder {
     /// Samples before the needle was first seen out of tissue: the tail of
     /// an insertion under way when the recording began, no trial.
     before_out: Option<u64>,
-    /// A status frame said the device's stream is off (it restarted, or
-    /// another program turned it off) since [`record`] last looked.
+    /// A status frame said the device's stream is off since [`record`]
+    /// last looked.
     stream_off: bool,
 }
 

@@ -812,3 +812,48 @@ fn needle_record_asks_for_the_stream_again_when_it_stops() {
     assert!(status.success());
     drop(device);
 }
+
+#[test]
+fn needle_record_goes_on_after_the_device_is_reset() {
+    // Issue 29 row 7: after a reset the device (a live replay waits for
+    // its host's first command, as at power-on) sent nothing, and `needle
+    // record` waited forever in silence.
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let out = dir.path().join("recorded");
+    let (mut record, lines) = record_until_loading(&device.port, &out);
+    device.reset().unwrap();
+    let until = Instant::now() + Duration::from_secs(30);
+    let mut seen = Vec::new();
+    let said = loop {
+        assert!(Instant::now() < until, "record never spoke up: {seen:?}");
+        if let Ok(line) = lines.recv_timeout(Duration::from_millis(200)) {
+            if line.contains("stream is off") && line.contains("asked for it again") {
+                break line;
+            }
+            seen.push(line);
+        }
+    };
+    assert!(
+        !said.contains("refused") && !said.contains("no answer"),
+        "{said}"
+    );
+    assert!(
+        seen.iter().any(|l| l.contains("nothing from the device")),
+        "{seen:?}"
+    );
+    // Samples arrive again.
+    let before = std::fs::metadata(out.join("stream.bin")).unwrap().len();
+    std::thread::sleep(Duration::from_secs(2));
+    let after = std::fs::metadata(out.join("stream.bin")).unwrap().len();
+    assert!(after > before + 2000, "{before} -> {after} bytes");
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(unsafe { libc::kill(record.id() as i32, libc::SIGINT) }, 0);
+    let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
+        .unwrap()
+        .expect("needle record stops at the signal");
+    assert!(status.success());
+    drop(device);
+}

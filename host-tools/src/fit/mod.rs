@@ -203,7 +203,7 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Va
         "margin_to_early_n": to_early_n,
         "smallest_puncture_fall_n": smallest_fall_n,
         "margin_to_miss_n": to_miss_n,
-        "note": "on the fitted trials, as the device's detector reads them: threshold_n is the fall that confirms from the expected peak (half the expected fall less its spread); from a smaller peak a quarter of the peak confirms, and below least_peak_n (30 % of the puncture force, or four spreads of it under it) nothing fires; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
+        "note": "on the fitted trials, as the device's detector reads them: threshold_n is the fall that confirms from the expected peak (half the expected fall less its spread, or a quarter of the peak if less); from a smaller peak a quarter of the peak confirms, and below least_peak_n (30 % of the puncture force, or four spreads of it under it) nothing fires; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
     })
 }
 
