@@ -760,18 +760,51 @@ fn garbage_from_the_host_does_not_disturb_the_samples() {
     assert!(corrupted_replies > 0, "the garbage was read and refused");
 }
 
+/// The first line of `record`'s standard error that says it asked for
+/// the stream again, within 30 s, and the lines before it.
+fn asked_again(lines: &std::sync::mpsc::Receiver<String>) -> (String, Vec<String>) {
+    let until = Instant::now() + Duration::from_secs(30);
+    let mut seen = Vec::new();
+    loop {
+        assert!(Instant::now() < until, "record never asked: {seen:?}");
+        if let Ok(line) = lines.recv_timeout(Duration::from_millis(200)) {
+            if line.contains("the device's stream is off") {
+                let refused = line.contains("refused") || line.contains("no answer");
+                assert!(line.contains("asked for it again") && !refused, "{line}");
+                return (line, seen);
+            }
+            seen.push(line);
+        }
+    }
+}
+
+/// Samples arrive again (`stream.bin` grows by more than heartbeats
+/// would), and `record` stops whole at Ctrl-C.
+fn streams_on_then_stops(out: &Path, mut record: std::process::Child) {
+    let before = std::fs::metadata(out.join("stream.bin")).unwrap().len();
+    std::thread::sleep(Duration::from_secs(2));
+    let after = std::fs::metadata(out.join("stream.bin")).unwrap().len();
+    assert!(after > before + 2000, "{before} -> {after} bytes");
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(unsafe { libc::kill(record.id() as i32, libc::SIGINT) }, 0);
+    let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
+        .unwrap()
+        .expect("needle record stops at the signal");
+    assert!(status.success());
+}
+
 #[test]
 fn needle_record_asks_for_the_stream_again_when_it_stops() {
-    // Issue 29 row 7: a device that restarted (its stream off until asked)
-    // left `needle record` waiting forever in silence. Here another
-    // program turns the stream off mid-insertion.
+    // Issue 29 row 7: a device whose stream went off left `needle record`
+    // waiting forever in silence. Here another program turns the stream
+    // off mid-insertion.
     use std::io::Write;
     let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let replay = replay_file(dir.path(), &Plan::PAPER, 0);
     let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
     let out = dir.path().join("recorded");
-    let (mut record, lines) = record_until_loading(&device.port, &out);
+    let (record, lines) = record_until_loading(&device.port, &out);
     let off = Encoder::<256>::default()
         .encode(&needle_holder::protocol::CommandFrame {
             seq: 3 << 29,
@@ -783,33 +816,8 @@ fn needle_record_asks_for_the_stream_again_when_it_stops() {
         .open(&device.port)
         .unwrap();
     pty.write_all(&[&[0][..], &off].concat()).unwrap();
-    let until = Instant::now() + Duration::from_secs(20);
-    let said = loop {
-        assert!(
-            Instant::now() < until,
-            "record never said the stream stopped"
-        );
-        if let Ok(line) = lines.recv_timeout(Duration::from_millis(200)) {
-            if line.contains("the device's stream is off") {
-                break line;
-            }
-        }
-    };
-    assert!(
-        said.contains("asked for it again") && !said.contains("refused"),
-        "{said}"
-    );
-    // Samples arrive again: the stream grows by more than heartbeats.
-    let before = std::fs::metadata(out.join("stream.bin")).unwrap().len();
-    std::thread::sleep(Duration::from_secs(2));
-    let after = std::fs::metadata(out.join("stream.bin")).unwrap().len();
-    assert!(after > before + 2000, "{before} -> {after} bytes");
-    // SAFETY: kill(2) on our own child's pid.
-    assert_eq!(unsafe { libc::kill(record.id() as i32, libc::SIGINT) }, 0);
-    let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
-        .unwrap()
-        .expect("needle record stops at the signal");
-    assert!(status.success());
+    asked_again(&lines);
+    streams_on_then_stops(&out, record);
     drop(device);
 }
 
@@ -823,37 +831,13 @@ fn needle_record_goes_on_after_the_device_is_reset() {
     let replay = replay_file(dir.path(), &Plan::PAPER, 0);
     let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
     let out = dir.path().join("recorded");
-    let (mut record, lines) = record_until_loading(&device.port, &out);
+    let (record, lines) = record_until_loading(&device.port, &out);
     device.reset().unwrap();
-    let until = Instant::now() + Duration::from_secs(30);
-    let mut seen = Vec::new();
-    let said = loop {
-        assert!(Instant::now() < until, "record never spoke up: {seen:?}");
-        if let Ok(line) = lines.recv_timeout(Duration::from_millis(200)) {
-            if line.contains("stream is off") && line.contains("asked for it again") {
-                break line;
-            }
-            seen.push(line);
-        }
-    };
+    let (_, before) = asked_again(&lines);
     assert!(
-        !said.contains("refused") && !said.contains("no answer"),
-        "{said}"
+        before.iter().any(|l| l.contains("nothing from the device")),
+        "{before:?}"
     );
-    assert!(
-        seen.iter().any(|l| l.contains("nothing from the device")),
-        "{seen:?}"
-    );
-    // Samples arrive again.
-    let before = std::fs::metadata(out.join("stream.bin")).unwrap().len();
-    std::thread::sleep(Duration::from_secs(2));
-    let after = std::fs::metadata(out.join("stream.bin")).unwrap().len();
-    assert!(after > before + 2000, "{before} -> {after} bytes");
-    // SAFETY: kill(2) on our own child's pid.
-    assert_eq!(unsafe { libc::kill(record.id() as i32, libc::SIGINT) }, 0);
-    let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
-        .unwrap()
-        .expect("needle record stops at the signal");
-    assert!(status.success());
+    streams_on_then_stops(&out, record);
     drop(device);
 }
