@@ -389,6 +389,16 @@ fn a_report_is_written_with_its_figure() {
     assert!(status.status.success());
     let html = std::fs::read_to_string(&page).unwrap();
     assert!(html.contains("depth_dependent_cutting") && html.contains("gap.svg"));
+    // The waterfall: the nominal, each effect, the noise floor and the
+    // level below which the gap counts as explained, each labelled.
+    for label in [
+        "nominal",
+        "+ depth_dependent_cutting",
+        "noise floor",
+        "explained below",
+    ] {
+        assert!(html.contains(label), "waterfall lacks {label}");
+    }
     let svg = std::fs::read_to_string(out.path().join("gap.svg")).unwrap();
     for label in [
         "measured",

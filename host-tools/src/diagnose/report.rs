@@ -81,8 +81,10 @@ pub fn write(path: &Path, svg: &Path, out: &Value) -> Result<()> {
 }
 
 /// The waterfall as an inline figure: a bar for the held-out RMS of the
-/// nominal, one after each named effect, and the noise floor as a line;
-/// every bar and line labelled with its name and value.
+/// nominal (each trial's spread fitted on the trial), one after each named
+/// effect, the noise floor as a line and the level below which the gap
+/// counts as explained ([`super::EXPLAINED_FACTOR`] noise floors) as
+/// another; every bar and line labelled with its name and value.
 fn waterfall_svg(out: &Value) -> String {
     let num = |v: &Value| v.as_f64().unwrap_or(0.0);
     let mut bars = vec![("nominal".to_owned(), num(&out["baseline"]["heldout_rms_n"]))];
@@ -93,7 +95,8 @@ fn waterfall_svg(out: &Value) -> String {
         ));
     }
     let noise = num(&out["noise_floor_n"]);
-    let top = bars.iter().map(|b| b.1).fold(noise, f64::max).max(1e-9) * 1.15;
+    let explained = super::EXPLAINED_FACTOR * noise;
+    let top = bars.iter().map(|b| b.1).fold(explained, f64::max).max(1e-9) * 1.15;
     let (w, h, left, bottom, bar_w) = (140.0 * bars.len() as f64 + 120.0, 300.0, 70.0, 250.0, 90.0);
     let y = |v: f64| bottom - (v / top) * (bottom - 20.0);
     let mut svg = format!(
@@ -115,13 +118,33 @@ fn waterfall_svg(out: &Value) -> String {
             bottom + 16.0,
         );
     }
-    svg += &format!(
-        "<line x1=\"{left}\" y1=\"{0:.1}\" x2=\"{1}\" y2=\"{0:.1}\" stroke=\"#c33\" stroke-dasharray=\"4 3\"/>\
-         <text x=\"{2}\" y=\"{3:.1}\" fill=\"#c33\">noise floor {noise:.4} N</text></svg>",
-        y(noise),
-        w - 10.0,
-        w - 180.0,
-        y(noise) - 4.0,
-    );
+    // The two labels at either end: the lines can lie a few pixels apart.
+    for (level, colour, label, label_x) in [
+        (
+            noise,
+            "#c33",
+            format!("noise floor {noise:.4} N"),
+            w - 180.0,
+        ),
+        (
+            explained,
+            "#36c",
+            format!(
+                "explained below {explained:.4} N ({} floors)",
+                super::EXPLAINED_FACTOR
+            ),
+            left + 4.0,
+        ),
+    ] {
+        svg += &format!(
+            "<line x1=\"{left}\" y1=\"{0:.1}\" x2=\"{1}\" y2=\"{0:.1}\" stroke=\"{colour}\" stroke-dasharray=\"4 3\"/>\
+             <text x=\"{2}\" y=\"{3:.1}\" fill=\"{colour}\">{label}</text>",
+            y(level),
+            w - 10.0,
+            label_x,
+            y(level) - 4.0,
+        );
+    }
+    svg += "</svg>";
     svg
 }
