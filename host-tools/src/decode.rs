@@ -619,12 +619,17 @@ pub const CSV_HEADER: [&str; 7] = [
 
 /// One sample as a trial CSV row, its time from sample `first_index`.
 pub fn csv_row(s: &Sample, first_index: u32, rate_hz: u16) -> [String; 7] {
+    let t_s = f64::from(s.index.wrapping_sub(first_index)) / f64::from(rate_hz);
+    csv_row_at(s, t_s, s.x.as_m())
+}
+
+/// One sample as a trial CSV row at time `t_s` and position `x_m` (a
+/// recording's own, where the device's were counted from its first
+/// sample).
+pub fn csv_row_at(s: &Sample, t_s: f64, x_m: f64) -> [String; 7] {
     [
-        format!(
-            "{:.6}",
-            f64::from(s.index.wrapping_sub(first_index)) / f64::from(rate_hz)
-        ),
-        format!("{:.9}", s.x.as_m()),
+        format!("{t_s:.6}"),
+        format!("{x_m:.9}"),
         format!("{:.6}", s.force.as_n()),
         format!("{:.9}", s.v.as_mps()),
         format!("{:.6}", s.model.as_n()),

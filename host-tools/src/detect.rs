@@ -425,16 +425,6 @@ fn samples_dir(dir: &Path, out: &Path) -> Result<()> {
     crate::input::create_out_dir(out)
 }
 
-/// The device's sample at row `i` of `trial` in `needle decode --csv`'s
-/// columns, in the file's time and coordinates (the device counts
-/// positions from its first sample).
-fn sample_row(trial: &Trial, i: usize, s: &Sample) -> [String; 7] {
-    let mut row = crate::decode::csv_row(s, 0, 1);
-    row[0] = format!("{:.6}", trial.t_s[i]);
-    row[1] = format!("{:.9}", trial.x_m[0] + s.x.as_m());
-    row
-}
-
 /// One trial through the device, its samples written to `out/NAME` as
 /// they come (as `NAME.part`, renamed once whole; removed if a write
 /// fails, which ends the run naming the file).
@@ -451,7 +441,10 @@ fn detect_writing_samples(
     let mut result = w.write_record(crate::decode::CSV_HEADER);
     let detection = detect_trial_samples(trial, config, |i, s| {
         if result.is_ok() {
-            result = w.write_record(sample_row(trial, i, s));
+            // The file's time and coordinates: the device counts positions
+            // from its first sample.
+            let row = crate::decode::csv_row_at(s, trial.t_s[i], trial.x_m[0] + s.x.as_m());
+            result = w.write_record(row);
         }
     });
     let whole = result
