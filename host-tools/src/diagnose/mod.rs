@@ -289,17 +289,21 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Gram sums per trial and phase of `fixed` columns (one set per trial,
-/// computed once by the caller).
-fn grams(data: &[Prepared], fixed: &[Vec<Vec<f64>>]) -> Vec<[Gram; PHASES.len()]> {
+/// computed once by the caller, with their [`Supports`]).
+fn grams(
+    data: &[Prepared],
+    fixed: &[Vec<Vec<f64>>],
+    supports: &[Supports],
+) -> Vec<[Gram; PHASES.len()]> {
     data.iter()
         .zip(fixed)
-        .map(|(p, cols)| {
+        .zip(supports)
+        .map(|((p, cols), supports)| {
             let n = cols.len();
             let mut g: [Gram; PHASES.len()] = std::array::from_fn(|_| Gram::new(n));
-            for (ph, r) in phase_runs(&p.phase) {
-                let gp = &mut g[ph];
+            for (ph, r, within) in &supports.runs {
+                let (gp, r) = (&mut g[*ph], r.clone());
                 let y = &p.residual_n;
-                let within: Vec<_> = cols.iter().map(|c| support(c, &r)).collect();
                 for (k, ck) in cols.iter().enumerate() {
                     for (l, cl) in cols.iter().enumerate().skip(k) {
                         let v = dot_over(ck, &within[k], cl, &within[l]);
@@ -318,19 +322,27 @@ fn grams(data: &[Prepared], fixed: &[Vec<Vec<f64>>]) -> Vec<[Gram; PHASES.len()]
         .collect()
 }
 
-/// Where each of a trial's columns is not zero, per phase run
-/// ([`phase_runs`]): `runs[run][column]`.
+/// A trial's phase runs ([`phase_runs`]), each with where each of the
+/// trial's columns is not zero in it: `(phase, run, within[column])`.
 struct Supports {
-    runs: Vec<Vec<std::ops::Range<usize>>>,
+    runs: Vec<(usize, std::ops::Range<usize>, Vec<std::ops::Range<usize>>)>,
 }
 
 impl Supports {
     fn of(p: &Prepared, cols: &[Vec<f64>]) -> Self {
         let runs = phase_runs(&p.phase)
             .into_iter()
-            .map(|(_, r)| cols.iter().map(|c| support(c, &r)).collect())
+            .map(|(ph, r)| {
+                let within = cols.iter().map(|c| support(c, &r)).collect();
+                (ph, r, within)
+            })
             .collect();
         Self { runs }
+    }
+
+    /// Each trial's, for its columns.
+    fn all(data: &[Prepared], cols: &[Vec<Vec<f64>>]) -> Vec<Self> {
+        data.iter().zip(cols).map(|(p, c)| Self::of(p, c)).collect()
     }
 }
 
@@ -353,8 +365,8 @@ fn extended(
             let mut g: [Gram; PHASES.len()] =
                 std::array::from_fn(|ph| base[ph].with_columns(extra.len()));
             let nf = fixed.len();
-            for ((ph, r), fixed_within) in phase_runs(&p.phase).into_iter().zip(&supports.runs) {
-                let gp = &mut g[ph];
+            for (ph, r, fixed_within) in &supports.runs {
+                let (gp, r) = (&mut g[*ph], r.clone());
                 let n = gp.n;
                 let within: Vec<_> = extra.iter().map(|c| support(c, &r)).collect();
                 for (e, ce) in extra.iter().enumerate() {
@@ -429,19 +441,14 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     let fixed_cols: Vec<_> = data.iter().map(|p| columns(p, fixed)).collect();
     // The fixed columns' own sums once; per grid value only what the
     // candidate's columns add (a ninth of the work for one column).
-    let base = grams(data, &fixed_cols);
+    let supports = Supports::all(data, &fixed_cols);
+    let base = grams(data, &fixed_cols, &supports);
     let per_grid: Vec<Vec<[Gram; PHASES.len()]>> = match cand {
         None => vec![base],
-        Some(c) => {
-            let supports: Vec<Supports> = data
-                .iter()
-                .zip(&fixed_cols)
-                .map(|(p, cols)| Supports::of(p, cols))
-                .collect();
-            grid.iter()
-                .map(|&g| extended(data, &fixed_cols, &supports, &base, |p| (c.columns)(p, g)))
-                .collect()
-        }
+        Some(c) => grid
+            .iter()
+            .map(|&g| extended(data, &fixed_cols, &supports, &base, |p| (c.columns)(p, g)))
+            .collect(),
     };
     let k = folds(data.len());
     let per = PerTrial {
@@ -1218,7 +1225,7 @@ fn withheld_overlay(data: &[Prepared], out: &Value) -> (Vec<f64>, String) {
         })
         .collect();
     let all_cols: Vec<_> = data.iter().map(|p| columns(p, &set)).collect();
-    let gs = grams(data, &all_cols);
+    let gs = grams(data, &all_cols, &Supports::all(data, &all_cols));
     let mut train = Gram::new(gs[0][0].n);
     for g in &gs[1..] {
         train.merge(&total(g));
