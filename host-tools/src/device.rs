@@ -128,19 +128,17 @@ fn tissue_command(tissue: &str, name: Option<&str>) -> Result<Command> {
             names.join(", ")
         );
     }
-    if name.is_none() {
-        let entries = crate::tissue::load(&path)?;
-        if entries.len() > 1 {
-            let names: Vec<&str> = entries.iter().map(|t| t.name.as_str()).collect();
-            bail!(
-                "{}: holds {} tissues ({}): say which with --name",
-                path.display(),
-                entries.len(),
-                names.join(", ")
-            );
-        }
-    }
-    let entry = crate::tissue::resolve(name, Some(&path))?;
+    let library = crate::tissue::load(&path)?;
+    let entry = match name {
+        Some(n) => crate::tissue::named(&library, n, &path.display().to_string())?,
+        None if library.len() > 1 => bail!(
+            "{}: holds {} tissues ({}): say which with --name",
+            path.display(),
+            library.len(),
+            crate::tissue::names(&library)
+        ),
+        None => library[0].clone(),
+    };
     // The device takes tissues in fixed point: the conversion (and its
     // check) runs here, with the core's own code.
     let model = needle_holder::config::TissueModel::from_params(&entry.params)

@@ -114,15 +114,24 @@ pub fn resolve(name: Option<&str>, file: Option<&Path>) -> Result<Tissue> {
     let wanted = name.or(file.is_none().then_some("liver1"));
     match wanted {
         None => Ok(library[0].clone()),
-        Some(n) => library
-            .iter()
-            .find(|t| t.name == n)
-            .cloned()
-            .ok_or_else(|| {
-                let names: Vec<_> = library.iter().map(|t| t.name.as_str()).collect();
-                anyhow!("no tissue `{n}` in {from} (it has: {})", names.join(", "))
-            }),
+        Some(n) => named(&library, n, &from),
     }
+}
+
+/// The entry `name` of `library` (read from `from`), or an error listing
+/// the names it has.
+pub fn named(library: &[Tissue], name: &str, from: &str) -> Result<Tissue> {
+    library
+        .iter()
+        .find(|t| t.name == name)
+        .cloned()
+        .ok_or_else(|| anyhow!("no tissue `{name}` in {from} (it has: {})", names(library)))
+}
+
+/// The entries' names, comma-separated.
+pub fn names(library: &[Tissue]) -> String {
+    let names: Vec<&str> = library.iter().map(|t| t.name.as_str()).collect();
+    names.join(", ")
 }
 
 fn line_of(text: &str, offset: usize) -> usize {
