@@ -594,10 +594,7 @@ fn a_recording_begun_inside_an_insertion_writes_no_fragment_as_a_trial() {
 fn a_device_that_goes_away_mid_insertion_ends_the_trial_saying_so() {
     let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
-    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
-    let out = dir.path().join("recorded");
-    let (mut record, lines) = record_until_loading(&device.port, &out);
+    let (device, out, mut record, lines) = recording_paper(dir.path());
     // The device goes away (QEMU killed: its pseudo-terminal closes).
     drop(device);
     let status = wait_timeout::ChildExt::wait_timeout(&mut record, Duration::from_secs(20))
@@ -615,6 +612,24 @@ fn a_device_that_goes_away_mid_insertion_ends_the_trial_saying_so() {
         "{rest:?}"
     );
     assert!(out.join("trial_000.csv").exists());
+}
+
+/// A live device replaying the paper's insertion from `dir`, and `needle
+/// record` from it into `dir/recorded` ([`record_until_loading`]): the
+/// device, the output directory, the recording and its lines.
+fn recording_paper(
+    dir: &Path,
+) -> (
+    QemuLive,
+    PathBuf,
+    std::process::Child,
+    std::sync::mpsc::Receiver<String>,
+) {
+    let replay = replay_file(dir, &Plan::PAPER, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let out = dir.join("recorded");
+    let (record, lines) = record_until_loading(&device.port, &out);
+    (device, out, record, lines)
 }
 
 /// `needle record` from `port` into `out`, once its progress line says the
@@ -672,10 +687,7 @@ fn ctrl_c_sigterm_and_sighup_stop_needle_record_with_the_stream_and_trial_whole(
     for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
         let _alone = one_at_a_time();
         let dir = tempfile::tempdir().unwrap();
-        let replay = replay_file(dir.path(), &Plan::PAPER, 0);
-        let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
-        let out = dir.path().join("recorded");
-        let (mut record, lines) = record_until_loading(&device.port, &out);
+        let (device, out, mut record, lines) = recording_paper(dir.path());
         // The raw stream is on disk while the recording runs.
         let streamed = std::fs::metadata(out.join("stream.bin")).unwrap().len();
         assert!(streamed > 0, "stream.bin is written as it arrives");
@@ -801,10 +813,7 @@ fn needle_record_asks_for_the_stream_again_when_it_stops() {
     use std::io::Write;
     let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
-    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
-    let out = dir.path().join("recorded");
-    let (record, lines) = record_until_loading(&device.port, &out);
+    let (device, out, record, lines) = recording_paper(dir.path());
     let off = Encoder::<256>::default()
         .encode(&needle_holder::protocol::CommandFrame {
             seq: 3 << 29,
@@ -828,10 +837,7 @@ fn needle_record_goes_on_after_the_device_is_reset() {
     // record` waited forever in silence.
     let _alone = one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
-    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
-    let out = dir.path().join("recorded");
-    let (record, lines) = record_until_loading(&device.port, &out);
+    let (device, out, record, lines) = recording_paper(dir.path());
     device.reset().unwrap();
     let (_, before) = asked_again(&lines);
     assert!(
