@@ -364,6 +364,14 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
             [near_jump(r.start), near_jump(r.end)],
         )
     }));
+    let quantum_mps = step_m / (2 * k) as f64 / dt;
+    let known: Vec<usize> = uncertain.iter().map(|u| u.0).collect();
+    uncertain.extend(
+        turning(&v, quantum_mps, least_rest)
+            .into_iter()
+            .filter(|u| !known.contains(&u.0) && !near_jump(u.0) && !near_jump(u.0 + 1)),
+    );
+    uncertain.sort_by_key(|u| u.0);
     NeedleVelocity {
         v_mps: v,
         uncertain,
@@ -373,6 +381,38 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
         tissue_sd_m: 0.0,
         force_sd_n: 0.0,
     }
+}
+
+/// The samples where a smooth turn (a stroke reversing, no jump and no
+/// rest) may already have turned: a window's central difference reads a
+/// needle about its turning point as still to within one encoder step
+/// over the window (`quantum_mps`), so which side of the turn such a
+/// sample lies on the encoder cannot say, while the friction steps from
+/// one side's force to the other's there, hundreds of noise floors. Each
+/// such sample gets the velocity of the turn's other side and even odds,
+/// for the force to settle ([`other_side_odds`]). A run still as long as
+/// a rest (`least_rest` samples) is a stop, which [`settling`] takes.
+fn turning(v: &[f64], quantum_mps: f64, least_rest: usize) -> Vec<(usize, f64, f64)> {
+    let mut out = Vec::new();
+    let mut i = 1;
+    while i < v.len() {
+        if v[i].abs() > quantum_mps + 1e-12 {
+            i += 1;
+            continue;
+        }
+        let still = i..(i..v.len())
+            .find(|&j| v[j].abs() > quantum_mps + 1e-12)
+            .unwrap_or(v.len());
+        let (before, after) = (v[still.start - 1], v.get(still.end).copied().unwrap_or(0.0));
+        if before * after < 0.0 && still.len() < least_rest {
+            for j in still.clone() {
+                let other = if v[j] * after > 0.0 { before } else { after };
+                out.push((j, other, 0.5));
+            }
+        }
+        i = still.end;
+    }
+    out
 }
 
 /// The half-width of the velocity windows, samples: 10 ms, but three
@@ -575,5 +615,48 @@ mod tests {
         assert!(settled.contains(&(first_moved - 1)), "{settled:?}");
         assert!(v.uncertain.iter().all(|u| u.1 < 0.0 && u.0 < first_moved));
         assert!(settled.iter().all(|&i| i + 5 >= first_moved), "{settled:?}");
+    }
+
+    #[test]
+    fn a_smooth_turn_leaves_its_side_to_the_force() {
+        // The paper's strokes: 2.5 mm at 0.5 Hz, 500 Hz, 1 µm encoder. Near
+        // each turning point the encoder reads one position for several
+        // samples and the windows read the needle as still.
+        let dt = 0.002;
+        let n = 2000;
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let x_m: Vec<f64> = t_s
+            .iter()
+            .map(|&t| {
+                let x = 0.04 - 2.5e-3 * (1.0 - (std::f64::consts::PI * t).cos());
+                (x * 1e6).round() * 1e-6
+            })
+            .collect();
+        let trial = Trial {
+            f_n: vec![0.0; n],
+            x_m,
+            t_s,
+        };
+        let v = needle_velocity(&trial);
+        // Turns at 1 s and 2 s (samples 500, 1000, 1500): each has samples
+        // whose side the force is to settle, with the other side's
+        // velocity, of the other sign.
+        for turn in [500usize, 1000, 1500] {
+            let near: Vec<&(usize, f64, f64)> = v
+                .uncertain
+                .iter()
+                .filter(|u| u.0.abs_diff(turn) <= 10)
+                .collect();
+            assert!(!near.is_empty(), "turn at {turn}: {:?}", v.uncertain);
+            for &&(i, other, prior) in &near {
+                assert_eq!(prior, 0.5);
+                assert!(other * v.v_mps[i] <= 0.0 && other != 0.0, "{i}: {other}");
+            }
+        }
+        // Elsewhere the encoder knows the side.
+        assert!(v
+            .uncertain
+            .iter()
+            .all(|u| [0usize, 500, 1000, 1500].iter().any(|t| u.0.abs_diff(*t) <= 10)));
     }
 }
