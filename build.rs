@@ -8,7 +8,14 @@ use std::fmt::Write as _;
 const LIBRARY: &str = "src/model/tissues.toml";
 
 /// Keys an entry may leave out (`Option`s in `TissueParams`).
-const OPTIONAL: [&str; 2] = ["puncture_force_sd_n", "puncture_drop_sd_n"];
+const OPTIONAL: [&str; 6] = [
+    "puncture_force_sd_n",
+    "puncture_drop_sd_n",
+    "relax_gain_1",
+    "relax_tau_1_s",
+    "relax_gain_2",
+    "relax_tau_2_s",
+];
 
 /// The memory map `memory.x` includes, per board.
 const QEMU_MEMORY: &str = "/* lm3s6965evb: 256 KiB flash at 0, 64 KiB SRAM; mps2-an386 has more of

@@ -5,6 +5,7 @@ use crate::calibration::{Encoder, LoadCell};
 use crate::detect::DetectConfig;
 use crate::kinematics::VelocityConfig;
 use crate::model::params::{ParamError, TissueParams, LIBRARY, LIVER1};
+use crate::model::relax::Relaxation;
 use crate::model::stiffness::Stiffness;
 use crate::model::ModelConfig;
 use crate::units::MicroNewtons;
@@ -25,6 +26,10 @@ pub struct DeviceConfig {
     pub detect: DetectConfig,
     /// Robot assist: what halts the robot besides faults.
     pub assist: AssistConfig,
+    /// The tissue's relaxation at rest, applied to the model's force.
+    /// Last on the wire: a protocol-3 configuration is this one without
+    /// it (none).
+    pub relaxation: Relaxation,
 }
 
 /// Assist modes of the firmware image, chosen by cargo features
@@ -69,6 +74,8 @@ pub struct TissueModel {
     pub detect: DetectConfig,
     /// Puncture force the tissue's model expects.
     pub expected_peak: MicroNewtons,
+    /// Relaxation of the model's force at rest.
+    pub relaxation: Relaxation,
 }
 
 /// A fixed-point parameter that cannot be, named by the TOML key it comes
@@ -92,6 +99,7 @@ impl TissueModel {
             model,
             detect: DetectConfig::for_tissue(p),
             expected_peak: MicroNewtons::from_n(p.puncture_force_n),
+            relaxation: Relaxation::from_params(p),
         })
     }
 
@@ -140,6 +148,18 @@ impl TissueModel {
             "relaxation",
             "must be within 0..=1",
         )?;
+        bad(
+            self.relaxation.total_gain() <= 1 << 16,
+            "relax_gain_2",
+            "and relax_gain_1 sum to more than 1",
+        )?;
+        for (k, b) in self.relaxation.branches.iter().enumerate() {
+            bad(
+                b.tau_ms <= crate::model::relax::MOST_TAU_MS,
+                ["relax_tau_1_s", "relax_tau_2_s"][k],
+                "must be within the device's 1000 s",
+            )?;
+        }
         bad(m.phase.withdrawal_speed.0 > 0, "withdrawal_speed", POS)?;
         bad(m.phase.hold_force.0 > 0, "contact_force_n", POS)?;
         bad(d.contact_force.0 > 0, "contact_force_n", POS)?;
@@ -242,6 +262,7 @@ impl DeviceConfig {
             model: tissue.model,
             detect: tissue.detect,
             assist: AssistConfig::for_peak(tissue.expected_peak, FIRMWARE_ASSIST),
+            relaxation: tissue.relaxation,
         }
     }
 
@@ -277,6 +298,7 @@ impl DeviceConfig {
             model: self.model,
             detect: self.detect,
             expected_peak: self.assist.expected_peak,
+            relaxation: self.relaxation,
         }
     }
 

@@ -9,7 +9,7 @@
 //! |---|---|
 //! | 0..4 | magic `NHS1` |
 //! | 4..6 | body length `n`, `u16` |
-//! | 6 | format version, [`FORMAT_VERSION`] |
+//! | 6 | format version, [`FORMAT_VERSION`] (2 since the tissue carries its relaxation: a version-1 log reads as `Invalid` and is erased before the next save) |
 //! | 7 | `0` |
 //! | 8..8+n | body: postcard of [`Settings`] |
 //! | then | `0xFF` up to a multiple of 4 |
@@ -40,7 +40,7 @@ use crate::units::Nanometres;
 /// First bytes of a record.
 pub const MAGIC: [u8; 4] = *b"NHS1";
 /// Record format this code reads and writes.
-pub const FORMAT_VERSION: u8 = 1;
+pub const FORMAT_VERSION: u8 = 2;
 /// Bytes before the body.
 const HEAD: usize = 8;
 /// Largest body.

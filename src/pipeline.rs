@@ -7,6 +7,7 @@ use crate::faults::Faults;
 use crate::hal::AdcSample;
 use crate::kinematics::{EncoderTracker, VelocityState};
 use crate::model::phase::PhaseState;
+use crate::model::relax::RelaxState;
 use crate::model::ModelState;
 use crate::protocol::{Event, Halt, Sample};
 use crate::units::MicroNewtons;
@@ -33,6 +34,10 @@ pub struct PipelineState {
     last_force: MicroNewtons,
     /// Every fault raised so far: once there is one, the detectors stop.
     faults_seen: Faults,
+    /// What the tissue's relaxation still holds. Last, as
+    /// [`DeviceConfig::relaxation`] is: a protocol-3 snapshot is this
+    /// one without it.
+    relax: RelaxState,
 }
 
 /// Result of one step.
@@ -129,7 +134,22 @@ impl DeviceConfig {
         self.model
             .phase
             .update(&mut state.phase, placed, x, v, force);
-        let model = self.model.expected(&mut state.model, &state.phase, x, v);
+        let sliding = self.model.sliding(v);
+        let mut unrelaxed = self.model.expected(&mut state.model, &state.phase, x, v);
+        if !sliding {
+            // At rest in the tissue the needle holds what it was applied
+            // with when it stopped (Karnopp: the applied force within the
+            // static band), which the load cell measured then.
+            if let Some((lower, upper)) = self.model.static_band(&state.phase, x) {
+                unrelaxed = state.relax.hold(force, lower, upper);
+            }
+        }
+        let model = self.relaxation.apply(
+            &mut state.relax,
+            unrelaxed,
+            sliding,
+            self.velocity.sample_rate_hz,
+        );
         let phase = state.phase.phase;
         let sample = Sample {
             index,

@@ -8,7 +8,7 @@
 //! |---|---|
 //! | 0..4 | magic `NHRP` |
 //! | 4 | format version, 1 |
-//! | 5 | reserved, 0 |
+//! | 5 | tissue: 0 for the image's default, `i + 1` for library tissue `i` |
 //! | 6..8 | sample rate, Hz, `u16` |
 //! | then 6 per sample | ADC counts `i32`, encoder count `u16` |
 //!
@@ -46,6 +46,10 @@ pub const OVERRUN_MARK: i32 = i32::MIN;
 pub struct ReplayHeader {
     /// Sample rate of the recording, Hz.
     pub sample_rate_hz: u16,
+    /// The library tissue (index into [`crate::model::params::LIBRARY`])
+    /// the recording was made on, run in place of the image's default;
+    /// `None`: the default.
+    pub tissue: Option<u8>,
 }
 
 impl ReplayHeader {
@@ -58,17 +62,21 @@ impl ReplayHeader {
             MAGIC[2],
             MAGIC[3],
             FORMAT_VERSION,
-            0,
+            self.tissue.map_or(0, |i| i.saturating_add(1)),
             rate[0],
             rate[1],
         ]
     }
 
-    /// Parse; `None` for a wrong magic, version or a zero rate.
+    /// Parse; `None` for a wrong magic, version, a zero rate or a tissue
+    /// the library does not have.
     pub fn parse(bytes: &[u8; HEADER_LEN]) -> Option<Self> {
         let rate = u16::from_le_bytes([bytes[6], bytes[7]]);
-        (bytes[..4] == MAGIC && bytes[4] == FORMAT_VERSION && rate > 0).then_some(Self {
+        let tissue = bytes[5].checked_sub(1);
+        let known = tissue.is_none_or(|i| usize::from(i) < crate::model::params::LIBRARY.len());
+        (bytes[..4] == MAGIC && bytes[4] == FORMAT_VERSION && rate > 0 && known).then_some(Self {
             sample_rate_hz: rate,
+            tissue,
         })
     }
 }
@@ -230,13 +238,18 @@ pub struct Replayer<R: Read, W: Write, H: OutputPin> {
 
 impl<R: Read, W: Write, H: OutputPin> Replayer<R, W, H> {
     /// Read the header and build the device from `config` at the replay's
-    /// rate. A bad header raises `REPLAY_BAD_HEADER` (at `config`'s rate)
-    /// and leaves nothing to replay: its final summary is the `Err`.
+    /// rate, with the replay's tissue if it names one. A bad header raises
+    /// `REPLAY_BAD_HEADER` (at `config`'s rate) and leaves nothing to
+    /// replay: its final summary is the `Err`.
     pub fn start(mut reader: R, config: DeviceConfig, sink: W, halt: H) -> Result<Self, Summary> {
         let header = read_header(&mut reader);
-        let sample_rate_hz = match header {
-            Ok(Some(h)) => h.sample_rate_hz,
-            _ => config.velocity.sample_rate_hz,
+        let (sample_rate_hz, tissue) = match header {
+            Ok(Some(h)) => (h.sample_rate_hz, h.tissue),
+            _ => (config.velocity.sample_rate_hz, None),
+        };
+        let config = match tissue.and_then(|i| crate::config::LIBRARY_MODELS.get(usize::from(i))) {
+            Some(model) => config.with_tissue(model),
+            None => config,
         };
         let mut device = Device::new(config.with_sample_rate(sample_rate_hz), sink, halt);
         if !matches!(header, Ok(Some(_))) {

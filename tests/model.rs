@@ -169,8 +169,8 @@ fn on_a_clean_insertion_the_residual_is_small_in_every_phase() {
     let mut state = PipelineState::default();
     let mut worst = [0.0f64; 4];
     let mut checked = [0usize; 4];
-    let mut v_device = 0.0;
-    let (mut x_s2, mut x_s3, mut deepest, mut last_sliding) = (None::<f64>, 0.0, 0.0, 0.0);
+    let mut v_device = 0.0f64;
+    let (mut x_s2, mut x_s3, mut deepest, mut last_sliding) = (None::<f64>, 0.0, 0.0, 0.0f64);
     let t_in = (surface + depth) / speed;
     for i in 0..((2.0 * t_in + 2.0) * rate_hz) as usize {
         let t = i as f64 / rate_hz;
@@ -193,10 +193,22 @@ fn on_a_clean_insertion_the_residual_is_small_in_every_phase() {
                 LIVER1.stiffness_n(d)
             }
             None => LIVER1.stiffness_n(d),
+            Some(_) if v_device.abs() < LIVER1.half_band_mps => {
+                // At rest the needle holds what it was applied with when
+                // it stopped (Karnopp's F_a), within the static band and
+                // the tip's cutting force at the front.
+                let l = x - x_s3;
+                let tip = if x >= deepest {
+                    LIVER1.cutting_force_n
+                } else {
+                    0.0
+                };
+                last_sliding.clamp(LIVER1.dn_n_per_m * l, LIVER1.dp_n_per_m * l + tip)
+            }
             Some(_) => {
-                let (fr, last) = LIVER1.friction_n(v_device, x - x_s3, last_sliding);
-                last_sliding = last;
+                let (fr, _) = LIVER1.friction_n(v_device, x - x_s3, last_sliding);
                 let cut = LIVER1.cutting_n(v_device, x >= deepest);
+                last_sliding = fr + cut;
                 deepest = f64::max(deepest, x);
                 fr + cut
             }

@@ -63,6 +63,35 @@ pub struct ImageSize {
 const F411_FASTEST_HZ: f64 = 2000.0;
 const F411_CLOCK_HZ: f64 = 100e6;
 
+/// A replay of skin_phantom (the library tissue that relaxes) held still
+/// 5 s after its puncture, run on that tissue (the replay's header names
+/// it), written into `dir`.
+fn relaxing_dwell(dir: &Path) -> Result<std::path::PathBuf> {
+    let (index, skin) = needle_holder::model::params::LIBRARY
+        .iter()
+        .enumerate()
+        .find(|(_, (name, _))| *name == "skin_phantom")
+        .map(|(i, (_, p))| (i as u8, *p))
+        .context("skin_phantom is not in the tissue library")?;
+    let plan = Plan {
+        depth_m: 0.02,
+        dwell_s: 5.0,
+        ..Plan::PAPER
+    };
+    let (trial, _) = sim::insertion(&skin, &plan);
+    let config = DeviceConfig::default();
+    let header = needle_holder::replay::ReplayHeader {
+        sample_rate_hz: 500,
+        tissue: Some(index),
+    };
+    let path = dir.join("skin_dwell.replay");
+    std::fs::write(
+        &path,
+        sim::to_replay_with(&trial, header, &config.load_cell, &config.encoder),
+    )?;
+    Ok(path)
+}
+
 pub fn run(args: &BenchArgs) -> Result<()> {
     firmware::ensure_qemu()?;
     let dir = firmware::repo_root().join("target").join("bench");
@@ -114,7 +143,16 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         )?;
         means.push((core, counts.mean().round() as u64));
     }
+    let relaxing = relaxing_dwell(&dir)?;
     let elf = firmware::build(Board::Lm3s6965)?;
+    let counts = count_instructions(Board::Lm3s6965, &elf, &relaxing, &dir.join("skin.frames"))?;
+    crate::out!(
+        "cortex-m3 with relaxation on (skin_phantom, 20 mm, a 5 s dwell): {:.1} instructions per sample (max {}: the sample that computes the decay factors), {} samples",
+        counts.mean(),
+        counts.max(),
+        counts.per_region.len()
+    )?;
+    means.push(("cortex-m3-relaxation", counts.mean().round() as u64));
     let size = image_size(&elf)?;
     crate::out!(
         "CI board image: {} bytes flash, {} bytes static RAM",

@@ -1,11 +1,11 @@
 //! Frame stream decoding on the host: split at `0x00`, check and decode
-//! each frame (COBS, CRC, exactly one frame), turn protocol-3 batches back
-//! into samples with the core's [`Reconstructor`], track sample-index
-//! gaps, and refuse protocol versions other than 2 and 3.
+//! each frame (COBS, CRC, exactly one frame), turn batches back into
+//! samples with the core's [`Reconstructor`], track sample-index gaps,
+//! and refuse protocol versions other than 2, 3 and this build's (4).
 //!
-//! Both versions are read: a frame passes the CRC of exactly one of them
-//! (version 3's covers an implied version byte, see
-//! `needle_holder::protocol::wire`), so a capture of either decodes.
+//! All three are read: a frame passes the CRC of exactly one of them
+//! (versions 3 and 4 cover an implied version byte, see
+//! `needle_holder::protocol::wire`), so a capture of any decodes.
 //!
 //! Written here rather than with postcard's `CobsAccumulator` because that
 //! knows no CRC and does not say how many bytes it threw away; this decoder
@@ -48,6 +48,41 @@ mod v2 {
         Event(Event),
         Status(Status),
         Halt(Halt),
+    }
+}
+
+/// Frames of protocol version 3: this build's, but for the tissue's
+/// relaxation, which version 4 added as the last field of the
+/// configuration and of the pipeline's state. A version-3 body of either
+/// with none appended is the version-4 body, so old captures decode with
+/// this build's types and the core's reconstruction.
+mod v3 {
+    use needle_holder::model::relax::{RelaxState, Relaxation};
+    use needle_holder::protocol::wire::{self, FRAME_CRC};
+    use needle_holder::protocol::MAX_ENCODED_FRAME;
+
+    /// The postcard tags of `Frame::Config` and `Frame::Snapshot`.
+    const CONFIG: u8 = 1;
+    const SNAPSHOT: u8 = 3;
+
+    /// The body of `chunk` if it passes version 3's framing, as a
+    /// version-4 body.
+    pub fn body(chunk: &[u8]) -> Option<Vec<u8>> {
+        let mut buffer = [0u8; MAX_ENCODED_FRAME];
+        let check = |b: &[u8]| {
+            let mut digest = FRAME_CRC.digest();
+            digest.update(&[3]);
+            digest.update(b);
+            digest.finalize()
+        };
+        let mut body = wire::unframe(chunk, &mut buffer, check).ok()?.to_vec();
+        let tail = match body.first() {
+            Some(&CONFIG) => postcard::to_allocvec(&Relaxation::default()),
+            Some(&SNAPSHOT) => postcard::to_allocvec(&RelaxState::default()),
+            _ => Ok(Vec::new()),
+        };
+        body.extend(tail.ok()?);
+        Some(body)
     }
 }
 
@@ -123,7 +158,7 @@ pub struct VersionMismatch {
 
 impl std::fmt::Display for VersionMismatch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let readable = [2, PROTOCOL_VERSION].contains(&self.found);
+        let readable = [2, 3, PROTOCOL_VERSION].contains(&self.found);
         if readable && self.found != self.framed_as {
             write!(
                 f,
@@ -133,7 +168,7 @@ impl std::fmt::Display for VersionMismatch {
         } else {
             write!(
                 f,
-                "the device speaks protocol version {}, this needle reads versions 2 and {}: rebuild one to match the other",
+                "the device speaks protocol version {}, this needle reads versions 2, 3 and {}: rebuild one to match the other",
                 self.found, PROTOCOL_VERSION
             )
         }
@@ -224,7 +259,7 @@ impl StreamDecoder {
         match protocol::decode(chunk, &mut buffer) {
             Ok(frame) => {
                 self.newer = None;
-                return self.accept(frame, chunk, on_item);
+                return self.accept(frame, chunk, PROTOCOL_VERSION, on_item);
             }
             Err(DecodeError::Crc) => {}
             Err(_) => {
@@ -232,6 +267,16 @@ impl StreamDecoder {
                 self.skip(chunk.len() + 1, "undecodable frame", on_item);
                 return Ok(());
             }
+        }
+        if let Some(body) = v3::body(chunk) {
+            self.newer = None;
+            return match wire::parse::<Frame>(&body) {
+                Ok(frame) => self.accept(frame, chunk, 3, on_item),
+                Err(_) => {
+                    self.skip(chunk.len() + 1, "undecodable frame", on_item);
+                    Ok(())
+                }
+            };
         }
         let mut buffer = [0u8; MAX_ENCODED_FRAME];
         match wire::unframe(chunk, &mut buffer, |b| FRAME_CRC.checksum(b)) {
@@ -354,17 +399,19 @@ impl StreamDecoder {
         on_item(Item::Frame(message));
     }
 
-    /// A version-3 frame; `chunk` is its bytes as received (a config
+    /// A frame of this build's protocol (or of version 3, read as one:
+    /// `version` says which); `chunk` is its bytes as received (a config
     /// frame's seed the batch checks).
     fn accept(
         &mut self,
         frame: Frame<'_>,
         chunk: &[u8],
+        version: u16,
         on_item: &mut impl FnMut(Item),
     ) -> Result<(), VersionMismatch> {
         let message = match frame {
             Frame::Header(h) => {
-                check_version(h.protocol_version, PROTOCOL_VERSION)?;
+                check_version(h.protocol_version, version)?;
                 // The device (re)started: indices begin again.
                 self.went_back(0, on_item);
                 self.next_index = None;
@@ -373,7 +420,7 @@ impl StreamDecoder {
                 Message::Header(h)
             }
             Frame::Status(s) => {
-                check_version(s.protocol_version, PROTOCOL_VERSION)?;
+                check_version(s.protocol_version, version)?;
                 if !s.streaming {
                     // Paused on request: what does not come is not lost.
                     self.next_index = None;
@@ -780,6 +827,68 @@ mod tests {
     }
 
     #[test]
+    fn a_version_3_capture_still_decodes_to_the_same_samples() {
+        use needle_holder::model::relax::{RelaxState, Relaxation};
+        use needle_holder::protocol::batch::BatchCheck;
+        // What a version-3 device sent: these frames less the relaxation
+        // at the end of its configuration and state, framed over version
+        // byte 3, and so its batch checks seeded from those config bytes.
+        let (stream, expected) = device_stream(DeviceConfig::default(), 600);
+        let v3_frame = |raw: &mut Vec<u8>| {
+            let mut digest = FRAME_CRC.digest();
+            digest.update(&[3]);
+            digest.update(raw);
+            raw.extend(digest.finalize().to_le_bytes());
+            cobs::encode_vec(raw)
+        };
+        let (mut old, mut seed) = (Vec::new(), BatchCheck::default());
+        for frame in split(&stream) {
+            let mut buf = [0u8; MAX_ENCODED_FRAME];
+            let body = wire::unframe(&frame[..frame.len() - 1], &mut buf, |b| {
+                let mut digest = FRAME_CRC.digest();
+                digest.update(&[PROTOCOL_VERSION as u8]);
+                digest.update(b);
+                digest.finalize()
+            })
+            .unwrap();
+            let tail = match body[0] {
+                1 => postcard::to_stdvec(&Relaxation::default()).unwrap().len(),
+                3 => postcard::to_stdvec(&RelaxState::default()).unwrap().len(),
+                _ => 0,
+            };
+            let mut raw = body[..body.len() - tail].to_vec();
+            match wire::parse::<Frame>(body).unwrap() {
+                Frame::Header(_) | Frame::Status(_) => raw[1] = 3,
+                Frame::Batch(batch) => {
+                    let mut check = seed;
+                    let first = batch.first_index as usize;
+                    for s in &expected[first..first + usize::from(batch.samples)] {
+                        check.add(s);
+                    }
+                    let rechecked = Frame::Batch(protocol::Batch {
+                        check: check.0.to_le_bytes(),
+                        ..batch
+                    });
+                    raw = postcard::to_stdvec(&rechecked).unwrap();
+                }
+                _ => {}
+            }
+            let framed = v3_frame(&mut raw);
+            if body[0] == 1 {
+                seed = BatchCheck::seed(&framed);
+            }
+            old.extend(framed);
+            old.push(0);
+        }
+        let (items, stats) = decode_all(&old).unwrap();
+        assert_eq!(stats.skipped_bytes, 0);
+        assert_eq!(samples(&items), expected);
+        assert!(messages(&items)
+            .iter()
+            .any(|m| matches!(m, Message::Header(h) if h.protocol_version == 3)));
+    }
+
+    #[test]
     fn another_protocol_version_is_refused() {
         let header = |v| {
             Frame::Header(Header {
@@ -789,7 +898,7 @@ mod tests {
         };
         let err = decode_all(FrameEncoder::default().encode(&header(9))).unwrap_err();
         assert_eq!(err.found, 9);
-        assert!(err.to_string().contains("reads versions 2 and"), "{err}");
+        assert!(err.to_string().contains("reads versions 2, 3 and"), "{err}");
         // A version this needle reads, named in another's frame.
         let err = decode_all(FrameEncoder::default().encode(&header(2))).unwrap_err();
         assert!(err.to_string().contains("contradicts itself"), "{err}");

@@ -169,9 +169,67 @@ fn the_real_boards_image_on_netduinoplus2_matches_the_host_twin() {
     assert_eq!(last_status(&qemu.frames).frames_dropped, 0);
 }
 
+#[test]
+fn a_relaxing_tissue_held_still_matches_the_host_twin_on_every_board() {
+    // skin_phantom relaxes at rest (one branch, 39 %, τ 1.5 s): a 5 s
+    // dwell runs the relaxation through the decay factors each image
+    // computed for itself with micromath.
+    let (index, skin) = needle_holder::model::params::LIBRARY
+        .iter()
+        .enumerate()
+        .find(|(_, (name, _))| *name == "skin_phantom")
+        .map(|(i, (_, p))| (i as u8, *p))
+        .unwrap();
+    let plan = Plan {
+        depth_m: 0.02,
+        dwell_s: 5.0,
+        ..Plan::PAPER
+    };
+    let (trial, _) = sim::insertion(&skin, &plan);
+    let config = DeviceConfig::default();
+    let header = ReplayHeader {
+        sample_rate_hz: 500,
+        tissue: Some(index),
+    };
+    let replay = sim::to_replay_with(&trial, header, &config.load_cell, &config.encoder);
+    for board in [
+        Board::Lm3s6965,
+        Board::Lm3s6965M0,
+        Board::Mps2An386,
+        Board::NucleoF411re,
+    ] {
+        let (qemu, _) = assert_twin(board, &replay, "skin-dwell");
+        // The device ran the replay's tissue, and its model relaxed over
+        // the dwell: the longest run at rest after the puncture ends
+        // 30-45 % under where it began.
+        let (items, _) = decode_all(&qemu.frames).unwrap();
+        let samples = host_tools::frames::samples(&items);
+        let mut best: &[needle_holder::protocol::Sample] = &[];
+        for run in
+            samples.split(|s| s.v.0 != 0 || s.phase != needle_holder::protocol::Phase::Inserted)
+        {
+            if run.len() > best.len() {
+                best = run;
+            }
+        }
+        assert!(
+            best.len() > 2000,
+            "{board:?}: dwell of {} samples",
+            best.len()
+        );
+        let (first, last) = (best[1].model.0 as f64, best[best.len() - 1].model.0 as f64);
+        let fall = 1.0 - last / first;
+        assert!(
+            (0.30..0.45).contains(&fall),
+            "{board:?}: {first} → {last} µN"
+        );
+    }
+}
+
 fn replay_of(records: impl IntoIterator<Item = Record>) -> Vec<u8> {
     let mut bytes = ReplayHeader {
         sample_rate_hz: 500,
+        tissue: None,
     }
     .to_bytes()
     .to_vec();

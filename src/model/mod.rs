@@ -5,6 +5,7 @@
 //! f = friction(v, l) + cutting, with l = x − x_s3 the needle length in
 //! tissue (Karnopp friction per unit length, see [`friction`]) and cutting
 //! a constant while the tip advances into uncut tissue. Zero out of tissue.
+//! While the needle is still, the pipeline relaxes this force ([`relax`]).
 //!
 //! Configuration ([`ModelConfig`], built from [`params::TissueParams`] at
 //! compile time for the firmware) is apart from state ([`ModelState`]).
@@ -18,6 +19,7 @@ pub mod friction;
 pub mod params;
 pub mod phase;
 pub mod reference;
+pub mod relax;
 pub mod stiffness;
 
 use self::fixed::FractionQ16;
@@ -72,7 +74,7 @@ impl ModelConfig {
     }
 
     /// Expected force for the needle at `x` moving at `v`, given the phase
-    /// and surface positions.
+    /// and surface positions, before relaxation ([`relax`]).
     pub fn expected(
         &self,
         state: &mut ModelState,
@@ -89,6 +91,39 @@ impl ModelConfig {
                 friction.add(self.cutting_now(phase, x, v))
             }
         }
+    }
+
+    /// The static band at `x` once the needle is at rest in the tissue:
+    /// the force the tissue can hold on it, from D_n·l (pulling) to D_p·l
+    /// plus the cutting force at the cutting front (the tissue ahead of a
+    /// stopped tip stays compressed). `None` out of the tissue or on the
+    /// capsule, where the stiffness law gives the force at rest too.
+    pub fn static_band(
+        &self,
+        phase: &PhaseState,
+        x: Nanometres,
+    ) -> Option<(MicroNewtons, MicroNewtons)> {
+        match phase.phase {
+            Phase::Out | Phase::Loading => None,
+            Phase::Inserted | Phase::Withdrawal => {
+                let l = phase.length_in_tissue(x).0.max(0);
+                let f = &self.friction;
+                let lower = fixed::affine_times(f.dn, fixed::PerLength2Q48(0), 0, l);
+                let upper = fixed::affine_times(f.dp, fixed::PerLength2Q48(0), 0, l);
+                let tip = if x >= phase.deepest {
+                    self.cutting
+                } else {
+                    MicroNewtons::ZERO
+                };
+                Some((MicroNewtons(lower), MicroNewtons(upper).add(tip)))
+            }
+        }
+    }
+
+    /// Whether the needle at `v` slides (outside the Karnopp band): what
+    /// renews the tissue's relaxation.
+    pub fn sliding(&self, v: NanometresPerSecond) -> bool {
+        v.0 >= self.friction.half_band.0 || v.0 <= self.friction.half_band.0.saturating_neg()
     }
 
     /// Cutting force now: only while advancing (v ≥ Δv/2) at the deepest

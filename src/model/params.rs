@@ -51,6 +51,20 @@ pub struct TissueParams {
     /// no less than a quarter of the drop.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub puncture_drop_sd_n: Option<f64>,
+    /// Stress relaxation at rest, branch 1 of the Prony series (see
+    /// `model::relax`): the share of a held force it relaxes away, 0–1.
+    /// Left out with its time constant: no such branch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relax_gain_1: Option<f64>,
+    /// Branch 1's time constant, s (> 0, within 1000 s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relax_tau_1_s: Option<f64>,
+    /// Branch 2's gain, 0–1 (the two gains sum to at most 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relax_gain_2: Option<f64>,
+    /// Branch 2's time constant, s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relax_tau_2_s: Option<f64>,
     /// Surface relaxation ρ in x_s3 = x_s1 + ρ·(x_s2 − x_s1), 0–1.
     pub relaxation: f64,
     /// Cutting force while advancing into uncut tissue, N.
@@ -74,8 +88,8 @@ pub struct TissueParams {
 }
 
 /// The keys of [`TissueParams`] that hold numbers, as in the TOML file
-/// (`stiffness_law` holds a name); the last two may be left out.
-pub const NUMBER_KEYS: [&str; 19] = [
+/// (`stiffness_law` holds a name); the last six may be left out.
+pub const NUMBER_KEYS: [&str; 23] = [
     "a1_n_per_m",
     "a2_n_per_m2",
     "rational_a_per_n",
@@ -95,6 +109,10 @@ pub const NUMBER_KEYS: [&str; 19] = [
     "contact_force_n",
     "puncture_force_sd_n",
     "puncture_drop_sd_n",
+    "relax_gain_1",
+    "relax_tau_1_s",
+    "relax_gain_2",
+    "relax_tau_2_s",
 ];
 
 /// A parameter that cannot be used, and why.
@@ -286,6 +304,57 @@ impl TissueParams {
             }
             i += 1;
         }
+        let branches = [
+            (
+                p.relax_gain_1,
+                p.relax_tau_1_s,
+                "relax_gain_1",
+                "relax_tau_1_s",
+            ),
+            (
+                p.relax_gain_2,
+                p.relax_tau_2_s,
+                "relax_gain_2",
+                "relax_tau_2_s",
+            ),
+        ];
+        let mut total_gain = 0.0;
+        let mut i = 0;
+        while i < branches.len() {
+            let (gain, tau, gain_key, tau_key) = branches[i];
+            match (gain, tau) {
+                (Some(g), Some(t)) => {
+                    check_all!(
+                        check(g.is_finite(), gain_key, NOT_FINITE),
+                        check(g >= 0.0 && g <= 1.0, gain_key, "must be within 0..=1"),
+                        check(t.is_finite(), tau_key, NOT_FINITE),
+                        check(
+                            t >= 0.001 && t <= 1000.0,
+                            tau_key,
+                            "must be within the device's 1 ms..=1000 s"
+                        ),
+                    );
+                    total_gain += g;
+                }
+                (None, None) => {}
+                (Some(_), None) => {
+                    check_all!(check(false, tau_key, "is missing (its gain is given)"));
+                }
+                (None, Some(_)) => {
+                    check_all!(check(
+                        false,
+                        gain_key,
+                        "is missing (its time constant is given)"
+                    ));
+                }
+            }
+            i += 1;
+        }
+        check_all!(check(
+            total_gain <= 1.0,
+            "relax_gain_2",
+            "and relax_gain_1 sum to more than 1 (more than the whole force relaxes)"
+        ));
         match p.stiffness_law {
             StiffnessLaw::Polynomial => check(
                 p.a1_n_per_m > 0.0 || p.a2_n_per_m2 > 0.0,

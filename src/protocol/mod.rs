@@ -2,7 +2,7 @@
 //! alike: the frames the device sends ([`Frame`]), the commands it takes
 //! ([`command`]), and how both are framed on the wire ([`wire`]).
 //!
-//! **The stream (version 3).** After boot the device sends a [`Header`],
+//! **The stream (version 4).** After boot the device sends a [`Header`],
 //! a [`ConfigFrame`] (everything the pipeline computes with: calibration,
 //! tissue model, detectors, assist) and a [`Snapshot`] of the pipeline's
 //! state; then the samples as [`batch`]es of raw readings, which the host
@@ -34,7 +34,7 @@ use crate::pipeline::PipelineState;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// Version of the frame format; the host refuses other versions.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// Samples between two status heartbeats.
 pub const STATUS_PERIOD_SAMPLES: u32 = 250;
@@ -281,15 +281,15 @@ mod tests {
     fn golden_bytes_pin_the_wire_format() {
         let mut encoder = FrameEncoder::default();
         let bytes = encoder.encode(&batch_frame());
-        assert_eq!(PROTOCOL_VERSION, 3);
+        assert_eq!(PROTOCOL_VERSION, 4);
         // COBS code, tag 2, index 1234, 2 samples, the check, 5 raw bytes,
-        // the CRC (0xc023, checked against a bitwise CRC-16/X.25 over the
-        // implied version byte 3 and the body), the zero.
+        // the CRC (0x30e4, checked against a bitwise CRC-16/X.25 over the
+        // implied version byte 4 and the body), the zero.
         assert_eq!(
             bytes,
             &[
                 0x11, 0x02, 0xd2, 0x09, 0x02, 0x01, 0x02, 0x03, 0x04, 0x05, 0x80, 0x01, 0x02, 0x03,
-                0x04, 0x23, 0xc0, 0x00
+                0x04, 0xe4, 0x30, 0x00
             ][..]
         );
     }
@@ -313,7 +313,12 @@ mod tests {
     fn every_variant_round_trips_within_the_size_bound() {
         let full = [0xffu8; batch::BATCH_BYTES];
         let mut state = PipelineState::default();
-        let config = crate::config::DEFAULT;
+        let mut config = crate::config::DEFAULT;
+        // The largest a tissue's relaxation can write.
+        config.relaxation.branches = [crate::model::relax::Branch {
+            gain: crate::model::fixed::FractionQ16(u32::MAX),
+            tau_ms: u32::MAX,
+        }; crate::model::relax::BRANCHES];
         for i in 0..40 {
             config.step(
                 &mut state,

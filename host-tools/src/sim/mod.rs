@@ -1284,6 +1284,12 @@ impl Dataset<'_> {
             rig,
         } = *self;
         let config = needle_holder::config::DeviceConfig::default();
+        // The replays run on this tissue where the firmware has it (a
+        // library tissue, unchanged); another runs on the image's default.
+        let library_index = needle_holder::model::params::LIBRARY
+            .iter()
+            .position(|(name, params)| *name == tissue_name && params == tissue)
+            .and_then(|i| u8::try_from(i).ok());
         let mut truths = Vec::new();
         for k in 0..trials {
             let mut rng =
@@ -1319,12 +1325,11 @@ impl Dataset<'_> {
             let name = format!("trial_{k:03}");
             let csv = dir.join(format!("{name}.csv"));
             crate::trial::write(&csv, &trial)?;
-            let replay = to_replay(
-                &trial,
-                sensor.rate_hz.round() as u16,
-                &config.load_cell,
-                &config.encoder,
-            );
+            let header = ReplayHeader {
+                sample_rate_hz: sensor.rate_hz.round() as u16,
+                tissue: library_index,
+            };
+            let replay = to_replay_with(&trial, header, &config.load_cell, &config.encoder);
             let path = dir.join(format!("{name}.replay"));
             let bytes = [replay.len() as u64, std::fs::metadata(&csv)?.len()];
             std::fs::write(&path, replay)
@@ -1386,13 +1391,25 @@ pub fn raw_record(x_m: f64, f_n: f64, load_cell: &LoadCell, encoder: &Encoder) -
     }
 }
 
-/// A trial as a firmware replay file for the given sensor calibration.
+/// A trial as a firmware replay file for the given sensor calibration,
+/// run on the image's default tissue.
 pub fn to_replay(trial: &Trial, rate_hz: u16, load_cell: &LoadCell, encoder: &Encoder) -> Vec<u8> {
-    let mut bytes = ReplayHeader {
+    let header = ReplayHeader {
         sample_rate_hz: rate_hz,
-    }
-    .to_bytes()
-    .to_vec();
+        tissue: None,
+    };
+    to_replay_with(trial, header, load_cell, encoder)
+}
+
+/// [`to_replay`] under `header` (its rate, and a library tissue to run in
+/// place of the image's default).
+pub fn to_replay_with(
+    trial: &Trial,
+    header: ReplayHeader,
+    load_cell: &LoadCell,
+    encoder: &Encoder,
+) -> Vec<u8> {
+    let mut bytes = header.to_bytes().to_vec();
     for (&x_m, &f_n) in trial.x_m.iter().zip(&trial.f_n) {
         let record = raw_record(x_m, f_n, load_cell, encoder);
         bytes.extend_from_slice(&record.to_bytes());
