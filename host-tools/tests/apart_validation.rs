@@ -244,3 +244,91 @@ fn the_detectors_on_vessels_and_phantoms_written_apart() {
         early.join("; ")
     );
 }
+
+/// The device's model over the dwells of the insert–dwell–withdraw cases
+/// whose tissue relaxes in this generator's forms (and the one without),
+/// with the tissue `needle fit --toml` writes from the same ten trials
+/// (`needle detect --samples`): the RMS residual over each trial's
+/// longest rest in the tissue, the worst trial's and all dwells', against
+/// the noise. Printed as measured; asserted only that every trial has a
+/// dwell and the fit wrote the relaxation keys or said why not.
+#[test]
+fn the_devices_dwell_on_relaxation_written_apart() {
+    let needle = |args: &[&str]| {
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_needle"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    };
+    println!("| case | relaxation fitted | worst trial's dwell RMS | all dwells' RMS | noise |");
+    println!("|---|---|---|---|---|");
+    let cases = apart::diagnosis_cases();
+    let relaxing = cases.iter().filter(|c| {
+        c.name.starts_with("idw/") && (c.name.contains("viscoelastic") || c.name == "idw/none")
+    });
+    for case in relaxing {
+        let dir = tempfile::tempdir().unwrap();
+        let path = |p: &str| dir.path().join(p).to_str().unwrap().to_owned();
+        let trials = apart::generate(case, TRIALS, SEED);
+        apart::write_dataset(&dir.path().join("trials"), &trials).unwrap();
+        needle(&["fit", &path("trials"), "--toml", &path("fitted.toml")]);
+        let toml = std::fs::read_to_string(path("fitted.toml")).unwrap();
+        let keys: Vec<&str> = toml.lines().filter(|l| l.starts_with("relax_")).collect();
+        assert!(keys.len() == 2 || toml.contains("relax_gain_1 and relax_tau_1_s are left out"));
+        needle(&[
+            "detect",
+            &path("trials"),
+            "--params",
+            &path("fitted.toml"),
+            "--samples",
+            &path("device"),
+        ]);
+        let (mut worst, mut sum, mut n) = (0.0f64, 0.0, 0usize);
+        for file in host_tools::trial::dataset_files(&dir.path().join("device")).unwrap() {
+            let rows: Vec<csv::StringRecord> = csv::Reader::from_path(&file)
+                .unwrap()
+                .records()
+                .map(Result::unwrap)
+                .collect();
+            let at_rest =
+                |r: &csv::StringRecord| &r[6] == "inserted" && r[3].parse::<f64>().unwrap() == 0.0;
+            let best = rows
+                .split(|r| !at_rest(r))
+                .max_by_key(|run| run.len())
+                .unwrap_or(&[]);
+            assert!(
+                best.len() > 100,
+                "{}: {} has no dwell",
+                case.name,
+                file.display()
+            );
+            let ss: f64 = best
+                .iter()
+                .map(|r| r[5].parse::<f64>().unwrap().powi(2))
+                .sum();
+            worst = worst.max((ss / best.len() as f64).sqrt());
+            (sum, n) = (sum + ss, n + best.len());
+        }
+        let value = |k: &str| {
+            keys.iter()
+                .find_map(|l| l.strip_prefix(k))
+                .and_then(|v| v.trim_start_matches([' ', '=']).parse::<f64>().ok())
+        };
+        let fitted = match (value("relax_gain_1"), value("relax_tau_1_s")) {
+            (Some(g), Some(tau)) => format!("{:.0} %, τ {tau:.2} s", g * 100.0),
+            _ => "none".to_owned(),
+        };
+        println!(
+            "| {} | {fitted} | {:.1} mN | {:.1} mN | {:.1} mN |",
+            case.name,
+            worst * 1e3,
+            (sum / n as f64).sqrt() * 1e3,
+            case.noise_n * 1e3
+        );
+    }
+}

@@ -289,3 +289,107 @@ fn detect_writes_the_devices_samples_per_trial_beside_no_trial() {
         2
     );
 }
+
+/// The device's residual over each dwell (the longest run at rest inside
+/// the tissue) of `needle detect --samples`'s output in `dir`: its RMS
+/// per trial, N.
+fn dwell_residuals(dir: &std::path::Path) -> Vec<f64> {
+    let mut out = Vec::new();
+    for file in host_tools::trial::dataset_files(dir).unwrap() {
+        let mut rows = csv::Reader::from_path(&file).unwrap();
+        let rows: Vec<csv::StringRecord> = rows.records().map(Result::unwrap).collect();
+        let at_rest =
+            |r: &csv::StringRecord| &r[6] == "inserted" && r[3].parse::<f64>().unwrap() == 0.0;
+        let mut best: &[csv::StringRecord] = &[];
+        for run in rows.split(|r| !at_rest(r)) {
+            if run.len() > best.len() {
+                best = run;
+            }
+        }
+        assert!(best.len() > 300, "{}: no dwell", file.display());
+        let sum: f64 = best
+            .iter()
+            .map(|r| r[5].parse::<f64>().unwrap().powi(2))
+            .sum();
+        out.push((sum / best.len() as f64).sqrt());
+    }
+    out
+}
+
+/// Issue 33: on insert–dwell–withdraw trials whose tissue relaxes at rest
+/// (each of the simulator's forms, trial-to-trial spread, jitter, the
+/// tissue dragged on withdrawal), the tissue `needle fit --toml` writes
+/// carries the relaxation, and with it the device's residual over every
+/// dwell stays within two noise floors; without the relaxation keys it
+/// does not.
+#[test]
+fn the_device_predicts_the_dwell_with_the_fitted_relaxation() {
+    let needle = |args: &[&str]| {
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_needle"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    };
+    let noise_n = 0.012;
+    for form in ["standard", "alternate", "literature"] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = |p: &str| dir.path().join(p).to_str().unwrap().to_owned();
+        needle(&[
+            "simulate",
+            "--out",
+            &path("trials"),
+            "--trials",
+            "6",
+            "--seed",
+            "5",
+            "--protocol",
+            "insert-dwell-withdraw",
+            "--effects",
+            "viscoelasticity",
+            "--effect-form",
+            form,
+            "--rate-hz",
+            "100",
+            "--noise-n",
+            "0.012",
+            "--jitter",
+            "--spread",
+            "0.2",
+        ]);
+        needle(&["fit", &path("trials"), "--toml", &path("fitted.toml")]);
+        let toml = std::fs::read_to_string(path("fitted.toml")).unwrap();
+        assert!(
+            toml.contains("relax_gain_1 = ") && toml.contains("relax_tau_1_s = "),
+            "{form}: {toml}"
+        );
+        let without: String = toml
+            .lines()
+            .filter(|l| !l.starts_with("relax_"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        std::fs::write(path("unrelaxed.toml"), without).unwrap();
+        let mut worst = [0.0f64; 2];
+        for (k, tissue) in ["fitted.toml", "unrelaxed.toml"].iter().enumerate() {
+            let out = path(&format!("device_{k}"));
+            needle(&[
+                "detect",
+                &path("trials"),
+                "--params",
+                &path(tissue),
+                "--samples",
+                &out,
+            ]);
+            worst[k] = dwell_residuals(std::path::Path::new(&out))
+                .into_iter()
+                .fold(0.0, f64::max);
+        }
+        println!("{form}: worst dwell residual {:.1} mN with the fitted relaxation, {:.1} mN without ({:.0} mN noise)", worst[0] * 1e3, worst[1] * 1e3, noise_n * 1e3);
+        assert!(worst[0] <= 2.0 * noise_n, "{form}: {worst:?}");
+        assert!(worst[1] > worst[0], "{form}: {worst:?}");
+    }
+}

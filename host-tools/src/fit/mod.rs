@@ -285,6 +285,8 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
             "duration_s": estimate(&dwells.iter().map(|d| d.duration_s).collect::<Vec<_>>()),
             "fraction": estimate(&dwells.iter().map(|d| d.fraction).collect::<Vec<_>>()),
             "tau_s": estimate(&dwells.iter().map(|d| d.tau_s).collect::<Vec<_>>()),
+            "gain": estimate(&dwells.iter().map(|d| d.gain).collect::<Vec<_>>()),
+            "fall_n": estimate(&dwells.iter().map(|d| d.fraction * d.start_level_n).collect::<Vec<_>>()),
         })
     };
     let most_layers = all.iter().map(|t| t.layers.len()).max().unwrap_or(0);
@@ -509,7 +511,42 @@ pub fn to_toml(fit: &Value) -> String {
         out += &format!("{key} = {value:?}\n");
         written.push((key, value));
     }
-    out + &spreads(fit)
+    out + &spreads(fit) + &relaxation_at_rest(fit)
+}
+
+/// The relaxation at rest the device models (`relax_gain_1`,
+/// `relax_tau_1_s`): one Prony branch, the trials' mean gain and time
+/// constant over their longest rest in the tissue, when the force falls
+/// there by more than three noise sd on average. One branch: a 5 s rest
+/// at 12 mN of noise does not tell two apart.
+fn relaxation_at_rest(fit: &Value) -> String {
+    let dwell = &fit["dwell_relaxation"];
+    let num = |v: &Value| value_of(v);
+    let (Some(gain), Some(tau_s), Some(fall_n)) = (
+        num(&dwell["gain"]),
+        num(&dwell["tau_s"]),
+        num(&dwell["fall_n"]),
+    ) else {
+        return format!("{NOTE} relax_gain_1 and relax_tau_1_s are left out: no trial rests in the tissue for {} s or more\n", trial::DWELL_MIN_S);
+    };
+    // Worth modelling when the fall left out would cost the residual more
+    // than the noise (over a noise sd), and it is the tissue's, not chance:
+    // three standard errors from the trials' spread (one trial: its own
+    // two 0.1 s levels' noise).
+    let noise_n = fit.get("noise_n").and_then(value_of).unwrap_or(0.0);
+    let trials = dwell["trials"].as_f64().unwrap_or(1.0).max(1.0);
+    let error_n = match dwell["fall_n"].get("sd").and_then(Value::as_f64) {
+        Some(sd) => sd / trials.sqrt(),
+        None => noise_n * 0.45,
+    };
+    if fall_n <= noise_n.max(3.0 * error_n) || gain <= 0.0 {
+        return format!("{NOTE} relax_gain_1 and relax_tau_1_s are left out: at rest the force fell {fall_n:.4} N on average (± {error_n:.4} N), not more than the noise ({noise_n:.4} N) and three standard errors\n");
+    }
+    let tau_s = tau_s.clamp(0.001, 1000.0);
+    format!(
+        "relax_gain_1 = {:?}\nrelax_tau_1_s = {tau_s:?}\n",
+        gain.min(1.0)
+    )
 }
 
 /// The spreads between trials the puncture detector takes its margins

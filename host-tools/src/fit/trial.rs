@@ -88,6 +88,9 @@ pub struct DwellRelaxation {
     pub fraction: f64,
     /// Time constant of the single exponential fitted to it, s.
     pub tau_s: f64,
+    /// The share of the start level that exponential relaxes away given
+    /// time (its amplitude over its start): a Prony branch's gain.
+    pub gain: f64,
 }
 
 /// A membrane's puncture after the capsule's: the peak before a sharp fall.
@@ -927,7 +930,7 @@ fn insertion_line(advancing: &[Xvf], x_s3: f64, noise_n: f64) -> Option<(f64, f6
 }
 
 /// Rest shorter than this is no dwell, s.
-const DWELL_MIN_S: f64 = 1.0;
+pub const DWELL_MIN_S: f64 = 1.0;
 
 /// The longest rest inside the tissue after the puncture: how far the
 /// force fell over it, and the time constant of one exponential through
@@ -961,7 +964,7 @@ fn dwell_relaxation(trial: &Trial, v: &[f64], ip: usize) -> Option<DwellRelaxati
         level(a, (a + tenth).min(b)),
         level(b.saturating_sub(tenth).max(a), b),
     );
-    let mut best_tau = (f64::INFINITY, 0.0, first);
+    let mut best_tau = (f64::INFINITY, 0.0, first, 0.0);
     for k in 0..=60 {
         let tau = 0.05 * 1000f64.powf(k as f64 / 60.0);
         let mut fit = Lsq::<2>::default();
@@ -971,7 +974,7 @@ fn dwell_relaxation(trial: &Trial, v: &[f64], ip: usize) -> Option<DwellRelaxati
         if let Some(c) = fit.solve() {
             let sse = fit.sse(&c);
             if sse < best_tau.0 {
-                best_tau = (sse, tau, c[0] + c[1]);
+                best_tau = (sse, tau, c[0] + c[1], c[1]);
             }
         }
     }
@@ -981,6 +984,7 @@ fn dwell_relaxation(trial: &Trial, v: &[f64], ip: usize) -> Option<DwellRelaxati
         duration_s,
         fraction: (first - last) / first,
         tau_s: best_tau.1,
+        gain: best_tau.3 / best_tau.2,
     })
 }
 
