@@ -154,10 +154,16 @@ impl TissueModel {
             "and relax_gain_1 sum to more than 1",
         )?;
         for (k, b) in self.relaxation.branches.iter().enumerate() {
+            let tau_key = ["relax_tau_1_s", "relax_tau_2_s"][k];
             bad(
                 b.tau_ms <= crate::model::relax::MOST_TAU_MS,
-                ["relax_tau_1_s", "relax_tau_2_s"][k],
+                tau_key,
                 "must be within the device's 1000 s",
+            )?;
+            bad(
+                b.gain.0 == 0 || b.tau_ms >= 1,
+                tau_key,
+                "must be at least 1 ms where its gain is not zero",
             )?;
         }
         bad(m.phase.withdrawal_speed.0 > 0, "withdrawal_speed", POS)?;
@@ -391,6 +397,28 @@ mod tests {
 
     /// What a host that skipped the parameters' check would upload: the
     /// device's own check names the key all the same.
+    #[test]
+    fn the_device_refuses_a_relaxation_it_cannot_run_by_key() {
+        use crate::model::fixed::FractionQ16;
+        use crate::model::relax::{Branch, MOST_TAU_MS};
+        let ok = TissueModel::from_params(&LIVER1).unwrap();
+        let with = |branches: [Branch; 2]| {
+            let mut m = ok;
+            m.relaxation.branches = branches;
+            m.check().map_err(|e| e.field)
+        };
+        let b = |gain: u32, tau_ms: u32| Branch {
+            gain: FractionQ16(gain),
+            tau_ms,
+        };
+        assert_eq!(with([b(30_000, 1500), b(0, 0)]), Ok(()));
+        // An instant relaxation: a gain with no time constant.
+        assert_eq!(with([b(30_000, 0), b(0, 0)]), Err("relax_tau_1_s"));
+        assert_eq!(with([b(0, 0), b(1, MOST_TAU_MS + 1)]), Err("relax_tau_2_s"));
+        // More than the whole force.
+        assert_eq!(with([b(40_000, 10), b(30_000, 10)]), Err("relax_gain_2"));
+    }
+
     #[test]
     fn the_device_refuses_contradicting_detector_figures_by_key() {
         type Spoil = fn(&mut TissueParams);

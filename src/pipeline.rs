@@ -60,6 +60,11 @@ impl PipelineState {
         self.faults_seen
     }
 
+    /// What the tissue at rest holds and has relaxed.
+    pub fn relax(&self) -> &RelaxState {
+        &self.relax
+    }
+
     /// The phase machine's state.
     pub fn phase(&self) -> &PhaseState {
         &self.phase
@@ -72,6 +77,29 @@ impl PipelineState {
 }
 
 impl DeviceConfig {
+    /// The model's force for a needle at rest: in the tissue, what it was
+    /// applied with when it stopped (Karnopp: the applied force within the
+    /// static band), which the load cell measured then; relaxed. Out of
+    /// line: most samples slide, and the sample path keeps its registers.
+    #[inline(never)]
+    fn at_rest(
+        &self,
+        state: &mut PipelineState,
+        x: crate::units::Nanometres,
+        force: MicroNewtons,
+        unrelaxed: MicroNewtons,
+    ) -> MicroNewtons {
+        let mut held = unrelaxed;
+        if self.relaxation.hold_applied {
+            match self.model.static_band(&state.phase, x) {
+                Some((lower, upper)) => held = state.relax.hold(force, lower, upper),
+                None => state.relax.release(),
+            }
+        }
+        self.relaxation
+            .at_rest(&mut state.relax, held, self.velocity.sample_rate_hz)
+    }
+
     /// Process one raw sample: calibrate, kinematics, detectors, phase,
     /// model, robot assist.
     ///
@@ -134,22 +162,12 @@ impl DeviceConfig {
         self.model
             .phase
             .update(&mut state.phase, placed, x, v, force);
-        let sliding = self.model.sliding(v);
-        let mut unrelaxed = self.model.expected(&mut state.model, &state.phase, x, v);
-        if !sliding {
-            // At rest in the tissue the needle holds what it was applied
-            // with when it stopped (Karnopp: the applied force within the
-            // static band), which the load cell measured then.
-            if let Some((lower, upper)) = self.model.static_band(&state.phase, x) {
-                unrelaxed = state.relax.hold(force, lower, upper);
-            }
-        }
-        let model = self.relaxation.apply(
-            &mut state.relax,
-            unrelaxed,
-            sliding,
-            self.velocity.sample_rate_hz,
-        );
+        let unrelaxed = self.model.expected(&mut state.model, &state.phase, x, v);
+        let model = if self.model.sliding(v) {
+            self.relaxation.slide(&mut state.relax, unrelaxed)
+        } else {
+            self.at_rest(state, x, force, unrelaxed)
+        };
         let phase = state.phase.phase;
         let sample = Sample {
             index,

@@ -247,11 +247,19 @@ impl<R: Read, W: Write, H: OutputPin> Replayer<R, W, H> {
             Ok(Some(h)) => (h.sample_rate_hz, h.tissue),
             _ => (config.velocity.sample_rate_hz, None),
         };
-        let config = match tissue.and_then(|i| crate::config::LIBRARY_MODELS.get(usize::from(i))) {
-            Some(model) => config.with_tissue(model),
-            None => config,
+        let named =
+            tissue.and_then(|i| Some((i, crate::config::LIBRARY_MODELS.get(usize::from(i))?)));
+        let config = named.map_or(config, |(_, model)| config.with_tissue(model));
+        let mut device = match named {
+            Some((i, _)) => Device::restored(
+                config.with_sample_rate(sample_rate_hz),
+                crate::protocol::TissueSource::Library(i),
+                crate::persist::Loaded::NotKept,
+                sink,
+                halt,
+            ),
+            None => Device::new(config.with_sample_rate(sample_rate_hz), sink, halt),
         };
-        let mut device = Device::new(config.with_sample_rate(sample_rate_hz), sink, halt);
         if !matches!(header, Ok(Some(_))) {
             device.raise(Faults::REPLAY_BAD_HEADER);
             return Err(device.finish());

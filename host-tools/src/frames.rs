@@ -828,12 +828,32 @@ mod tests {
 
     #[test]
     fn a_version_3_capture_still_decodes_to_the_same_samples() {
-        use needle_holder::model::relax::{RelaxState, Relaxation};
+        use needle_holder::model::params::LIVER1;
+        use needle_holder::model::relax::Relaxation;
         use needle_holder::protocol::batch::BatchCheck;
-        // What a version-3 device sent: these frames less the relaxation
-        // at the end of its configuration and state, framed over version
-        // byte 3, and so its batch checks seeded from those config bytes.
-        let (stream, expected) = device_stream(DeviceConfig::default(), 600);
+        // What a version-3 device sent for a whole insertion (contact,
+        // puncture, a 2 s dwell, withdrawal): this build's frames with
+        // protocol 3's model at rest (no hold, no relaxation), less the
+        // relaxation at the end of its configuration and state, framed
+        // over version byte 3, so its batch checks seeded from those
+        // config bytes.
+        let (trial, _) = crate::sim::insertion(&LIVER1, &crate::sim::Plan::PAPER);
+        let config = DeviceConfig {
+            relaxation: Relaxation::default(),
+            ..DeviceConfig::default()
+        };
+        let replay = crate::sim::to_replay(&trial, 500, &config.load_cell, &config.encoder);
+        let mut stream = Vec::new();
+        let mut halt = crate::twin::RecordingPin::default();
+        needle_holder::replay::run(&replay[..], config, &mut stream, &mut halt);
+        let (items, _) = decode_all(&stream).unwrap();
+        let expected = samples(&items);
+        assert_eq!(expected.len(), trial.len());
+        let rests = expected
+            .iter()
+            .filter(|s| s.phase == Phase::Inserted && s.v.0 == 0)
+            .count();
+        assert!(rests > 500, "a dwell in the tissue: {rests} samples");
         let v3_frame = |raw: &mut Vec<u8>| {
             let mut digest = FRAME_CRC.digest();
             digest.update(&[3]);
@@ -851,13 +871,14 @@ mod tests {
                 digest.finalize()
             })
             .unwrap();
-            let tail = match body[0] {
-                1 => postcard::to_stdvec(&Relaxation::default()).unwrap().len(),
-                3 => postcard::to_stdvec(&RelaxState::default()).unwrap().len(),
+            let parsed = wire::parse::<Frame>(body).unwrap();
+            let tail = match &parsed {
+                Frame::Config(c) => postcard::to_stdvec(&c.config.relaxation).unwrap().len(),
+                Frame::Snapshot(s) => postcard::to_stdvec(s.state.relax()).unwrap().len(),
                 _ => 0,
             };
             let mut raw = body[..body.len() - tail].to_vec();
-            match wire::parse::<Frame>(body).unwrap() {
+            match parsed {
                 Frame::Header(_) | Frame::Status(_) => raw[1] = 3,
                 Frame::Batch(batch) => {
                     let mut check = seed;

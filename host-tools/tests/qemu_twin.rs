@@ -202,6 +202,15 @@ fn a_relaxing_tissue_held_still_matches_the_host_twin_on_every_board() {
         // The device ran the replay's tissue, and its model relaxed over
         // the dwell: the longest run at rest after the puncture ends
         // 30-45 % under where it began.
+        let tissue = frames_of(&qemu.frames).into_iter().find_map(|f| match f {
+            Frame::Config(c) => Some(c.tissue),
+            _ => None,
+        });
+        assert_eq!(
+            tissue,
+            Some(needle_holder::protocol::TissueSource::Library(index)),
+            "{board:?}"
+        );
         let (items, _) = decode_all(&qemu.frames).unwrap();
         let samples = host_tools::frames::samples(&items);
         let mut best: &[needle_holder::protocol::Sample] = &[];

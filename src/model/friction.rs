@@ -14,7 +14,11 @@
 //! holds the friction of the last sliding sample (what the tissue was
 //! carrying when the needle stopped) and clamps it to the static band: a
 //! needle that stops after inserting keeps its drag up to D_p·l, one that
-//! stops after withdrawing keeps its pull down to D_n·l.
+//! stops after withdrawing keeps its pull down to D_n·l. That is the
+//! model at rest of protocol 3 and of a configuration without
+//! `hold_applied`; since protocol 4 the pipeline holds the force the
+//! needle was applied with instead (`model::relax`), which the load cell
+//! measures.
 
 use super::fixed::{affine_times, PerLength2Q48, PerLengthQ26};
 use super::params::TissueParams;

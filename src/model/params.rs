@@ -334,7 +334,9 @@ impl TissueParams {
                             "must be within the device's 1 ms..=1000 s"
                         ),
                     );
-                    total_gain += g;
+                    // As the device will hold it (Q16), so both sides
+                    // refuse the same sums.
+                    total_gain += super::fixed::FractionQ16::from_ratio(g).0 as f64 / 65536.0;
                 }
                 (None, None) => {}
                 (Some(_), None) => {
@@ -391,7 +393,7 @@ mod tests {
     #[test]
     fn invalid_parameters_are_rejected_naming_the_field() {
         type Spoil = fn(&mut TissueParams);
-        let cases: [(Spoil, &str); 11] = [
+        let cases: [(Spoil, &str); 15] = [
             (|p| p.a1_n_per_m = f64::NAN, "a1_n_per_m"),
             (|p| p.a2_n_per_m2 = -1.0, "a2_n_per_m2"),
             (|p| p.dp_n_per_m = -0.1, "dp_n_per_m"),
@@ -404,6 +406,24 @@ mod tests {
             (|p| p.puncture_force_n = 5000.0, "puncture_force_n"),
             (|p| p.cutting_force_n = 1e300, "cutting_force_n"),
             (|p| p.cn_n_per_m = -1e6, "cn_n_per_m"),
+            // Relaxation: a gain past 1, a branch half given, gains that
+            // sum past the whole force, a time constant under 1 ms.
+            (
+                |p| (p.relax_gain_1, p.relax_tau_1_s) = (Some(1.5), Some(1.0)),
+                "relax_gain_1",
+            ),
+            (|p| p.relax_gain_1 = Some(0.3), "relax_tau_1_s"),
+            (
+                |p| {
+                    (p.relax_gain_1, p.relax_tau_1_s) = (Some(0.6), Some(1.0));
+                    (p.relax_gain_2, p.relax_tau_2_s) = (Some(0.5), Some(5.0));
+                },
+                "relax_gain_2",
+            ),
+            (
+                |p| (p.relax_gain_2, p.relax_tau_2_s) = (Some(0.2), Some(1e-4)),
+                "relax_tau_2_s",
+            ),
         ];
         for (spoil, field) in cases {
             let mut p = LIVER1;

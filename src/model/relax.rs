@@ -20,8 +20,9 @@
 //!
 //! The decay factors are computed from `τ_k` and the sample rate with
 //! micromath's `exp` in `f32`, on the device as on the host (the same
-//! bits: software `f32` arithmetic), whenever either changes, and kept in
-//! the state; the per-sample work is integer only.
+//! bits: software `f32` arithmetic), at the first sample at rest after
+//! either changes, and kept in the state; the per-sample work is integer
+//! only.
 //!
 //! | quantity | format | 1 LSB | range |
 //! |---|---|---|---|
@@ -56,11 +57,19 @@ pub struct Branch {
     pub tau_ms: u32,
 }
 
-/// The relaxation spectrum of a tissue (all gains zero: none).
+/// The tissue at rest: whether the needle holds the force it was applied
+/// with, and the relaxation spectrum of that force (all gains zero: none).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Relaxation {
     /// The branches, in any order.
     pub branches: [Branch; BRANCHES],
+    /// At rest in the tissue the model holds the force the needle was
+    /// applied with (the measured force at the rest's start, within the
+    /// static band). Off (the default, and what a protocol-3 stream's
+    /// missing field reads as): the friction of the last sliding sample,
+    /// clamped to the band, protocol 3's model. Every tissue made from
+    /// parameters has it on.
+    pub hold_applied: bool,
 }
 
 /// Relaxation state: each branch's unrelaxed force and its decay factor
@@ -112,7 +121,10 @@ impl Relaxation {
             }
             k += 1;
         }
-        Self { branches }
+        Self {
+            branches,
+            hold_applied: true,
+        }
     }
 
     /// The sum of the gains, Q16 (≤ 1 in a valid tissue).
@@ -122,10 +134,19 @@ impl Relaxation {
             .fold(0u32, |s, b| s.saturating_add(b.gain.0))
     }
 
+    /// The force `force` the tissue exerts on a sliding needle: whole, and
+    /// every branch holds it again.
+    #[inline(always)]
+    pub fn slide(&self, state: &mut RelaxState, force: MicroNewtons) -> MicroNewtons {
+        state.last = force;
+        state.held = [force; BRANCHES];
+        state.hold = None;
+        force
+    }
+
     /// The force `force` held by the tissue, relaxed for how long the
     /// needle has been still (`moving`: it is not, and every branch holds
     /// the whole force again). `rate_hz` is the sample rate.
-    #[inline(always)]
     pub fn apply(
         &self,
         state: &mut RelaxState,
@@ -133,26 +154,27 @@ impl Relaxation {
         moving: bool,
         rate_hz: u16,
     ) -> MicroNewtons {
-        // Most samples move: three stores. The rest is out of line, so the
-        // sample path keeps its registers (`needle bench`).
         if moving {
-            state.last = force;
-            state.held = [force; BRANCHES];
-            state.hold = None;
-            force
+            self.slide(state, force)
         } else {
             self.at_rest(state, force, rate_hz)
         }
     }
 
     /// [`Self::apply`] for a needle at rest.
-    #[inline(never)]
-    fn at_rest(&self, state: &mut RelaxState, force: MicroNewtons, rate_hz: u16) -> MicroNewtons {
+    #[inline(always)]
+    pub fn at_rest(
+        &self,
+        state: &mut RelaxState,
+        force: MicroNewtons,
+        rate_hz: u16,
+    ) -> MicroNewtons {
         let [b0, b1] = self.branches;
         let step = force.0.saturating_sub(state.last.0);
         state.last = force;
         state.last_out = force;
         if (b0.gain.0 | b1.gain.0) == 0 {
+            state.held = [force; BRANCHES];
             return force;
         }
         if state.decay_for != (rate_hz, [b0.tau_ms, b1.tau_ms]) {
@@ -174,6 +196,12 @@ impl Relaxation {
 }
 
 impl RelaxState {
+    /// Forget the hold (the needle left the tissue's static band: out of
+    /// it, or on the capsule).
+    pub fn release(&mut self) {
+        self.hold = None;
+    }
+
     /// The force held at rest: the mean measured force over the rest's
     /// first [`HOLD_SAMPLES`] samples, each with what the model had
     /// relaxed away by then added back (one sample's noise held for a
@@ -251,6 +279,7 @@ mod tests {
                 gain: FractionQ16::from_ratio(g),
                 tau_ms,
             }),
+            hold_applied: true,
         }
     }
 

@@ -151,8 +151,10 @@ pub struct Reply {
 
 /// Largest command frame before COBS, CRC included: an upload (a
 /// tissue's fixed-point model and thresholds, at most 5 bytes a field and
-/// 10 for the rational law's two `i64`), the tag, the sequence number.
-pub const MAX_RAW_COMMAND: usize = 5 + 1 + 1 + 1 + 2 * 10 + 7 * 5 + 5 + 3 * 5 + 10 * 5 + 5 + 2;
+/// 10 for the rational law's two `i64`; its relaxation, two branches of
+/// two `u32` and a flag), the tag, the sequence number.
+pub const MAX_RAW_COMMAND: usize =
+    5 + 1 + 1 + 1 + 2 * 10 + 7 * 5 + 5 + 3 * 5 + 10 * 5 + 5 + 2 + (2 * 2 * 5 + 1);
 /// Largest command frame on the wire.
 pub const MAX_ENCODED_COMMAND: usize = encoded_bound(MAX_RAW_COMMAND);
 
@@ -231,6 +233,11 @@ mod tests {
             b_q32: i64::MIN,
         };
         huge.model.cutting = MicroNewtons::MIN;
+        huge.relaxation.branches = [crate::model::relax::Branch {
+            gain: crate::model::fixed::FractionQ16(u32::MAX),
+            tau_ms: u32::MAX,
+        }; crate::model::relax::BRANCHES];
+        huge.relaxation.hold_applied = true;
         let commands = [
             Command::Tare,
             Command::SelectTissue(u8::MAX),
