@@ -79,11 +79,19 @@ impl Friction {
             state.last_sliding = MicroNewtons(affine_times(self.cn, self.bn, v.0, l));
             state.last_sliding
         } else {
-            let upper = affine_times(self.dp, PerLength2Q48(0), 0, l);
-            let lower = affine_times(self.dn, PerLength2Q48(0), 0, l);
+            let (lower, upper) = self.band(Nanometres(l));
             // max/min rather than clamp: no panic when a tissue's band is
             // upside down (upper wins).
-            MicroNewtons(state.last_sliding.0.max(lower).min(upper))
+            MicroNewtons(state.last_sliding.0.max(lower.0).min(upper.0))
         }
+    }
+
+    /// The static band on `l` of needle in tissue: (D_n·l, D_p·l).
+    pub fn band(&self, l: Nanometres) -> (MicroNewtons, MicroNewtons) {
+        let l = l.0.max(0);
+        (
+            MicroNewtons(affine_times(self.dn, PerLength2Q48(0), 0, l)),
+            MicroNewtons(affine_times(self.dp, PerLength2Q48(0), 0, l)),
+        )
     }
 }

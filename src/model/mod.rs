@@ -106,16 +106,13 @@ impl ModelConfig {
         match phase.phase {
             Phase::Out | Phase::Loading => None,
             Phase::Inserted | Phase::Withdrawal => {
-                let l = phase.length_in_tissue(x).0.max(0);
-                let f = &self.friction;
-                let lower = fixed::affine_times(f.dn, fixed::PerLength2Q48(0), 0, l);
-                let upper = fixed::affine_times(f.dp, fixed::PerLength2Q48(0), 0, l);
+                let (lower, upper) = self.friction.band(phase.length_in_tissue(x));
                 let tip = if x >= phase.deepest {
                     self.cutting
                 } else {
                     MicroNewtons::ZERO
                 };
-                Some((MicroNewtons(lower), MicroNewtons(upper).add(tip)))
+                Some((lower, upper.add(tip)))
             }
         }
     }

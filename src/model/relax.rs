@@ -145,23 +145,7 @@ impl Relaxation {
     }
 
     /// The force `force` held by the tissue, relaxed for how long the
-    /// needle has been still (`moving`: it is not, and every branch holds
-    /// the whole force again). `rate_hz` is the sample rate.
-    pub fn apply(
-        &self,
-        state: &mut RelaxState,
-        force: MicroNewtons,
-        moving: bool,
-        rate_hz: u16,
-    ) -> MicroNewtons {
-        if moving {
-            self.slide(state, force)
-        } else {
-            self.at_rest(state, force, rate_hz)
-        }
-    }
-
-    /// [`Self::apply`] for a needle at rest.
+    /// needle has been still; `rate_hz` is the sample rate.
     #[inline(always)]
     pub fn at_rest(
         &self,
@@ -305,11 +289,11 @@ mod tests {
         let r = spectrum([(0.25, 500), (0.15, 3000)]);
         let mut s = RelaxState::default();
         let f = MicroNewtons(1_600_000);
-        assert_eq!(r.apply(&mut s, f, true, 500), f);
+        assert_eq!(r.slide(&mut s, f), f);
         // 5 s at rest at 500 Hz.
         let mut last = f;
         for _ in 0..2500 {
-            last = r.apply(&mut s, f, false, 500);
+            last = r.at_rest(&mut s, f, 500);
         }
         let exact =
             1.6e6 * (1.0 - 0.25 * (1.0 - (-10.0f64).exp()) - 0.15 * (1.0 - (-5.0f64 / 3.0).exp()));
@@ -318,12 +302,12 @@ mod tests {
             "{last:?} {exact}"
         );
         // Moving again: the whole force.
-        assert_eq!(r.apply(&mut s, f, true, 500), f);
+        assert_eq!(r.slide(&mut s, f), f);
         // A force that steps down at the stop steps down in full, then
         // relaxes from there: one sample's relaxation of the 1.6 N held
         // (0.25·(1 − e^(−1/250)) + 0.15·(1 − e^(−1/1500)) of it, 1.76 mN).
         let lower = MicroNewtons(1_000_000);
-        let at_stop = r.apply(&mut s, lower, false, 500);
+        let at_stop = r.at_rest(&mut s, lower, 500);
         assert!((at_stop.0 - (1_000_000 - 1_757)).abs() < 5, "{at_stop:?}");
     }
 
@@ -332,13 +316,13 @@ mod tests {
         let off = Relaxation::default();
         let mut s = RelaxState::default();
         assert_eq!(
-            off.apply(&mut s, MicroNewtons(123), false, 500),
+            off.at_rest(&mut s, MicroNewtons(123), 500),
             MicroNewtons(123)
         );
         let full = spectrum([(1.0, 1), (1.0, 1)]);
         for f in [i32::MAX, i32::MIN, 0] {
-            full.apply(&mut s, MicroNewtons(f), true, 65_535);
-            let out = full.apply(&mut s, MicroNewtons(f), false, 65_535);
+            full.slide(&mut s, MicroNewtons(f));
+            let out = full.at_rest(&mut s, MicroNewtons(f), 65_535);
             assert!(
                 out.0 == f || (out.0 as i64).abs() <= (f as i64).abs(),
                 "{f}: {out:?}"
