@@ -63,35 +63,6 @@ pub struct ImageSize {
 const F411_FASTEST_HZ: f64 = 2000.0;
 const F411_CLOCK_HZ: f64 = 100e6;
 
-/// A replay of skin_phantom (the library tissue that relaxes) held still
-/// 5 s after its puncture, run on that tissue (the replay's header names
-/// it), written into `dir`.
-fn relaxing_dwell(dir: &Path) -> Result<std::path::PathBuf> {
-    let (index, skin) = needle_holder::model::params::LIBRARY
-        .iter()
-        .enumerate()
-        .find(|(_, (name, _))| *name == "skin_phantom")
-        .map(|(i, (_, p))| (i as u8, *p))
-        .context("skin_phantom is not in the tissue library")?;
-    let plan = Plan {
-        depth_m: 0.02,
-        dwell_s: 5.0,
-        ..Plan::PAPER
-    };
-    let (trial, _) = sim::insertion(&skin, &plan);
-    let config = DeviceConfig::default();
-    let header = needle_holder::replay::ReplayHeader {
-        sample_rate_hz: 500,
-        tissue: Some(index),
-    };
-    let path = dir.join("skin_dwell.replay");
-    std::fs::write(
-        &path,
-        sim::to_replay_with(&trial, header, &config.load_cell, &config.encoder),
-    )?;
-    Ok(path)
-}
-
 pub fn run(args: &BenchArgs) -> Result<()> {
     firmware::ensure_qemu()?;
     let dir = firmware::repo_root().join("target").join("bench");
@@ -143,7 +114,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         )?;
         means.push((core, counts.mean().round() as u64));
     }
-    let relaxing = relaxing_dwell(&dir)?;
+    let relaxing = dir.join("skin_dwell.replay");
+    std::fs::write(&relaxing, sim::relaxing_dwell_replay()?.1)?;
     let elf = firmware::build(Board::Lm3s6965)?;
     let counts = count_instructions(Board::Lm3s6965, &elf, &relaxing, &dir.join("skin.frames"))?;
     crate::out!(

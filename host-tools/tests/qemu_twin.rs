@@ -174,24 +174,7 @@ fn a_relaxing_tissue_held_still_matches_the_host_twin_on_every_board() {
     // skin_phantom relaxes at rest (one branch, 39 %, τ 1.5 s): a 5 s
     // dwell runs the relaxation through the decay factors each image
     // computed for itself with micromath.
-    let (index, skin) = needle_holder::model::params::LIBRARY
-        .iter()
-        .enumerate()
-        .find(|(_, (name, _))| *name == "skin_phantom")
-        .map(|(i, (_, p))| (i as u8, *p))
-        .unwrap();
-    let plan = Plan {
-        depth_m: 0.02,
-        dwell_s: 5.0,
-        ..Plan::PAPER
-    };
-    let (trial, _) = sim::insertion(&skin, &plan);
-    let config = DeviceConfig::default();
-    let header = ReplayHeader {
-        sample_rate_hz: 500,
-        tissue: Some(index),
-    };
-    let replay = sim::to_replay_with(&trial, header, &config.load_cell, &config.encoder);
+    let (index, replay) = sim::relaxing_dwell_replay().unwrap();
     for board in [
         Board::Lm3s6965,
         Board::Lm3s6965M0,

@@ -1391,6 +1391,34 @@ pub fn raw_record(x_m: f64, f_n: f64, load_cell: &LoadCell, encoder: &Encoder) -
     }
 }
 
+/// The library tissue that relaxes at rest (`skin_phantom`) inserted
+/// 20 mm and held still 5 s, as a replay that names it (the firmware
+/// runs that tissue): what `needle bench` counts with relaxation on and
+/// the QEMU twin compares. Its library index, and the replay.
+pub fn relaxing_dwell_replay() -> Result<(u8, Vec<u8>)> {
+    let (index, skin) = needle_holder::model::params::LIBRARY
+        .iter()
+        .enumerate()
+        .find(|(_, (name, _))| *name == "skin_phantom")
+        .map(|(i, (_, p))| (i as u8, *p))
+        .context("skin_phantom is not in the tissue library")?;
+    let plan = Plan {
+        depth_m: 0.02,
+        dwell_s: 5.0,
+        ..Plan::PAPER
+    };
+    let (trial, _) = insertion(&skin, &plan);
+    let config = needle_holder::config::DeviceConfig::default();
+    let header = ReplayHeader {
+        sample_rate_hz: 500,
+        tissue: Some(index),
+    };
+    Ok((
+        index,
+        to_replay_with(&trial, header, &config.load_cell, &config.encoder),
+    ))
+}
+
 /// A trial as a firmware replay file for the given sensor calibration,
 /// run on the image's default tissue.
 pub fn to_replay(trial: &Trial, rate_hz: u16, load_cell: &LoadCell, encoder: &Encoder) -> Vec<u8> {
