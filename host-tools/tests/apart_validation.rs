@@ -9,6 +9,7 @@
 //! leaves less at each step, the scorer's counts add up.
 
 mod apart;
+mod common;
 
 use host_tools::detect::detect_dataset;
 use host_tools::diagnose::candidates::CANDIDATES;
@@ -254,17 +255,7 @@ fn the_detectors_on_vessels_and_phantoms_written_apart() {
 /// dwell and the fit wrote the relaxation keys or said why not.
 #[test]
 fn the_devices_dwell_on_relaxation_written_apart() {
-    let needle = |args: &[&str]| {
-        let run = std::process::Command::new(env!("CARGO_BIN_EXE_needle"))
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            run.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&run.stderr)
-        );
-    };
+    use common::needle;
     println!("| case | relaxation fitted | worst trial's dwell RMS | all dwells' RMS | noise |");
     println!("|---|---|---|---|---|");
     let cases = apart::diagnosis_cases();
@@ -289,30 +280,10 @@ fn the_devices_dwell_on_relaxation_written_apart() {
             &path("device"),
         ]);
         let (mut worst, mut sum, mut n) = (0.0f64, 0.0, 0usize);
-        for file in host_tools::trial::dataset_files(&dir.path().join("device")).unwrap() {
-            let rows: Vec<csv::StringRecord> = csv::Reader::from_path(&file)
-                .unwrap()
-                .records()
-                .map(Result::unwrap)
-                .collect();
-            let at_rest =
-                |r: &csv::StringRecord| &r[6] == "inserted" && r[3].parse::<f64>().unwrap() == 0.0;
-            let best = rows
-                .split(|r| !at_rest(r))
-                .max_by_key(|run| run.len())
-                .unwrap_or(&[]);
-            assert!(
-                best.len() > 100,
-                "{}: {} has no dwell",
-                case.name,
-                file.display()
-            );
-            let ss: f64 = best
-                .iter()
-                .map(|r| r[5].parse::<f64>().unwrap().powi(2))
-                .sum();
-            worst = worst.max((ss / best.len() as f64).sqrt());
-            (sum, n) = (sum + ss, n + best.len());
+        for (ss, len) in common::dwells(&dir.path().join("device")) {
+            assert!(len > 100, "{}: a trial with no dwell", case.name);
+            worst = worst.max((ss / len as f64).sqrt());
+            (sum, n) = (sum + ss, n + len);
         }
         let value = |k: &str| {
             keys.iter()

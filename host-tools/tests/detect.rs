@@ -9,6 +9,8 @@
 
 use std::sync::OnceLock;
 
+mod common;
+
 use host_tools::evaluate::{cell, kind, Cell};
 use serde_json::Value;
 
@@ -290,32 +292,6 @@ fn detect_writes_the_devices_samples_per_trial_beside_no_trial() {
     );
 }
 
-/// The device's residual over each dwell (the longest run at rest inside
-/// the tissue) of `needle detect --samples`'s output in `dir`: its RMS
-/// per trial, N.
-fn dwell_residuals(dir: &std::path::Path) -> Vec<f64> {
-    let mut out = Vec::new();
-    for file in host_tools::trial::dataset_files(dir).unwrap() {
-        let mut rows = csv::Reader::from_path(&file).unwrap();
-        let rows: Vec<csv::StringRecord> = rows.records().map(Result::unwrap).collect();
-        let at_rest =
-            |r: &csv::StringRecord| &r[6] == "inserted" && r[3].parse::<f64>().unwrap() == 0.0;
-        let mut best: &[csv::StringRecord] = &[];
-        for run in rows.split(|r| !at_rest(r)) {
-            if run.len() > best.len() {
-                best = run;
-            }
-        }
-        assert!(best.len() > 300, "{}: no dwell", file.display());
-        let sum: f64 = best
-            .iter()
-            .map(|r| r[5].parse::<f64>().unwrap().powi(2))
-            .sum();
-        out.push((sum / best.len() as f64).sqrt());
-    }
-    out
-}
-
 /// Issue 33: on insert–dwell–withdraw trials whose tissue relaxes at rest
 /// (each of the simulator's forms, trial-to-trial spread, jitter, the
 /// tissue dragged on withdrawal), the tissue `needle fit --toml` writes
@@ -324,17 +300,7 @@ fn dwell_residuals(dir: &std::path::Path) -> Vec<f64> {
 /// does not.
 #[test]
 fn the_device_predicts_the_dwell_with_the_fitted_relaxation() {
-    let needle = |args: &[&str]| {
-        let run = std::process::Command::new(env!("CARGO_BIN_EXE_needle"))
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            run.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&run.stderr)
-        );
-    };
+    use common::needle;
     let noise_n = 0.012;
     for form in ["standard", "alternate", "literature"] {
         let dir = tempfile::tempdir().unwrap();
@@ -384,9 +350,10 @@ fn the_device_predicts_the_dwell_with_the_fitted_relaxation() {
                 "--samples",
                 &out,
             ]);
-            worst[k] = dwell_residuals(std::path::Path::new(&out))
-                .into_iter()
-                .fold(0.0, f64::max);
+            for (sum, n) in common::dwells(std::path::Path::new(&out)) {
+                assert!(n > 300, "{form}: a trial with no dwell");
+                worst[k] = worst[k].max((sum / n as f64).sqrt());
+            }
         }
         println!("{form}: worst dwell residual {:.1} mN with the fitted relaxation, {:.1} mN without ({:.0} mN noise)", worst[0] * 1e3, worst[1] * 1e3, noise_n * 1e3);
         assert!(worst[0] <= 2.0 * noise_n, "{form}: {worst:?}");
