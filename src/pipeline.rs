@@ -8,7 +8,7 @@ use crate::hal::AdcSample;
 use crate::kinematics::{EncoderTracker, VelocityState};
 use crate::model::phase::PhaseState;
 use crate::model::relax::RelaxState;
-use crate::model::ModelState;
+use crate::model::{ModelConfig, ModelState};
 use crate::protocol::{Event, Halt, Sample};
 use crate::units::MicroNewtons;
 use serde::{Deserialize, Serialize};
@@ -91,9 +91,11 @@ impl DeviceConfig {
     ) -> MicroNewtons {
         let mut held = unrelaxed;
         if self.relaxation.hold_applied {
-            match self.model.static_band(&state.phase, x) {
-                Some((lower, upper)) => held = state.relax.hold(force, lower, upper),
-                None => state.relax.release(),
+            if ModelConfig::holds_at_rest(&state.phase) {
+                let band = || self.model.static_band(&state.phase, x);
+                held = state.relax.hold(force, band);
+            } else {
+                state.relax.release();
             }
         }
         self.relaxation

@@ -93,28 +93,27 @@ impl ModelConfig {
         }
     }
 
-    /// The static band at `x` once the needle is at rest in the tissue:
-    /// the force the tissue can hold on it, from D_n·l (pulling) to D_p·l
-    /// plus the cutting force at the cutting front (the tissue ahead of a
-    /// stopped tip stays compressed). `None` out of the tissue or on the
-    /// capsule, where the stiffness law gives the force at rest too.
-    pub fn static_band(
-        &self,
-        phase: &PhaseState,
-        x: Nanometres,
-    ) -> Option<(MicroNewtons, MicroNewtons)> {
-        match phase.phase {
-            Phase::Out | Phase::Loading => None,
-            Phase::Inserted | Phase::Withdrawal => {
-                let (lower, upper) = self.friction.band(phase.length_in_tissue(x));
-                let tip = if x >= phase.deepest {
-                    self.cutting
-                } else {
-                    MicroNewtons::ZERO
-                };
-                Some((lower, upper.add(tip)))
-            }
-        }
+    /// Whether a needle at rest in `phase` is held by the tissue's static
+    /// band ([`static_band`](Self::static_band)): in the tissue past the
+    /// capsule. Out of it, or on the capsule, the stiffness law gives the
+    /// force at rest too.
+    pub fn holds_at_rest(phase: &PhaseState) -> bool {
+        matches!(phase.phase, Phase::Inserted | Phase::Withdrawal)
+    }
+
+    /// The static band at `x` for a needle at rest in the tissue
+    /// ([`holds_at_rest`](Self::holds_at_rest)): the force the tissue can
+    /// hold on it, from D_n·l (pulling) to D_p·l plus the cutting force at
+    /// the cutting front (the tissue ahead of a stopped tip stays
+    /// compressed).
+    pub fn static_band(&self, phase: &PhaseState, x: Nanometres) -> (MicroNewtons, MicroNewtons) {
+        let (lower, upper) = self.friction.band(phase.length_in_tissue(x));
+        let tip = if x >= phase.deepest {
+            self.cutting
+        } else {
+            MicroNewtons::ZERO
+        };
+        (lower, upper.add(tip))
     }
 
     /// Whether the needle at `v` slides (outside the Karnopp band): what

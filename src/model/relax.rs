@@ -77,7 +77,8 @@ pub struct Relaxation {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RelaxState {
     /// The force the needle was held with since it came to rest in the
-    /// tissue; `None` while it slides.
+    /// tissue (while the first samples are averaged, their running mean);
+    /// `None` while it slides.
     hold: Option<MicroNewtons>,
     /// How many of the rest's first samples the hold has averaged (up to
     /// [`HOLD_SAMPLES`]).
@@ -189,14 +190,18 @@ impl RelaxState {
     /// The force held at rest: the mean measured force over the rest's
     /// first [`HOLD_SAMPLES`] samples, each with what the model had
     /// relaxed away by then added back (one sample's noise held for a
-    /// whole dwell was a residual of a noise sd), within `lower..=upper`
-    /// (the static band), kept through the rest.
+    /// whole dwell was a residual of a noise sd), within the static band
+    /// `band()` gives, kept through the rest. The band is asked for only
+    /// while the mean is still forming: the needle is still, and the
+    /// rest of the dwell costs the sample path nothing for it.
     pub fn hold(
         &mut self,
         measured: MicroNewtons,
-        lower: MicroNewtons,
-        upper: MicroNewtons,
+        band: impl FnOnce() -> (MicroNewtons, MicroNewtons),
     ) -> MicroNewtons {
+        if let (Some(held), HOLD_SAMPLES) = (self.hold, self.hold_count) {
+            return held;
+        }
         // Each sample as the force it would be unrelaxed: plus what the
         // model relaxed away by the sample before (none at the first). A
         // running mean in i32 (a hardware divide; an i64 one is a library
@@ -208,14 +213,18 @@ impl RelaxState {
             }
             Some(mean) => (mean.0, self.last.0.saturating_sub(self.last_out.0)),
         };
-        if self.hold_count < HOLD_SAMPLES {
-            self.hold_count += 1;
-            let delta = measured.0.saturating_add(lost).saturating_sub(mean);
-            let n = i32::from(self.hold_count);
-            self.hold = Some(MicroNewtons(mean.saturating_add(delta / n)));
-        }
-        let held = self.hold.unwrap_or(measured);
-        MicroNewtons(held.0.max(lower.0).min(upper.0))
+        // At most HOLD_SAMPLES: a full hold returned above.
+        self.hold_count = self.hold_count.saturating_add(1);
+        let delta = measured.0.saturating_add(lost).saturating_sub(mean);
+        let mean = mean.saturating_add(delta / i32::from(self.hold_count));
+        let (lower, upper) = band();
+        let held = MicroNewtons(mean.max(lower.0).min(upper.0));
+        self.hold = Some(if self.hold_count == HOLD_SAMPLES {
+            held
+        } else {
+            MicroNewtons(mean)
+        });
+        held
     }
 
     /// The decay factors for `relaxation` at `rate_hz`: once per tissue or
