@@ -67,6 +67,17 @@ pub struct Summary {
     pub halt: bool,
 }
 
+impl Summary {
+    /// Whether the halt is asserted for a latched fault: a state nothing
+    /// but a re-arm leaves, in which the robot is stopped. A board's
+    /// independent watchdog may be fed in it without samples (a converter
+    /// that stopped is reported, not turned into a reset loop); anywhere
+    /// else only a sample feeds it.
+    pub fn halted_for_fault(&self) -> bool {
+        self.halt && !self.faults.is_empty()
+    }
+}
+
 /// The library position of the default tissue.
 pub fn default_tissue() -> TissueSource {
     let at = LIBRARY.iter().position(|(name, _)| *name == DEFAULT_TISSUE);

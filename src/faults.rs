@@ -36,9 +36,17 @@ impl Faults {
     /// The load cell read beyond a plausible offset at boot: a load on the
     /// needle, which a tare would silently take for zero.
     pub const LOAD_AT_BOOT: Self = Self(1 << 10);
+    /// The board's independent watchdog reset it: the firmware stopped
+    /// taking samples (hung, locked up, or stuck in a loop). Raised at the
+    /// boot after, so the halt stays asserted until the host re-arms.
+    pub const WATCHDOG_RESET: Self = Self(1 << 11);
+    /// The settings store's flash did not finish an operation within its
+    /// longest time, or reported an error: settings a command changed
+    /// may not survive a reset.
+    pub const SETTINGS_STORE: Self = Self(1 << 12);
 
     /// Names of the bits, lowest first, for host-side display.
-    pub const NAMES: [(Self, &'static str); 11] = [
+    pub const NAMES: [(Self, &'static str); 13] = [
         (Self::ADC_SATURATED, "adc_saturated"),
         (Self::ADC_ERROR, "adc_error"),
         (Self::ENCODER_JUMP, "encoder_jump"),
@@ -50,6 +58,8 @@ impl Faults {
         (Self::ENCODER_STUCK, "encoder_stuck"),
         (Self::ADC_TIMEOUT, "adc_timeout"),
         (Self::LOAD_AT_BOOT, "load_at_boot"),
+        (Self::WATCHDOG_RESET, "watchdog_reset"),
+        (Self::SETTINGS_STORE, "settings_store"),
     ];
 
     /// Union of two sets.

@@ -520,3 +520,22 @@ proptest! {
         prop_assert_eq!(device.finish().samples, ticks);
     }
 }
+
+#[test]
+fn only_a_halt_for_a_latched_fault_may_keep_the_watchdog_fed_without_samples() {
+    let mut sink = Vec::new();
+    let mut device = Device::new(DeviceConfig::default(), &mut sink, RecordingPin::default());
+    device.tick(&mut ok(0), &mut Enc(0));
+    assert!(!device.summary().halted_for_fault(), "running");
+    // The reset the board's watchdog caused, raised at the next boot.
+    device.raise(Faults::WATCHDOG_RESET);
+    let summary = device.summary();
+    assert!(summary.halt && summary.faults.contains(Faults::WATCHDOG_RESET));
+    assert!(summary.halted_for_fault());
+    // A good sample and a re-arm: running again, fed by samples only.
+    device.tick(&mut ok(0), &mut Enc(0));
+    device.receive(&command_bytes(1, protocol::Command::Rearm));
+    let summary = device.summary();
+    assert!(!summary.halt && summary.faults.is_empty(), "{summary:?}");
+    assert!(!summary.halted_for_fault());
+}

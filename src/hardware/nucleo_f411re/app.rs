@@ -7,6 +7,9 @@
 //!   conversions set the load cell's zero before the device is armed.
 //! - `watchdog` (TIM5 at 25 Hz): no sample over two periods is an
 //!   `adc_timeout` fault and a halt — a converter unplugged never hangs.
+//!   The independent watchdog ([`super::super::iwdg`]) is fed by each
+//!   sample, and here only while the device is halted for a fault: a hung
+//!   chip resets, and boots into a `watchdog_reset` fault and the halt.
 //! - `link` (USART2 transmit-empty and receive-not-empty, lowest): frame
 //!   bytes to the wire; command bytes from it, put together into frames
 //!   here, outside the sample's lock, which a whole command takes only to
@@ -27,10 +30,11 @@ mod app {
     use super::super::adc::{Acquisition, Broken, Conversion, Ready};
     use super::super::encoder::Encoder;
     use super::super::halt::HaltLine;
+    use super::super::iwdg::{IndependentWatchdog, ResetCause};
     use super::super::link::{drain, QueueWriter, QUEUE_BYTES};
     use super::super::serial::Usart2;
     use super::super::setup::setup;
-    use super::super::store::Store;
+    use super::super::store::{SaveError, Store};
     use super::super::timer::Watchdog;
 
     type Dev = Device<QueueWriter, HaltLine>;
@@ -49,9 +53,13 @@ mod app {
         /// Samples taken, for the watchdog.
         seen: u32,
         config: DeviceConfig,
-        /// Where the configuration came from: the tissue's source and
-        /// what the settings store held.
-        origin: (TissueSource, Loaded),
+        /// Where the configuration came from (the tissue's source and
+        /// what the settings store held) and the faults the boot found
+        /// (a watchdog reset), raised when the device is armed.
+        origin: (TissueSource, Loaded, Faults),
+        /// Fed by the sample task, and by the watchdog task only while
+        /// the device is halted for a fault.
+        iwdg: IndependentWatchdog,
     }
 
     #[local]
@@ -84,7 +92,7 @@ mod app {
         // The saved tissue, calibration and assist, or the compiled
         // default (the config frame says which).
         let (mut store, load) = Store::open(parts.flash);
-        store.prepare(load.settings.as_ref());
+        let store_ready = store.prepare(load.settings.as_ref());
         defmt::info!("settings: {}", load.loaded);
         let (config, tissue) = match &load.settings {
             Some(s) => (base.with_settings(s), s.tissue),
@@ -96,13 +104,23 @@ mod app {
             super::super::BOARD,
             config.velocity.sample_rate_hz
         );
+        let mut boot_faults = Faults::NONE;
+        if parts.reset_cause == ResetCause::Watchdog {
+            defmt::error!("reset by the independent watchdog: watchdog_reset, halt kept");
+            boot_faults = boot_faults.union(Faults::WATCHDOG_RESET);
+        }
+        if store_ready == Err(SaveError::Flash) {
+            boot_faults = boot_faults.union(Faults::SETTINGS_STORE);
+        }
         let (producer, outgoing) = cx.local.queue.split();
+        let (iwdg, dbgmcu) = parts.iwdg;
         let mut shared = Shared {
             device: None,
             unarmed: Some((needle_holder::link::QueueWriter(producer), parts.halt)),
             seen: 0,
             config,
-            origin: (tissue, load.loaded),
+            origin: (tissue, load.loaded, boot_faults),
+            iwdg: IndependentWatchdog::start(iwdg, &dbgmcu),
         };
         if let Err(e) = parts.converter_started {
             defmt::error!("ADS1220 did not start: {}", defmt::Debug2Format(&e));
@@ -136,22 +154,27 @@ mod app {
         )
     }
 
-    /// The device, armed now with `config` if it was not yet.
+    /// The device, armed now with `config` if it was not yet, with the
+    /// faults the boot found raised.
     fn arm<'a>(
         device: &'a mut Option<Dev>,
         unarmed: &mut Option<(QueueWriter, HaltLine)>,
         config: &DeviceConfig,
-        (tissue, stored): (TissueSource, Loaded),
+        (tissue, stored, boot_faults): (TissueSource, Loaded, Faults),
     ) -> Option<&'a mut Dev> {
         if device.is_none() {
             if let Some((sink, halt)) = unarmed.take() {
-                *device = Some(Device::restored(*config, tissue, stored, sink, halt));
+                let mut armed = Device::restored(*config, tissue, stored, sink, halt);
+                if !boot_faults.is_empty() {
+                    armed.raise(boot_faults);
+                }
+                *device = Some(armed);
             }
         }
         device.as_mut()
     }
 
-    #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config, origin], local = [acquisition, encoder, tare])]
+    #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config, origin, iwdg], local = [acquisition, encoder, tare])]
     fn sample(cx: sample::Context) {
         let acquisition = cx.local.acquisition;
         acquisition.converter.data_ready_pin().clear_pending();
@@ -162,10 +185,14 @@ mod app {
             cx.shared.seen,
             cx.shared.config,
             cx.shared.origin,
+            cx.shared.iwdg,
         );
         let (encoder, tare) = (cx.local.encoder, cx.local.tare);
-        shared.lock(|device, unarmed, seen, config, origin| {
+        shared.lock(|device, unarmed, seen, config, origin, iwdg| {
             *seen = seen.wrapping_add(1);
+            if !matches!(conversion, Conversion::Stale) {
+                iwdg.feed();
+            }
             match conversion {
                 Conversion::Partial | Conversion::Stale => {}
                 Conversion::Failed(e) => {
@@ -204,7 +231,7 @@ mod app {
         rtic::pend(pac::Interrupt::USART2);
     }
 
-    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config, origin], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0, ticks: u32 = 0])]
+    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config, origin, iwdg], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0, ticks: u32 = 0])]
     fn watchdog(mut cx: watchdog::Context) {
         cx.local.watchdog.clear();
         // Every 10 s, how deep the stack has been.
@@ -218,6 +245,14 @@ mod app {
                 "stack high-water mark {=usize} bytes",
                 super::super::stack::high_water_bytes()
             );
+        }
+        let halted_for_fault = cx.shared.device.lock(|device| {
+            device
+                .as_ref()
+                .is_some_and(|d| d.summary().halted_for_fault())
+        });
+        if halted_for_fault {
+            cx.shared.iwdg.lock(|iwdg| iwdg.feed());
         }
         let seen = cx.shared.seen.lock(|s| *s);
         if seen != *cx.local.last_seen {
@@ -271,8 +306,14 @@ mod app {
                 .device
                 .lock(|device| device.as_mut().and_then(|d| d.settings_to_save()));
             if let Some(settings) = changed {
-                if cx.local.store.save(&settings) {
-                    defmt::info!("settings saved");
+                match cx.local.store.save(&settings) {
+                    Ok(()) => defmt::info!("settings saved"),
+                    Err(SaveError::Full) => {}
+                    Err(SaveError::Flash) => cx.shared.device.lock(|device| {
+                        if let Some(d) = device.as_mut() {
+                            d.raise(Faults::SETTINGS_STORE);
+                        }
+                    }),
                 }
             }
             cortex_m::asm::wfi();

@@ -1,8 +1,11 @@
 //! The halt line: PA8, push-pull, active high (asserted: the robot must
 //! stop). Firmware drives it high from its first instructions until the
-//! device is armed (during reset and until then the pin floats: a pull-up
-//! on the line makes reset a stop too), and a panic or HardFault drives
-//! it high and leaves it there.
+//! device is armed; during a reset and until then the pin floats, and the
+//! pull-up the wiring requires holds it high — so a reset by the
+//! independent watchdog ([`super::iwdg`]), which a hung chip gets, is a
+//! stop too. A panic or HardFault drives it high and leaves it there (and
+//! the watchdog, no longer fed, resets the chip into a `watchdog_reset`
+//! fault).
 
 use core::convert::Infallible;
 

@@ -15,8 +15,9 @@
 //! hands out the parts, [`clocks`] the clock tree, [`pins`] the GPIO,
 //! [`adc`] is the converter on its bus ([`spi`]), [`encoder`] the timer in
 //! encoder mode, [`serial`] USART2 and [`link`] the frame queue and its
-//! drain, [`timer`] the watchdog's tick, [`halt`] the line and what a
-//! panic does to it, [`store`] the settings sector in flash, [`rtt`] the
+//! drain, [`timer`] the data-ready watchdog's tick, [`iwdg`] the
+//! independent watchdog that resets a hung chip, [`halt`] the line and
+//! what a panic does to it, [`store`] the settings sector in flash, [`rtt`] the
 //! defmt logger; [`app`] is the RTIC application that schedules them (the
 //! converter's data-ready is the sample clock).
 //!
@@ -44,6 +45,8 @@ pub mod clocks;
 #[cfg(not(feature = "f411-replay"))]
 pub mod encoder;
 pub mod halt;
+#[cfg(not(feature = "f411-replay"))]
+pub mod iwdg;
 pub mod link;
 // The replay image sets up only USART2's pins.
 #[cfg_attr(feature = "f411-replay", allow(dead_code))]

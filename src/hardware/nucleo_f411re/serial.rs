@@ -5,21 +5,36 @@ use stm32f4::stm32f411 as pac;
 
 pub struct Usart2(pac::USART2);
 
+/// BRR for `baud` from `pclk_hz` at 16× oversampling: the clock over the
+/// baud rate as a 12.4 fixed-point divider (RM0383 §19.3.4), rounded,
+/// within the register's 16..=0xFFFF.
+fn divider(pclk_hz: u32, baud: u32) -> u16 {
+    let brr = pclk_hz
+        .saturating_add(baud / 2)
+        .checked_div(baud)
+        .unwrap_or(0);
+    brr.clamp(16, 0xFFFF) as u16
+}
+
 impl Usart2 {
     /// Enabled at `baud` from APB1's `pclk1_hz`, receiving; with the
     /// receive interrupt if `rx_interrupt`.
     pub fn new(usart: pac::USART2, pclk1_hz: u32, baud: u32, rx_interrupt: bool) -> Self {
-        // 16× oversampling: BRR is the clock over the baud rate, as a
-        // 12.4 fixed-point divider (RM0383 §19.3.4), rounded.
-        let brr = pclk1_hz
-            .saturating_add(baud / 2)
-            .checked_div(baud)
-            .unwrap_or(0);
+        let brr = divider(pclk1_hz, baud);
+        let actual = pclk1_hz.checked_div(u32::from(brr)).unwrap_or(0);
+        // Both ends' errors add up; past about 2 % bytes are lost.
+        if actual.abs_diff(baud) > baud / 100 {
+            defmt::warn!(
+                "USART2 at {=u32} Bd for {=u32} from a {=u32} Hz clock: the link may lose bytes",
+                actual,
+                baud,
+                pclk1_hz
+            );
+        }
         // SAFETY: any 16-bit value is a divider; 921 600 Bd from 50 MHz
-        // is 54 (0.5 % fast), 115 200 from 16 MHz 139.
-        usart
-            .brr()
-            .write(|w| unsafe { w.bits(brr.clamp(16, 0xFFFF) as u16) });
+        // is 54 (0.5 % fast), from the unmultiplied 16 MHz HSI 17 (2.1 %
+        // fast, warned above).
+        usart.brr().write(|w| unsafe { w.bits(brr) });
         usart.cr1().write(|w| {
             w.ue().set_bit();
             w.te().set_bit();

@@ -12,6 +12,7 @@ use super::adc::{rate_for, Acquisition, Converter};
 use super::clocks::{self, CycleDelay};
 use super::encoder::Encoder;
 use super::halt::HaltLine;
+use super::iwdg::{self, ResetCause};
 use super::pins::{self, ChipSelect, DataReady};
 use super::serial::Usart2;
 use super::spi::Spi1;
@@ -37,12 +38,19 @@ pub struct Parts {
     pub watchdog: Watchdog,
     /// The flash interface, for the settings store.
     pub flash: pac::FLASH,
+    /// Why the chip last reset.
+    pub reset_cause: ResetCause,
+    /// The independent watchdog and the debug unit that freezes it,
+    /// started once the settings store is ready (its erase stalls for
+    /// seconds).
+    pub iwdg: (pac::IWDG, pac::DBGMCU),
 }
 
 /// Bring everything up for `sample_rate_hz`.
 pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
     clocks::enable_peripherals(&dp.RCC);
     let halt = HaltLine::asserted(&dp.GPIOA);
+    let reset_cause = iwdg::reset_cause(&dp.RCC);
     let clocks = clocks::to_100mhz(&dp.RCC, &dp.FLASH, &dp.PWR);
 
     pins::spi1(&dp.GPIOA, &dp.GPIOB);
@@ -81,5 +89,7 @@ pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
         halt,
         watchdog,
         flash: dp.FLASH,
+        reset_cause,
+        iwdg: (dp.IWDG, dp.DBGMCU),
     }
 }

@@ -20,6 +20,25 @@ const LEN: usize = 128 * 1024;
 /// The flash controller's unlock sequence (RM0383 §3.5.1).
 const KEYS: [u32; 2] = [0x4567_0123, 0xCDEF_89AB];
 
+/// Polls of the busy flag before an operation is given up as hung: each
+/// poll takes at least three cycles, so at 100 MHz these bounds are at
+/// least the operation's longest time (F411 datasheet, table 46: a
+/// 128 KiB sector erase ≤ 4 s, a byte ≤ 100 µs), and longer on a slower
+/// clock. While the flash works, fetches from it stall and polls are
+/// fewer still.
+const ERASE_POLLS: u32 = 150_000_000;
+const PROGRAM_POLLS: u32 = 10_000;
+
+/// Why settings were not kept.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum SaveError {
+    /// No room until the next boot erases the sector.
+    Full,
+    /// The flash did not finish within its longest time, or flagged an
+    /// error: a `settings_store` fault.
+    Flash,
+}
+
 /// The settings sector, through the flash controller's registers
 /// (RM0383 §3.5–3.6): unlocked for one operation at a time, every error
 /// flag read back.
@@ -43,40 +62,42 @@ impl Store {
 
     /// At boot, before sampling: a full or unreadable log is erased, and
     /// `keep` (the settings in force) written back at its start.
-    pub fn prepare(&mut self, keep: Option<&Settings>) {
+    pub fn prepare(&mut self, keep: Option<&Settings>) -> Result<(), SaveError> {
         if self.next_free.is_some() {
-            return;
+            return Ok(());
         }
         defmt::warn!("settings sector full or unreadable: erasing it");
         if !self.erase() {
             defmt::error!("settings sector: erase failed");
-            return;
+            return Err(SaveError::Flash);
         }
         self.next_free = Some(0);
-        if let Some(settings) = keep {
-            self.save(settings);
+        match keep {
+            Some(settings) => self.save(settings),
+            None => Ok(()),
         }
     }
 
-    /// Append `settings`; whether they are kept.
-    pub fn save(&mut self, settings: &Settings) -> bool {
+    /// Append `settings`.
+    pub fn save(&mut self, settings: &Settings) -> Result<(), SaveError> {
         let Some(at) = self.next_free else {
             defmt::warn!("settings sector full: not kept until the next boot erases it");
-            return false;
+            return Err(SaveError::Full);
         };
         let mut buf = [0u8; MAX_RECORD];
         let record = persist::record(settings, &mut buf);
         let end = at + record.len();
         if record.is_empty() || end > LEN {
             self.next_free = None;
-            return false;
+            return Err(SaveError::Full);
         }
         let written = self.program(BASE + at, record);
         self.next_free = (written && LEN - end >= MIN_ROOM).then_some(end);
         if !written {
             defmt::error!("settings sector: programming failed");
+            return Err(SaveError::Flash);
         }
-        written
+        Ok(())
     }
 
     /// Erase the sector (1–2 s, every flash fetch stalled meanwhile).
@@ -89,7 +110,7 @@ impl Store {
                 w.ser().sector_erase()
             });
             flash.cr().modify(|_, w| w.strt().start());
-            let erased = Self::finished(flash);
+            let erased = Self::finished(flash, ERASE_POLLS);
             // `open` read the sector through the data cache: those lines
             // are stale now (RM0383 §3.4.3: reset with the cache off).
             flash.acr().modify(|_, w| w.dcen().clear_bit());
@@ -111,7 +132,7 @@ impl Store {
                 // the record fits), which the image never uses; with PG
                 // set a byte write is a program operation.
                 unsafe { ((address + i) as *mut u8).write_volatile(byte) };
-                Self::finished(flash)
+                Self::finished(flash, PROGRAM_POLLS)
             })
         })
     }
@@ -133,10 +154,12 @@ impl Store {
         done
     }
 
-    /// Wait for the operation in hand to end; whether it ended without an
-    /// error flag.
-    fn finished(flash: &FLASH) -> bool {
-        while flash.sr().read().bsy().bit_is_set() {}
+    /// Wait for the operation in hand to end, at most `polls` polls;
+    /// whether it ended, and without an error flag.
+    fn finished(flash: &FLASH, polls: u32) -> bool {
+        if !(0..polls).any(|_| flash.sr().read().bsy().bit_is_clear()) {
+            return false;
+        }
         let sr = flash.sr().read();
         let failed = sr.pgserr().bit_is_set()
             || sr.pgperr().bit_is_set()
