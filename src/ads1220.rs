@@ -44,6 +44,22 @@ pub const FULL_SCALE_POSITIVE: i32 = 0x7F_FFFF;
 /// Smallest code: negative full scale, likewise.
 pub const FULL_SCALE_NEGATIVE: i32 = -0x80_0000;
 
+/// 7/8 of full scale: the PGA's linear limit at high gain on a reference
+/// at the supply ([`Config::linear_range`]).
+pub const LINEAR_LIMIT_HIGH_GAIN: i32 = (1 << 23) / 8 * 7;
+
+/// Conversions between two read-backs of the configuration registers
+/// while converting: a converter that lost power or its bus since the
+/// start is found within 32 ms at 1000 SPS.
+pub const CHECK_EVERY: u16 = 32;
+
+/// The same code this many conversions running is a stuck bus, not a
+/// reading: a floating or shorted MISO reads 0x000000 or 0xFFFFFF, both
+/// plausible forces. A bridge at gain 128 has noise of hundreds of codes,
+/// so two equal codes in a row are rare and sixteen never happen; codes
+/// at full scale are excepted (a real overload holds them: saturation).
+pub const STUCK_RUN: u16 = 16;
+
 /// Wait after RESET before the next command: 50 µs + 32 clocks of the
 /// 4.096 MHz oscillator (58 µs), with margin.
 const RESET_WAIT_US: u32 = 100;
@@ -127,6 +143,26 @@ pub struct Config {
 }
 
 impl Config {
+    /// The codes the PGA measures linearly, lowest and highest; a code at
+    /// or beyond either is saturated. Its outputs must stay
+    /// 200 mV inside the supply (SBAS501 §8.3.2.1): with the bridge's
+    /// common mode at mid-supply, |V_IN| ≤ (AVDD − 0.4 V)/(G − 1), at a
+    /// 3.3 V supply and gain 128 22.8 mV, where full scale on a reference
+    /// at the supply (the ratiometric bridge) is 3.3 V/128 = 25.8 mV.
+    /// Beyond it the reading is wrong without reaching full scale, so it
+    /// counts as saturated: 7/8 of full scale (22.6 mV), a margin for the
+    /// supply's tolerance, at gains of 16 and up on a reference near the
+    /// supply; full scale otherwise (the PGA's range covers it).
+    pub const fn linear_range(&self) -> (i32, i32) {
+        let high_gain = self.gain as u8 >= Gain::X16 as u8;
+        match self.reference {
+            Reference::External0 | Reference::Supply if high_gain => {
+                (-LINEAR_LIMIT_HIGH_GAIN, LINEAR_LIMIT_HIGH_GAIN)
+            }
+            _ => (FULL_SCALE_NEGATIVE, FULL_SCALE_POSITIVE),
+        }
+    }
+
     /// A load cell's bridge: AIN1/AIN2 at gain 128, ratiometric on
     /// REFP0/REFN0, continuous conversion at `rate`.
     pub const fn bridge(rate: DataRate) -> Self {
@@ -168,19 +204,43 @@ pub enum Error<E> {
         /// Read back.
         read: [u8; 4],
     },
+    /// The same code [`STUCK_RUN`] conversions running: the data line is
+    /// stuck (a converter gone, a floating MISO).
+    Stuck {
+        /// The code.
+        code: i32,
+    },
 }
 
 /// The converter on its SPI device, with its data-ready pin.
 pub struct Ads1220<SPI, DRDY> {
     spi: SPI,
     drdy: DRDY,
+    /// The registers written at the start, read back every
+    /// [`CHECK_EVERY`] conversions (none before a start).
+    written: Option<[u8; 4]>,
+    /// Conversions since the last read-back.
+    since_check: u16,
+    /// Codes at or beyond these are saturated.
+    linear_range: (i32, i32),
+    /// The last code and how many conversions running gave it.
+    last_code: i32,
+    same_run: u16,
 }
 
 impl<SPI: SpiDevice, DRDY: InputPin> Ads1220<SPI, DRDY> {
     /// The converter on `spi` (mode 1), data-ready on `drdy`; nothing is
     /// sent until [`Self::start`].
     pub fn new(spi: SPI, drdy: DRDY) -> Self {
-        Self { spi, drdy }
+        Self {
+            spi,
+            drdy,
+            written: None,
+            since_check: 0,
+            linear_range: (FULL_SCALE_NEGATIVE, FULL_SCALE_POSITIVE),
+            last_code: i32::MIN,
+            same_run: 0,
+        }
     }
 
     /// Reset, write `config`, check it reads back, and start continuous
@@ -197,6 +257,16 @@ impl<SPI: SpiDevice, DRDY: InputPin> Ads1220<SPI, DRDY> {
         self.spi
             .write(&[command::WREG | 0b11, a, b, c, d])
             .map_err(Error::Spi)?;
+        self.check_registers(wrote)?;
+        self.spi.write(&[command::START_SYNC]).map_err(Error::Spi)?;
+        self.written = Some(wrote);
+        self.linear_range = config.linear_range();
+        Ok(())
+    }
+
+    /// Read the configuration registers back and compare them with
+    /// `wrote`.
+    fn check_registers(&mut self, wrote: [u8; 4]) -> Result<(), Error<SPI::Error>> {
         let mut read = [0; 4];
         self.spi
             .transaction(&mut [
@@ -207,7 +277,29 @@ impl<SPI: SpiDevice, DRDY: InputPin> Ads1220<SPI, DRDY> {
         if read != wrote {
             return Err(Error::Readback { wrote, read });
         }
-        self.spi.write(&[command::START_SYNC]).map_err(Error::Spi)
+        Ok(())
+    }
+
+    /// After each conversion read: a code stuck for [`STUCK_RUN`]
+    /// conversions, or registers that no longer read back, is an error.
+    fn check_health(&mut self, code: i32) -> Result<(), Error<SPI::Error>> {
+        let full_scale = code >= FULL_SCALE_POSITIVE || code <= FULL_SCALE_NEGATIVE;
+        if code == self.last_code && !full_scale {
+            self.same_run = self.same_run.saturating_add(1);
+        } else {
+            (self.last_code, self.same_run) = (code, 1);
+        }
+        if self.same_run >= STUCK_RUN {
+            return Err(Error::Stuck { code });
+        }
+        if let Some(wrote) = self.written {
+            self.since_check = self.since_check.saturating_add(1);
+            if self.since_check >= CHECK_EVERY {
+                self.since_check = 0;
+                self.check_registers(wrote)?;
+            }
+        }
+        Ok(())
     }
 
     /// Data-ready is low: a conversion waits to be read.
@@ -251,12 +343,16 @@ impl<SPI: SpiDevice, DRDY: InputPin> LoadCellAdc for Ads1220<SPI, DRDY> {
     type Error = Error<SPI::Error>;
 
     /// The chip has no overrun flag: the board raises `sample_overrun`
-    /// when data-ready falls while the previous sample is in hand.
+    /// when data-ready falls while the previous sample is in hand. A code
+    /// beyond the PGA's linear range ([`Config::linear_range`]) is
+    /// saturated; a stuck code or registers that no longer read back are
+    /// errors.
     fn read(&mut self) -> Result<AdcSample, Self::Error> {
         let counts = self.read_counts()?;
+        self.check_health(counts)?;
         Ok(AdcSample {
             counts,
-            saturated: counts >= FULL_SCALE_POSITIVE || counts <= FULL_SCALE_NEGATIVE,
+            saturated: counts <= self.linear_range.0 || counts >= self.linear_range.1,
             overrun: false,
         })
     }

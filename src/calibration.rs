@@ -27,6 +27,46 @@ impl LoadCell {
         full_scale_counts: (1 << 23) - 1,
     };
 
+    /// A full-bridge cell rated `rated_n` with `output_mv_per_v` of
+    /// signal per volt of excitation at that load, on a 24-bit converter
+    /// at PGA gain `pga_gain` whose reference is the excitation
+    /// (ratiometric: the excitation cancels), saturating at
+    /// `saturation_counts`. The rated load reads output · gain of full
+    /// scale (2 mV/V at gain 128: 0.256 of it, 2.15 M counts).
+    pub const fn ratiometric_bridge(
+        rated_n: f64,
+        output_mv_per_v: f64,
+        pga_gain: u32,
+        saturation_counts: i32,
+    ) -> Self {
+        let rated_counts = output_mv_per_v / 1000.0 * pga_gain as f64 * (1u32 << 23) as f64;
+        Self {
+            tare_counts: 0,
+            gain_q16: crate::model::fixed::round_i64(rated_n * 1e6 * 65536.0 / rated_counts) as i32,
+            full_scale_counts: saturation_counts,
+        }
+    }
+
+    /// The bill of materials' cell on the real board: a 2 lb (8.90 N)
+    /// FUTEK LSB200 at its 2 mV/V, on the ADS1220 at gain 128 with the
+    /// excitation as reference, saturating where the PGA leaves its linear
+    /// range (7/8 of full scale, 30 N): 4.142 µN a count. A cell of
+    /// another output or range is set by `needle device calibrate`.
+    pub const LSB200_2LB_ADS1220: Self =
+        Self::ratiometric_bridge(8.896_443, 2.0, 128, crate::ads1220::LINEAR_LIMIT_HIGH_GAIN);
+
+    /// The most the load cell may read at zero for a tare (at boot or on
+    /// command) to take it as an offset rather than a load on the needle:
+    /// 0.5 N, in counts of this calibration.
+    pub fn most_tare_offset_counts(&self) -> u32 {
+        // A gain of zero (which no check lets through) allows any offset.
+        let scaled = (MOST_TARE_OFFSET.0 as u64) << 16;
+        let counts = scaled
+            .checked_div(u64::from(self.gain_q16.unsigned_abs()))
+            .unwrap_or(u64::MAX);
+        u32::try_from(counts).unwrap_or(u32::MAX)
+    }
+
     /// Calibrated force for a raw reading.
     #[inline]
     pub fn force(&self, counts: i32) -> MicroNewtons {
@@ -41,6 +81,10 @@ impl LoadCell {
         saturate_i32(scaled.div_euclid(self.gain_q16 as i64) + self.tare_counts as i64)
     }
 }
+
+/// The most a load cell may read at zero and still be tared: 0.5 N, a
+/// bridge's offset is far less, and a needle resting on something more.
+pub const MOST_TARE_OFFSET: MicroNewtons = MicroNewtons(500_000);
 
 /// The load cell's zero found at boot: the mean of the first
 /// [`BootTare::SAMPLES`] readings with the needle at rest and unloaded.
@@ -158,6 +202,37 @@ impl Encoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_boms_cell_reads_its_rated_load_and_a_tare_stops_at_half_a_newton() {
+        // 2 mV/V at gain 128: the rated 8.90 N is 0.256 of full scale.
+        let cell = LoadCell::LSB200_2LB_ADS1220;
+        assert_eq!(cell.gain_q16, 271_498); // 4.1427 µN a count
+        let rated_counts = (0.002 * 128.0 * f64::from(1 << 23)) as i32;
+        assert!((cell.force(rated_counts).as_n() - 8.896_443).abs() < 1e-5);
+        // It saturates where the PGA leaves its linear range: 30.4 N.
+        assert_eq!(cell.full_scale_counts, 7_340_032);
+        assert!((cell.force(cell.full_scale_counts).as_n() - 30.41).abs() < 0.01);
+        // 0.5 N of offset is the most either cell tares.
+        for cell in [LoadCell::TEN_NEWTON_24_BIT, LoadCell::LSB200_2LB_ADS1220] {
+            let most = cell.most_tare_offset_counts() as i32;
+            let at_zero = LoadCell {
+                tare_counts: 0,
+                ..cell
+            };
+            assert!(at_zero.force(most).0 <= 500_000, "{cell:?}");
+            assert!(at_zero.force(most + 1).0 > 500_000 - 5, "{cell:?}");
+        }
+        assert_eq!(
+            LoadCell::TEN_NEWTON_24_BIT.most_tare_offset_counts(),
+            419_430
+        );
+        let no_gain = LoadCell {
+            gain_q16: 0,
+            ..LoadCell::TEN_NEWTON_24_BIT
+        };
+        assert_eq!(no_gain.most_tare_offset_counts(), u32::MAX);
+    }
 
     #[test]
     fn full_scale_reads_ten_newtons_and_inverse_round_trips() {

@@ -236,6 +236,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
                             | Command::SelectTissue(_)
                             | Command::UploadTissue(_)
                             | Command::SetAssist { .. }
+                            | Command::SetLoadCellGain(_)
                     );
                     self.unsaved |= changes_settings && result.is_ok();
                     self.last_command = (frame.seq, check, result.clone());
@@ -298,6 +299,14 @@ impl<W: Write, H: OutputPin> Device<W, H> {
                 self.send_config();
                 Ok(())
             }
+            Command::SetLoadCellGain(gain_q16) => {
+                if gain_q16.unsigned_abs() < command::MIN_GAIN_Q16 {
+                    return Err(CommandError::out_of_range("gain"));
+                }
+                self.config.load_cell.gain_q16 = gain_q16;
+                self.send_config();
+                Ok(())
+            }
         }
     }
 
@@ -310,8 +319,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
                 crate::protocol::command::NO_READING_YET,
             ));
         };
-        let limit = self.config.load_cell.full_scale_counts.unsigned_abs() / 20;
-        if zero.unsigned_abs() > limit {
+        if zero.unsigned_abs() > self.config.load_cell.most_tare_offset_counts() {
             let at_zero = crate::calibration::LoadCell {
                 tare_counts: 0,
                 ..self.config.load_cell

@@ -150,3 +150,114 @@ fn bus_errors_are_errors() {
     );
     drdy.done();
 }
+
+fn rreg(registers: [u8; 4]) -> Vec<SpiT<u8>> {
+    vec![
+        SpiT::transaction_start(),
+        SpiT::write_vec(vec![command::RREG | 0b11]),
+        SpiT::read_vec(registers.to_vec()),
+        SpiT::transaction_end(),
+    ]
+}
+
+/// A started converter and the expectations of its start.
+fn started(after_start: Vec<SpiT<u8>>, reads: usize) -> (Spi<u8>, Pin, Ads1220<Spi<u8>, Pin>) {
+    let mut spi_expected = start_expectations(AT_1000_SPS, AT_1000_SPS);
+    spi_expected.extend(after_start);
+    let spi = Spi::new(&spi_expected);
+    let drdy = Pin::new(&vec![PinT::get(State::Low); reads]);
+    let mut adc = Ads1220::new(spi.clone(), drdy.clone());
+    adc.start(&Config::bridge(DataRate::Sps1000), &mut NoopDelay::new())
+        .unwrap();
+    (spi, drdy, adc)
+}
+
+/// Distinct codes, as a bridge's noise gives.
+fn noisy(i: usize) -> [u8; 3] {
+    [0x01, (i >> 8) as u8, i as u8]
+}
+
+#[test]
+fn a_started_converter_reads_its_registers_back_every_so_often() {
+    let n = usize::from(needle_holder::ads1220::CHECK_EVERY);
+    let mut expected = Vec::new();
+    for i in 0..2 * n {
+        expected.extend(rdata(noisy(i)));
+        if (i + 1) % n == 0 {
+            // The first read-back matches; the second finds the
+            // registers at their reset values (the converter lost power).
+            expected.extend(rreg(if i < n { AT_1000_SPS } else { [0; 4] }));
+        }
+    }
+    let (mut spi, mut drdy, mut adc) = started(expected, 2 * n);
+    for _ in 0..2 * n - 1 {
+        assert!(adc.read().is_ok());
+    }
+    assert_eq!(
+        adc.read(),
+        Err(Error::Readback {
+            wrote: AT_1000_SPS,
+            read: [0; 4]
+        })
+    );
+    spi.done();
+    drdy.done();
+}
+
+#[test]
+fn a_stuck_data_line_is_an_error_but_a_held_overload_is_saturation() {
+    let stuck = usize::from(needle_holder::ads1220::STUCK_RUN);
+    for (code, counts) in [([0xFF, 0xFF, 0xFF], -1), ([0x00, 0x00, 0x00], 0)] {
+        let mut spi = Spi::new(&(0..stuck).flat_map(|_| rdata(code)).collect::<Vec<_>>());
+        let mut drdy = Pin::new(&vec![PinT::get(State::Low); stuck]);
+        let mut adc = Ads1220::new(spi.clone(), drdy.clone());
+        for _ in 1..stuck {
+            assert_eq!(adc.read().unwrap().counts, counts);
+        }
+        assert_eq!(adc.read(), Err(Error::Stuck { code: counts }));
+        spi.done();
+        drdy.done();
+    }
+    let held = 2 * stuck;
+    let mut spi = Spi::new(
+        &(0..held)
+            .flat_map(|_| rdata([0x7F, 0xFF, 0xFF]))
+            .collect::<Vec<_>>(),
+    );
+    let mut drdy = Pin::new(&vec![PinT::get(State::Low); held]);
+    let mut adc = Ads1220::new(spi.clone(), drdy.clone());
+    for _ in 0..held {
+        assert!(adc.read().unwrap().saturated);
+    }
+    spi.done();
+    drdy.done();
+}
+
+#[test]
+fn at_gain_128_on_the_supply_codes_past_the_pgas_linear_range_are_saturated() {
+    // 7/8 of full scale: the PGA's outputs 200 mV inside a 3.3 V supply.
+    let limit = needle_holder::ads1220::LINEAR_LIMIT_HIGH_GAIN;
+    assert_eq!(limit, 7_340_032);
+    assert_eq!(
+        Config::bridge(DataRate::Sps1000).linear_range(),
+        (-limit, limit)
+    );
+    let codes: [(i32, bool); 4] = [
+        (limit - 1, false),
+        (limit, true),
+        (-limit + 1, false),
+        (-limit, true),
+    ];
+    let bytes = |c: i32| {
+        let b = c.to_be_bytes();
+        [b[1], b[2], b[3]]
+    };
+    let expected = codes.iter().flat_map(|&(c, _)| rdata(bytes(c))).collect();
+    let (mut spi, mut drdy, mut adc) = started(expected, codes.len());
+    for (code, saturated) in codes {
+        let sample = adc.read().unwrap();
+        assert_eq!((sample.counts, sample.saturated), (code, saturated));
+    }
+    spi.done();
+    drdy.done();
+}

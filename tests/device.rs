@@ -462,7 +462,7 @@ fn input() -> impl Strategy<Value = Input> {
         8 => (any::<Option<i32>>(), any::<bool>(), any::<bool>(), any::<u16>())
             .prop_map(|(c, s, o, e)| Input::Reading(c, s, o, e)),
         1 => prop::collection::vec(any::<u8>(), 0..64).prop_map(Input::Bytes),
-        2 => (any::<u32>(), 0u8..7, any::<i32>(), any::<usize>(), any::<usize>(), any::<u8>())
+        2 => (any::<u32>(), 0u8..8, any::<i32>(), any::<usize>(), any::<usize>(), any::<u8>())
             .prop_map(|(q, w, v, t, at, b)| Input::Command(q, w, v, t, at, b)),
     ]
 }
@@ -488,6 +488,7 @@ fn any_command(which: u8, value: i32, entry: usize, at: usize, byte: u8) -> prot
         },
         4 => Command::Rearm,
         5 => Command::Stream(value % 2 == 0),
+        6 => Command::SetLoadCellGain(value),
         _ => Command::ReadConfig,
     }
 }
@@ -538,4 +539,47 @@ fn only_a_halt_for_a_latched_fault_may_keep_the_watchdog_fed_without_samples() {
     let summary = device.summary();
     assert!(!summary.halt && summary.faults.is_empty(), "{summary:?}");
     assert!(!summary.halted_for_fault());
+}
+
+#[test]
+fn a_gain_set_by_command_scales_the_force_is_kept_and_a_tiny_one_is_refused() {
+    use needle_holder::persist;
+    let mut sink = Vec::new();
+    let mut device = Device::new(DeviceConfig::default(), &mut sink, RecordingPin::default());
+    let before = device.config().load_cell;
+    device.receive(&command_bytes(1, protocol::Command::SetLoadCellGain(655)));
+    assert_eq!(
+        device.config().load_cell,
+        before,
+        "refused: nothing changed"
+    );
+    assert_eq!(device.settings_to_save(), None);
+    let doubled = 2 * before.gain_q16;
+    device.receive(&command_bytes(
+        2,
+        protocol::Command::SetLoadCellGain(doubled),
+    ));
+    assert_eq!(device.config().load_cell.gain_q16, doubled);
+    let settings = device.settings_to_save().expect("the gain is kept");
+    assert_eq!(settings.load_cell.gain_q16, doubled);
+    let mut buf = [0u8; persist::MAX_RECORD];
+    assert!(!persist::record(&settings, &mut buf).is_empty());
+    for _ in 0..500 {
+        device.tick(&mut ok(1000), &mut Enc(0));
+    }
+    drop(device);
+    let replies: Vec<_> = frames(&sink)
+        .into_iter()
+        .filter_map(|f| match f {
+            Frame::Reply(r) => Some((r.seq, r.result.is_ok())),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(replies, [(1, false), (2, true)]);
+    let force = samples(&sink).last().unwrap().force;
+    assert_eq!(
+        force,
+        DeviceConfig::default().load_cell.force(2000),
+        "twice the gain"
+    );
 }

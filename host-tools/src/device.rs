@@ -58,6 +58,9 @@ pub enum Action {
     },
     /// Print the device's configuration.
     Config,
+    /// Calibrate the load cell with a known mass: zero it unloaded, then
+    /// set its gain from the mass hanging (kept in the device's settings).
+    Calibrate(crate::calibrate::CalibrateArgs),
 }
 
 pub fn run(args: &DeviceArgs) -> Result<()> {
@@ -72,10 +75,14 @@ pub fn run(args: &DeviceArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let command = command_of(&args.action)?;
     let Some(port) = &args.port else {
         bail!("--port: which serial port is the device on (e.g. --port /dev/ttyACM0)?");
     };
+    if let Action::Calibrate(calibrate) = &args.action {
+        let mut link = Link::open(port, args.baud)?;
+        return crate::calibrate::run(&mut link, port, calibrate);
+    }
+    let command = command_of(&args.action)?;
     let mut link = Link::open(port, args.baud)?;
     match link.command(command)? {
         Ok(()) => crate::out!("done")?,
@@ -93,6 +100,7 @@ pub fn command_of(action: &Action) -> Result<Command> {
         Action::Tare => Command::Tare,
         Action::Tissue { tissue, name } => tissue_command(tissue, name.as_deref())?,
         Action::Tissues => bail!("`tissues` sends nothing"),
+        Action::Calibrate(_) => bail!("`calibrate` is a dialogue, not one command"),
         Action::Assist { modes, depth_mm } => {
             let target_depth = Nanometres::from_m(depth_mm / 1e3);
             if !(depth_mm.is_finite() && needle_holder::assist::target_depth_is_valid(target_depth))

@@ -2,6 +2,7 @@
 //! `needle` command and the integration tests share them.
 
 pub mod bench;
+pub mod calibrate;
 pub mod decode;
 pub mod demo;
 pub mod detect;

@@ -103,7 +103,7 @@ proptest! {
 
     /// Every command the host can send arrives as sent.
     #[test]
-    fn every_command_round_trips(seq in any::<u32>(), which in 0u8..7, value in any::<i32>(), entry in 0usize..LIBRARY_MODELS.len()) {
+    fn every_command_round_trips(seq in any::<u32>(), which in 0u8..8, value in any::<i32>(), entry in 0usize..LIBRARY_MODELS.len()) {
         let mut tissue = LIBRARY_MODELS[entry];
         tissue.model.cutting.0 = value;
         let command = match which {
@@ -113,6 +113,7 @@ proptest! {
             3 => Command::SetAssist { modes: needle_holder::assist::AssistModes(value as u8), target_depth: Nanometres(value) },
             4 => Command::Rearm,
             5 => Command::Stream(value % 2 == 0),
+            6 => Command::SetLoadCellGain(value),
             _ => Command::ReadConfig,
         };
         let frame = CommandFrame { seq, command };

@@ -847,3 +847,63 @@ fn needle_record_goes_on_after_the_device_is_reset() {
     streams_on_then_stops(&out, record);
     drop(device);
 }
+
+#[test]
+fn needle_device_calibrate_sets_the_gain_that_reads_the_mass_and_the_device_keeps_it() {
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    // 20 s at rest with 0.5 N on the cell, a little noise on it: a 100 g
+    // mass (0.981 N) on a cell whose gain is half what it should be.
+    let rate_hz = 500u16;
+    let n = 20 * usize::from(rate_hz);
+    let trial = host_tools::trial::Trial {
+        t_s: (0..n).map(|i| i as f64 / f64::from(rate_hz)).collect(),
+        x_m: vec![0.0; n],
+        f_n: (0..n).map(|i| 0.5 + 2e-4 * ((i * 7) % 5) as f64).collect(),
+    };
+    let config = DeviceConfig::default();
+    let replay = dir.path().join("hung_mass.replay");
+    std::fs::write(
+        &replay,
+        sim::to_replay(&trial, rate_hz, &config.load_cell, &config.encoder),
+    )
+    .unwrap();
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let port = device.port.as_str();
+    let out = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args([
+            "device",
+            "--port",
+            port,
+            "calibrate",
+            "--mass-g",
+            "100",
+            "--loaded",
+            "--seconds",
+            "1",
+        ])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("gain 1.192093 → 2.3"), "{stdout}");
+    // The device now reads the mass's weight, and says so in its config.
+    let mut link = Link::open(port, 115_200).unwrap();
+    assert_eq!(link.command(Command::ReadConfig).unwrap(), Ok(()));
+    let gain_q16 = next_config(&mut link).config.load_cell.gain_q16;
+    // The mean load: 0.5 N plus the noise pattern's mean, 0.4 mN.
+    let expected = 78_125.0 * 0.1 * 9.806_65 / 0.5004;
+    assert!(
+        (f64::from(gain_q16) / expected - 1.0).abs() < 1e-4,
+        "{gain_q16} vs {expected}"
+    );
+    let force_n = wait_for(&mut link, Duration::from_secs(3), "sample", |i| match i {
+        Item::Sample(s) => Some(s.force.as_n()),
+        _ => None,
+    });
+    assert!((force_n - 0.980_665).abs() < 2e-3, "{force_n} N");
+}

@@ -49,6 +49,11 @@ pub enum Command {
     Stream(bool),
     /// Send the configuration (a config frame) now.
     ReadConfig,
+    /// The load cell's gain, µN per count in Q16.16, as a calibration
+    /// with a known mass found it (`needle device calibrate`); the zero
+    /// stays the tare's. Kept in the settings. At least
+    /// [`MIN_GAIN_Q16`] in magnitude; the sign is the wiring's.
+    SetLoadCellGain(i32),
 }
 
 /// A command as it goes on the wire.
@@ -115,6 +120,11 @@ impl From<DecodeError> for CommandError {
         }
     }
 }
+
+/// The smallest load-cell gain a command may set, in magnitude: 0.01 µN
+/// a count (Q16.16), far finer than any cell on a 24-bit converter; a
+/// gain near zero would read every load as none.
+pub const MIN_GAIN_Q16: u32 = 656;
 
 /// The [`CommandError::OutOfRange`] field of a tare asked for before the
 /// load cell's first readings: nothing is out of range, there is nothing
@@ -249,6 +259,7 @@ mod tests {
             Command::Rearm,
             Command::Stream(false),
             Command::ReadConfig,
+            Command::SetLoadCellGain(i32::MIN),
         ];
         for command in commands {
             let frame = CommandFrame {

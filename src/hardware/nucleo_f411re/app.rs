@@ -18,7 +18,7 @@
 #[rtic::app(device = stm32f4::stm32f411, peripherals = true)]
 mod app {
     use heapless::spsc::{Consumer, Queue};
-    use needle_holder::calibration::{BootTare, TareResult};
+    use needle_holder::calibration::{BootTare, LoadCell, TareResult};
     use needle_holder::config::DeviceConfig;
     use needle_holder::device::{default_tissue, Device};
     use needle_holder::faults::Faults;
@@ -38,11 +38,6 @@ mod app {
     use super::super::timer::Watchdog;
 
     type Dev = Device<QueueWriter, HaltLine>;
-
-    /// Largest plausible offset of an unloaded bridge at boot: 5 % of the
-    /// converter's full scale (0.5 N on the 10 N default); beyond it the
-    /// needle is loaded and taring would hide the load.
-    const MAX_BOOT_OFFSET_COUNTS: i32 = (1 << 23) / 20;
 
     #[shared]
     struct Shared {
@@ -87,7 +82,8 @@ mod app {
     #[init(local = [queue: Queue<u8, QUEUE_BYTES> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         super::super::stack::paint();
-        let base = DeviceConfig::default().with_sample_rate(SAMPLE_RATE_HZ);
+        let mut base = DeviceConfig::default().with_sample_rate(SAMPLE_RATE_HZ);
+        base.load_cell = LoadCell::LSB200_2LB_ADS1220;
         let parts = setup(cx.device, base.velocity.sample_rate_hz);
         // The saved tissue, calibration and assist, or the compiled
         // default (the config frame says which).
@@ -144,7 +140,9 @@ mod app {
             Local {
                 acquisition,
                 encoder: parts.encoder,
-                tare: BootTare::new(MAX_BOOT_OFFSET_COUNTS),
+                // Beyond 0.5 N the needle is loaded, and taring would hide
+                // the load.
+                tare: BootTare::new(config.load_cell.most_tare_offset_counts() as i32),
                 serial: parts.serial,
                 commands: CommandReader::default(),
                 outgoing,

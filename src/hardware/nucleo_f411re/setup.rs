@@ -73,6 +73,7 @@ pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
             Error::Pin => Error::Pin,
             Error::NotReady => Error::NotReady,
             Error::Readback { wrote, read } => Error::Readback { wrote, read },
+            Error::Stuck { code } => Error::Stuck { code },
         });
 
     pins::encoder(&dp.GPIOA);
