@@ -60,11 +60,64 @@ pub fn drain<const N: usize>(
     true
 }
 
+/// Where the reader of a circular receive buffer, which a DMA channel
+/// fills, has got to. The channel's remaining-transfers count (NDTR on an
+/// STM32) says where it will write next: `len − remaining`, and it
+/// reloads `len` at the wrap. The bytes between the reader and that point
+/// are new. A burst as long as the buffer or longer between two reads
+/// loses bytes; the board sizes the buffer for several of the longest
+/// command.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RxRing {
+    next: usize,
+    len: usize,
+}
+
+impl RxRing {
+    /// A reader at the start of a buffer of `len` bytes.
+    pub const fn new(len: usize) -> Self {
+        Self { next: 0, len }
+    }
+
+    /// The indices of the bytes that arrived since the last call, in
+    /// order, given the channel's `remaining` count now; the reader moves
+    /// past them.
+    pub fn arrived(&mut self, remaining: usize) -> impl Iterator<Item = usize> {
+        let len = self.len.max(1);
+        // `remaining` is len at the start and after each wrap; 0 only for
+        // the instant before the reload.
+        let write_at = len.saturating_sub(remaining.min(len)) % len;
+        let from = self.next % len;
+        let count = (write_at + len - from) % len;
+        self.next = write_at;
+        (0..count).map(move |i| (from + i) % len)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use embedded_io::Write;
     use heapless::spsc::Queue;
+
+    #[test]
+    fn the_ring_yields_what_arrived_across_the_wrap_and_nothing_twice() {
+        let mut ring = RxRing::new(8);
+        // Nothing yet: remaining is the whole length.
+        assert_eq!(ring.arrived(8).count(), 0);
+        // Three bytes written (remaining 5).
+        assert_eq!(ring.arrived(5).collect::<std::vec::Vec<_>>(), [0, 1, 2]);
+        assert_eq!(ring.arrived(5).count(), 0, "nothing twice");
+        // Seven more: to the end and round to index 1 (remaining 6).
+        assert_eq!(
+            ring.arrived(6).collect::<std::vec::Vec<_>>(),
+            [3, 4, 5, 6, 7, 0, 1]
+        );
+        // The instant before the reload reads as the wrap point.
+        let mut ring = RxRing::new(8);
+        assert_eq!(ring.arrived(0).count(), 0);
+        assert_eq!(ring.arrived(7).collect::<std::vec::Vec<_>>(), [0]);
+    }
 
     #[test]
     fn a_frame_goes_in_whole_or_not_at_all() {

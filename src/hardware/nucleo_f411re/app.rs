@@ -10,10 +10,11 @@
 //!   The independent watchdog ([`super::super::iwdg`]) is fed by each
 //!   sample, and here only while the device is halted for a fault: a hung
 //!   chip resets, and boots into a `watchdog_reset` fault and the halt.
-//! - `link` (USART2 transmit-empty and receive-not-empty, lowest): frame
-//!   bytes to the wire; command bytes from it, put together into frames
-//!   here, outside the sample's lock, which a whole command takes only to
-//!   be carried out and answered.
+//! - `link` (USART2 transmit-empty and idle line, lowest): frame bytes to
+//!   the wire; command bytes from it, which DMA has put in a buffer as
+//!   they landed, put together into frames here, outside the sample's
+//!   lock, which a whole command takes only to be carried out and
+//!   answered.
 
 #[rtic::app(device = stm32f4::stm32f411, peripherals = true)]
 mod app {
@@ -32,7 +33,7 @@ mod app {
     use super::super::halt::HaltLine;
     use super::super::iwdg::{IndependentWatchdog, ResetCause};
     use super::super::link::{drain, QueueWriter, QUEUE_BYTES};
-    use super::super::serial::Usart2;
+    use super::super::serial::{RxDma, Usart2, RX_BYTES};
     use super::super::setup::setup;
     use super::super::store::{SaveError, Store};
     use super::super::timer::Watchdog;
@@ -63,6 +64,9 @@ mod app {
         encoder: Encoder,
         tare: BootTare,
         serial: Usart2,
+        receiver: RxDma,
+        /// Receive errors (overrun, noise, framing) since boot.
+        line_errors: u32,
         commands: CommandReader,
         outgoing: Consumer<'static, u8, QUEUE_BYTES>,
         watchdog: Watchdog,
@@ -79,7 +83,10 @@ mod app {
         500
     };
 
-    #[init(local = [queue: Queue<u8, QUEUE_BYTES> = Queue::new()])]
+    #[init(local = [
+        queue: Queue<u8, QUEUE_BYTES> = Queue::new(),
+        received: [u8; RX_BYTES] = [0; RX_BYTES],
+    ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         super::super::stack::paint();
         let mut base = DeviceConfig::default().with_sample_rate(SAMPLE_RATE_HZ);
@@ -135,6 +142,8 @@ mod app {
         // waits for the next one.
         let mut acquisition = parts.acquisition;
         acquisition.converter.data_ready_pin().clear_pending();
+        let mut serial = parts.serial;
+        let receiver = RxDma::start(parts.dma1, &mut serial, cx.local.received);
         (
             shared,
             Local {
@@ -143,7 +152,9 @@ mod app {
                 // Beyond 0.5 N the needle is loaded, and taring would hide
                 // the load.
                 tare: BootTare::new(config.load_cell.most_tare_offset_counts() as i32),
-                serial: parts.serial,
+                serial,
+                receiver,
+                line_errors: 0,
                 commands: CommandReader::default(),
                 outgoing,
                 watchdog: parts.watchdog,
@@ -275,21 +286,28 @@ mod app {
         }
     }
 
-    #[task(binds = USART2, priority = 1, shared = [device], local = [serial, commands, outgoing])]
+    #[task(binds = USART2, priority = 1, shared = [device], local = [serial, receiver, line_errors, commands, outgoing])]
     fn link(mut cx: link::Context) {
-        // Line errors (overrun, framing, noise) lose the byte: the frame
-        // it was in fails its CRC and the device says so.
-        while let Some(byte) = cx.local.serial.read() {
-            if let Some(frame) = cx.local.commands.push(byte) {
+        // A byte with a line error is in the buffer all the same: the
+        // frame it is in fails its CRC and the device says so.
+        let errors = cx.local.serial.take_line_events();
+        if errors > 0 {
+            *cx.local.line_errors = cx.local.line_errors.saturating_add(errors);
+            defmt::warn!("USART2 receive errors: {=u32}", *cx.local.line_errors);
+        }
+        let commands = cx.local.commands;
+        let device = &mut cx.shared.device;
+        cx.local.receiver.read(|byte| {
+            if let Some(frame) = commands.push(byte) {
                 // Before arming (the boot tare, a quarter second) there is
                 // no device to answer: the host sends again.
-                cx.shared.device.lock(|device| {
+                device.lock(|device| {
                     if let Some(d) = device.as_mut() {
                         d.answer(frame);
                     }
                 });
             }
-        }
+        });
         drain(cx.local.serial, cx.local.outgoing);
     }
 

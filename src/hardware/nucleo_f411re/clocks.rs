@@ -46,8 +46,11 @@ fn wait_for(ready: impl Fn() -> bool) -> bool {
 
 /// Turn on the clocks of the peripherals the board uses.
 pub fn enable_peripherals(rcc: &pac::RCC) {
-    rcc.ahb1enr()
-        .modify(|_, w| w.gpioaen().set_bit().gpioben().set_bit());
+    rcc.ahb1enr().modify(|_, w| {
+        w.gpioaen().set_bit();
+        w.gpioben().set_bit();
+        w.dma1en().set_bit()
+    });
     rcc.apb1enr().modify(|_, w| {
         w.tim2en().set_bit();
         w.tim5en().set_bit();

@@ -51,7 +51,7 @@ mod app {
         clocks::enable_peripherals(&dp.RCC);
         let halt = HaltLine::asserted(&dp.GPIOA);
         pins::usart2(&dp.GPIOA);
-        let serial = Usart2::new(dp.USART2, HSI.pclk1_hz, REPLAY_BAUD, false);
+        let serial = Usart2::new(dp.USART2, HSI.pclk1_hz, REPLAY_BAUD);
         let (producer, outgoing) = cx.local.queue.split();
         defmt::info!(
             "needle-holder {} on {} (replay)",

@@ -32,8 +32,10 @@ pub struct Parts {
     /// Set up by `start`, or why the converter would not start.
     pub converter_started: Result<(), Error<()>>,
     pub encoder: Encoder,
-    /// Frames out, commands in (its receive interrupt is on).
+    /// Frames out; commands in once [`super::serial::RxDma`] starts on
+    /// `dma1`.
     pub serial: Usart2,
+    pub dma1: pac::DMA1,
     pub halt: HaltLine,
     pub watchdog: Watchdog,
     /// The flash interface, for the settings store.
@@ -79,7 +81,7 @@ pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
     pins::encoder(&dp.GPIOA);
     let encoder = Encoder::new(dp.TIM2);
     pins::usart2(&dp.GPIOA);
-    let serial = Usart2::new(dp.USART2, clocks.pclk1_hz, BAUD, true);
+    let serial = Usart2::new(dp.USART2, clocks.pclk1_hz, BAUD);
     let watchdog = Watchdog::start(dp.TIM5, clocks.apb1_timer_hz, WATCHDOG_HZ);
 
     Parts {
@@ -87,6 +89,7 @@ pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
         converter_started,
         encoder,
         serial,
+        dma1: dp.DMA1,
         halt,
         watchdog,
         flash: dp.FLASH,
