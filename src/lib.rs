@@ -34,5 +34,6 @@ pub mod persist;
 pub mod pipeline;
 pub mod protocol;
 pub mod replay;
+pub mod sample_clock;
 pub mod stream;
 pub mod units;

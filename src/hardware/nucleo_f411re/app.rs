@@ -28,7 +28,8 @@ mod app {
     use needle_holder::protocol::TissueSource;
     use stm32f4::stm32f411 as pac;
 
-    use super::super::adc::{Acquisition, Broken, Conversion, Ready};
+    use super::super::adc::{rate_for, Acquisition, Broken, Conversion, Ready};
+    use super::super::capture::{EdgeCapture, TICK_HZ};
     use super::super::encoder::Encoder;
     use super::super::halt::HaltLine;
     use super::super::iwdg::{IndependentWatchdog, ResetCause};
@@ -37,6 +38,7 @@ mod app {
     use super::super::setup::setup;
     use super::super::store::{SaveError, Store};
     use super::super::timer::Watchdog;
+    use needle_holder::sample_clock::EdgeClock;
 
     type Dev = Device<QueueWriter, HaltLine>;
 
@@ -61,6 +63,10 @@ mod app {
     #[local]
     struct Local {
         acquisition: Acquisition,
+        edges: EdgeCapture,
+        edge_clock: EdgeClock,
+        /// Conversions whose data-ready fell but that were never read.
+        conversions_lost: u32,
         encoder: Encoder,
         tare: BootTare,
         serial: Usart2,
@@ -148,6 +154,9 @@ mod app {
             shared,
             Local {
                 acquisition,
+                edges: parts.edges,
+                edge_clock: EdgeClock::new(conversion_period_ticks(config.velocity.sample_rate_hz)),
+                conversions_lost: 0,
                 encoder: parts.encoder,
                 // Beyond 0.5 N the needle is loaded, and taring would hide
                 // the load.
@@ -161,6 +170,13 @@ mod app {
                 store,
             },
         )
+    }
+
+    /// Timer ticks between two of the converter's conversions at the rate
+    /// a sample rate sets it to.
+    fn conversion_period_ticks(sample_rate_hz: u16) -> u16 {
+        let sps = rate_for(sample_rate_hz).0.sps();
+        u16::try_from(TICK_HZ.checked_div(sps).unwrap_or(1)).unwrap_or(u16::MAX)
     }
 
     /// The device, armed now with `config` if it was not yet, with the
@@ -183,10 +199,24 @@ mod app {
         device.as_mut()
     }
 
-    #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config, origin, iwdg], local = [acquisition, encoder, tare])]
+    #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config, origin, iwdg], local = [acquisition, edges, edge_clock, conversions_lost, encoder, tare])]
     fn sample(cx: sample::Context) {
         let acquisition = cx.local.acquisition;
         acquisition.converter.data_ready_pin().clear_pending();
+        // Edges the timer captured since the last conversion taken: more
+        // than one, and the converter overwrote the ones between (this
+        // task was held off past a period). The sample is late.
+        let edges = cx.local.edge_clock.edges_since(cx.local.edges.latest());
+        if edges > 1 {
+            let lost = cx.local.conversions_lost;
+            *lost = lost.saturating_add(edges - 1);
+            defmt::warn!(
+                "{=u32} conversions lost ({=u32} since boot)",
+                edges - 1,
+                *lost
+            );
+            acquisition.overrun = true;
+        }
         let conversion = acquisition.convert();
         let mut shared = (
             cx.shared.device,

@@ -57,8 +57,11 @@ pub fn enable_peripherals(rcc: &pac::RCC) {
         w.usart2en().set_bit();
         w.pwren().set_bit()
     });
-    rcc.apb2enr()
-        .modify(|_, w| w.spi1en().set_bit().syscfgen().set_bit());
+    rcc.apb2enr().modify(|_, w| {
+        w.spi1en().set_bit();
+        w.syscfgen().set_bit();
+        w.tim1en().set_bit()
+    });
     // Two cycles before an enabled peripheral's registers answer (RM0383
     // §6.3.10 note).
     cortex_m::asm::dsb();

@@ -13,7 +13,8 @@
 //!
 //! Split by concern as stabilizer does: [`setup`] brings the chip up and
 //! hands out the parts, [`clocks`] the clock tree, [`pins`] the GPIO,
-//! [`adc`] is the converter on its bus ([`spi`]), [`encoder`] the timer in
+//! [`adc`] is the converter on its bus ([`spi`]), [`capture`] the timer
+//! that times its data-ready edges, [`encoder`] the timer in
 //! encoder mode, [`serial`] USART2 and [`link`] the frame queue and its
 //! drain, [`timer`] the data-ready watchdog's tick, [`iwdg`] the
 //! independent watchdog that resets a hung chip, [`halt`] the line and
@@ -39,6 +40,8 @@
 pub mod adc;
 #[cfg(not(feature = "f411-replay"))]
 mod app;
+#[cfg(not(feature = "f411-replay"))]
+pub mod capture;
 // The replay image runs on the HSI and only sends.
 #[cfg_attr(feature = "f411-replay", allow(dead_code))]
 pub mod clocks;

@@ -53,7 +53,10 @@ pub fn encoder(gpioa: &pac::GPIOA) {
 /// an interrupt on EXTI line 10 (EXTI15_10).
 pub fn data_ready(gpioa: &pac::GPIOA, syscfg: &pac::SYSCFG, exti: &pac::EXTI) {
     gpioa.pupdr().modify(|_, w| w.pupdr10().pull_up());
-    gpioa.moder().modify(|_, w| w.moder10().input());
+    // TIM1_CH3 (alternate function 1) captures its edges; the input
+    // data register and the EXTI line see the pin in that mode too.
+    gpioa.afrh().modify(|_, w| w.afrh10().af1());
+    gpioa.moder().modify(|_, w| w.moder10().alternate());
     // SAFETY: 0 selects port A for line 10 (RM0383 §7.2.5).
     syscfg
         .exticr3()

@@ -9,6 +9,7 @@ use needle_holder::ads1220::{Ads1220, Config as AdcConfig, Error};
 use stm32f4::stm32f411 as pac;
 
 use super::adc::{rate_for, Acquisition, Converter};
+use super::capture::EdgeCapture;
 use super::clocks::{self, CycleDelay};
 use super::encoder::Encoder;
 use super::halt::HaltLine;
@@ -29,6 +30,8 @@ pub const WATCHDOG_HZ: u32 = 25;
 /// Everything the application runs on.
 pub struct Parts {
     pub acquisition: Acquisition,
+    /// The times of the converter's data-ready edges.
+    pub edges: EdgeCapture,
     /// Set up by `start`, or why the converter would not start.
     pub converter_started: Result<(), Error<()>>,
     pub encoder: Encoder,
@@ -86,6 +89,7 @@ pub fn setup(dp: pac::Peripherals, sample_rate_hz: u16) -> Parts {
 
     Parts {
         acquisition: Acquisition::new(converter, per_sample),
+        edges: EdgeCapture::start(dp.TIM1, clocks.pclk2_hz),
         converter_started,
         encoder,
         serial,
