@@ -15,9 +15,9 @@ use crate::pipeline::{PipelineState, RawSample};
 use crate::protocol::batch::{samples_per_batch, BatchCheck, BatchWriter};
 use crate::protocol::command::{self, CommandReader};
 use crate::protocol::{
-    Command, CommandError, CommandFrame, ConfigFrame, Event, EventKind, Frame, FrameEncoder, Halt,
-    HaltReason, Header, Phase, Reply, Sample, Snapshot, Status, TissueSource, PROTOCOL_VERSION,
-    STATUS_PERIOD_SAMPLES,
+    BoardCounters, Command, CommandError, CommandFrame, ConfigFrame, Event, EventKind, Frame,
+    FrameEncoder, Halt, HaltReason, Header, Phase, Reply, Sample, Snapshot, Status, TissueSource,
+    PROTOCOL_VERSION, STATUS_PERIOD_SAMPLES,
 };
 use crate::units::{MicroNewtons, Nanometres};
 
@@ -51,6 +51,8 @@ pub struct Device<W: Write, H: OutputPin> {
     stored: Loaded,
     /// Settings changed by a command and not yet handed to the store.
     unsaved: bool,
+    /// What the board counts below the core, for the status frames.
+    board: BoardCounters,
 }
 
 /// Counters and flags at the end of a run.
@@ -121,6 +123,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             last_command: (0, 0, Ok(())),
             stored,
             unsaved: false,
+            board: BoardCounters::default(),
         };
         if device.halt.set_low().is_err() {
             device.faults = device.faults.union(Faults::HALT_OUTPUT);
@@ -164,6 +167,11 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             self.send_snapshot();
             self.send_status();
         }
+    }
+
+    /// The board's counters, which the next status frames report.
+    pub fn board_counters_mut(&mut self) -> &mut BoardCounters {
+        &mut self.board
     }
 
     /// Raise faults found outside the pipeline (e.g. a truncated replay).
@@ -422,6 +430,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             halt: self.halt_asserted,
             streaming: self.streaming,
             next_command_seq: self.last_command.0.saturating_add(1),
+            board: self.board,
         };
         self.send(&Frame::Status(status));
     }

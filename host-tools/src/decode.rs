@@ -795,9 +795,11 @@ pub fn describe(frame: &Message, rate_hz: Option<u16>) -> String {
             f64::from(e.confidence_permille) / 10.0
         ),
         Message::Status(s) => format!(
-            "status  {} samples, {} frames dropped, faults {}, halt {}{}",
+            "status  {} samples, {} frames dropped, {} conversions lost, {} receive errors, faults {}, halt {}{}",
             s.samples,
             s.frames_dropped,
+            s.board.conversions_lost,
+            s.board.line_errors,
             fault_names(s.faults),
             if s.halt { "ASSERTED" } else { "released" },
             if s.streaming { "" } else { ", stream stopped" }
@@ -832,6 +834,31 @@ pub fn halt_reason_name(reason: HaltReason) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_status_names_the_boards_counters_and_the_new_faults() {
+        let status = needle_holder::protocol::Status {
+            protocol_version: needle_holder::protocol::PROTOCOL_VERSION,
+            sample_rate_hz: 2000,
+            samples: 10,
+            frames_dropped: 0,
+            faults: Faults::WATCHDOG_RESET.union(Faults::SETTINGS_STORE),
+            halt: true,
+            streaming: true,
+            next_command_seq: 1,
+            board: needle_holder::protocol::BoardCounters {
+                conversions_lost: 3,
+                line_errors: 7,
+            },
+        };
+        let said = describe(&Message::Status(status), Some(2000));
+        assert!(
+            said.contains("3 conversions lost, 7 receive errors")
+                && said.contains("watchdog_reset")
+                && said.contains("settings_store"),
+            "{said}"
+        );
+    }
 
     #[test]
     fn a_tare_before_any_reading_says_so_and_not_out_of_range() {

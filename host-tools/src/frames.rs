@@ -1,10 +1,10 @@
 //! Frame stream decoding on the host: split at `0x00`, check and decode
 //! each frame (COBS, CRC, exactly one frame), turn batches back into
 //! samples with the core's [`Reconstructor`], track sample-index gaps,
-//! and refuse protocol versions other than 2, 3 and this build's (4).
+//! and refuse protocol versions other than 2, 3, 4 and this build's (5).
 //!
-//! All three are read: a frame passes the CRC of exactly one of them
-//! (versions 3 and 4 cover an implied version byte, see
+//! All four are read: a frame passes the CRC of exactly one of them
+//! (versions 3 on cover an implied version byte, see
 //! `needle_holder::protocol::wire`), so a capture of any decodes.
 //!
 //! Written here rather than with postcard's `CobsAccumulator` because that
@@ -51,34 +51,51 @@ mod v2 {
     }
 }
 
-/// Frames of protocol version 3: this build's, but for the tissue's
-/// relaxation, which version 4 added as the last field of the
-/// configuration and of the pipeline's state. A version-3 body of either
-/// with none appended is the version-4 body, so old captures decode with
-/// this build's types and the core's reconstruction.
-mod v3 {
+/// Frames of protocol versions 3 and 4: this build's, but for fields a
+/// later version appended as the last of a frame — version 4 the tissue's
+/// relaxation to the configuration and the pipeline's state, version 5
+/// the board's counters to the status. An older body with the defaults
+/// appended (no relaxation, nothing counted) is this version's body, so
+/// old captures decode with this build's types and the core's
+/// reconstruction.
+mod older {
     use needle_holder::model::relax::{RelaxState, Relaxation};
     use needle_holder::protocol::wire::{self, FRAME_CRC};
-    use needle_holder::protocol::MAX_ENCODED_FRAME;
+    use needle_holder::protocol::{BoardCounters, MAX_ENCODED_FRAME};
 
-    /// The postcard tags of `Frame::Config` and `Frame::Snapshot`.
+    /// The postcard tags of `Frame::Config`, `Frame::Snapshot` and
+    /// `Frame::Status`.
     const CONFIG: u8 = 1;
     const SNAPSHOT: u8 = 3;
+    const STATUS: u8 = 5;
 
-    /// The body of `chunk` if it passes version 3's framing, as a
-    /// version-4 body.
-    pub fn body(chunk: &[u8]) -> Option<Vec<u8>> {
+    /// The versions read this way, newest first.
+    pub const VERSIONS: [u16; 2] = [4, 3];
+
+    /// The version whose framing `chunk` passes, and its body as this
+    /// version's.
+    pub fn body(chunk: &[u8]) -> Option<(u16, Vec<u8>)> {
+        VERSIONS
+            .iter()
+            .find_map(|&v| Some((v, as_current(v, unframed(chunk, v)?)?)))
+    }
+
+    fn unframed(chunk: &[u8], version: u16) -> Option<Vec<u8>> {
         let mut buffer = [0u8; MAX_ENCODED_FRAME];
         let check = |b: &[u8]| {
             let mut digest = FRAME_CRC.digest();
-            digest.update(&[3]);
+            digest.update(&[version as u8]);
             digest.update(b);
             digest.finalize()
         };
-        let mut body = wire::unframe(chunk, &mut buffer, check).ok()?.to_vec();
+        Some(wire::unframe(chunk, &mut buffer, check).ok()?.to_vec())
+    }
+
+    fn as_current(version: u16, mut body: Vec<u8>) -> Option<Vec<u8>> {
         let tail = match body.first() {
-            Some(&CONFIG) => postcard::to_allocvec(&Relaxation::default()),
-            Some(&SNAPSHOT) => postcard::to_allocvec(&RelaxState::default()),
+            Some(&CONFIG) if version < 4 => postcard::to_allocvec(&Relaxation::default()),
+            Some(&SNAPSHOT) if version < 4 => postcard::to_allocvec(&RelaxState::default()),
+            Some(&STATUS) if version < 5 => postcard::to_allocvec(&BoardCounters::default()),
             _ => Ok(Vec::new()),
         };
         body.extend(tail.ok()?);
@@ -158,7 +175,9 @@ pub struct VersionMismatch {
 
 impl std::fmt::Display for VersionMismatch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let readable = [2, 3, PROTOCOL_VERSION].contains(&self.found);
+        let readable = self.found == 2
+            || older::VERSIONS.contains(&self.found)
+            || self.found == PROTOCOL_VERSION;
         if readable && self.found != self.framed_as {
             write!(
                 f,
@@ -168,7 +187,7 @@ impl std::fmt::Display for VersionMismatch {
         } else {
             write!(
                 f,
-                "the device speaks protocol version {}, this needle reads versions 2, 3 and {}: rebuild one to match the other",
+                "the device speaks protocol version {}, this needle reads versions 2, 3, 4 and {}: rebuild one to match the other",
                 self.found, PROTOCOL_VERSION
             )
         }
@@ -268,10 +287,10 @@ impl StreamDecoder {
                 return Ok(());
             }
         }
-        if let Some(body) = v3::body(chunk) {
+        if let Some((version, body)) = older::body(chunk) {
             self.newer = None;
             return match wire::parse::<Frame>(&body) {
-                Ok(frame) => self.accept(frame, chunk, 3, on_item),
+                Ok(frame) => self.accept(frame, chunk, version, on_item),
                 Err(_) => {
                     self.skip(chunk.len() + 1, "undecodable frame", on_item);
                     Ok(())
@@ -498,6 +517,7 @@ impl StreamDecoder {
                     halt: s.halt,
                     streaming: true,
                     next_command_seq: 0,
+                    board: Default::default(),
                 })
             }
             v2::Frame::Sample(s) => {
@@ -801,12 +821,12 @@ mod tests {
     #[test]
     fn a_newer_devices_stream_is_named_as_one_not_as_noise() {
         // Every frame fails this build's CRC; three in a row pass version
-        // 5's. Two do not yet decide it.
+        // 6's. Two do not yet decide it.
         let frame = Frame::Header(Header {
-            protocol_version: 5,
+            protocol_version: 6,
             sample_rate_hz: 500,
         });
-        let two: Vec<u8> = (0..2).flat_map(|_| bytes_of_version(&frame, 5)).collect();
+        let two: Vec<u8> = (0..2).flat_map(|_| bytes_of_version(&frame, 6)).collect();
         assert!(decode_all(&two).is_ok());
         // This build's own frame between them: not three in a row.
         let own = FrameEncoder::default()
@@ -815,28 +835,47 @@ mod tests {
                 sample_rate_hz: 500,
             }))
             .to_vec();
-        let broken: Vec<u8> = [two.clone(), own, bytes_of_version(&frame, 5)].concat();
+        let broken: Vec<u8> = [two.clone(), own, bytes_of_version(&frame, 6)].concat();
         assert!(decode_all(&broken).is_ok());
-        let three: Vec<u8> = (0..3).flat_map(|_| bytes_of_version(&frame, 5)).collect();
+        let three: Vec<u8> = (0..3).flat_map(|_| bytes_of_version(&frame, 6)).collect();
         let err = decode_all(&three).unwrap_err();
-        assert_eq!((err.found, err.framed_as), (5, 5));
+        assert_eq!((err.found, err.framed_as), (6, 6));
         assert!(
-            err.to_string().contains("speaks protocol version 5"),
+            err.to_string().contains("speaks protocol version 6"),
             "{err}"
         );
     }
 
     #[test]
-    fn a_version_3_capture_still_decodes_to_the_same_samples() {
+    fn version_3_and_4_captures_still_decode_to_the_same_samples() {
+        for version in older::VERSIONS {
+            let (old, expected) = older_capture(version);
+            let (items, stats) = decode_all(&old).unwrap();
+            assert_eq!(stats.skipped_bytes, 0, "version {version}");
+            assert_eq!(samples(&items), expected, "version {version}");
+            let said = |m: &Message| match m {
+                Message::Header(h) => h.protocol_version == version,
+                Message::Status(s) => {
+                    s.protocol_version == version && s.board == Default::default()
+                }
+                _ => false,
+            };
+            assert!(messages(&items).iter().filter(|m| said(m)).count() > 1);
+        }
+    }
+
+    /// What a device of protocol `version` (3 or 4) sent for a whole
+    /// insertion (contact, puncture, a 2 s dwell, withdrawal), and the
+    /// samples in it: this build's frames less what later versions
+    /// appended — version 5 the board's counters at the end of a status,
+    /// version 4 the relaxation at the end of the configuration and state
+    /// (run with protocol 3's model at rest: no hold, no relaxation) —
+    /// framed over that version byte, so its batch checks seeded from
+    /// those config bytes.
+    fn older_capture(version: u16) -> (Vec<u8>, Vec<Sample>) {
         use needle_holder::model::params::LIVER1;
         use needle_holder::model::relax::Relaxation;
         use needle_holder::protocol::batch::BatchCheck;
-        // What a version-3 device sent for a whole insertion (contact,
-        // puncture, a 2 s dwell, withdrawal): this build's frames with
-        // protocol 3's model at rest (no hold, no relaxation), less the
-        // relaxation at the end of its configuration and state, framed
-        // over version byte 3, so its batch checks seeded from those
-        // config bytes.
         let (trial, _) = crate::sim::insertion(&LIVER1, &crate::sim::Plan::PAPER);
         let config = DeviceConfig {
             relaxation: Relaxation::default(),
@@ -854,9 +893,9 @@ mod tests {
             .filter(|s| s.phase == Phase::Inserted && s.v.0 == 0)
             .count();
         assert!(rests > 500, "a dwell in the tissue: {rests} samples");
-        let v3_frame = |raw: &mut Vec<u8>| {
+        let framed_as = |raw: &mut Vec<u8>| {
             let mut digest = FRAME_CRC.digest();
-            digest.update(&[3]);
+            digest.update(&[version as u8]);
             digest.update(raw);
             raw.extend(digest.finalize().to_le_bytes());
             cobs::encode_vec(raw)
@@ -872,14 +911,16 @@ mod tests {
             })
             .unwrap();
             let parsed = wire::parse::<Frame>(body).unwrap();
+            let len = |bytes: postcard::Result<Vec<u8>>| bytes.unwrap().len();
             let tail = match &parsed {
-                Frame::Config(c) => postcard::to_stdvec(&c.config.relaxation).unwrap().len(),
-                Frame::Snapshot(s) => postcard::to_stdvec(s.state.relax()).unwrap().len(),
+                Frame::Config(c) if version < 4 => len(postcard::to_stdvec(&c.config.relaxation)),
+                Frame::Snapshot(s) if version < 4 => len(postcard::to_stdvec(s.state.relax())),
+                Frame::Status(s) => len(postcard::to_stdvec(&s.board)),
                 _ => 0,
             };
             let mut raw = body[..body.len() - tail].to_vec();
             match parsed {
-                Frame::Header(_) | Frame::Status(_) => raw[1] = 3,
+                Frame::Header(_) | Frame::Status(_) => raw[1] = version as u8,
                 Frame::Batch(batch) => {
                     let mut check = seed;
                     let first = batch.first_index as usize;
@@ -894,19 +935,14 @@ mod tests {
                 }
                 _ => {}
             }
-            let framed = v3_frame(&mut raw);
+            let framed = framed_as(&mut raw);
             if body[0] == 1 {
                 seed = BatchCheck::seed(&framed);
             }
             old.extend(framed);
             old.push(0);
         }
-        let (items, stats) = decode_all(&old).unwrap();
-        assert_eq!(stats.skipped_bytes, 0);
-        assert_eq!(samples(&items), expected);
-        assert!(messages(&items)
-            .iter()
-            .any(|m| matches!(m, Message::Header(h) if h.protocol_version == 3)));
+        (old, expected)
     }
 
     #[test]
@@ -919,7 +955,10 @@ mod tests {
         };
         let err = decode_all(FrameEncoder::default().encode(&header(9))).unwrap_err();
         assert_eq!(err.found, 9);
-        assert!(err.to_string().contains("reads versions 2, 3 and"), "{err}");
+        assert!(
+            err.to_string().contains("reads versions 2, 3, 4 and"),
+            "{err}"
+        );
         // A version this needle reads, named in another's frame.
         let err = decode_all(FrameEncoder::default().encode(&header(2))).unwrap_err();
         assert!(err.to_string().contains("contradicts itself"), "{err}");

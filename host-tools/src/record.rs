@@ -15,7 +15,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use needle_holder::protocol::{Command, Phase, Sample};
+use needle_holder::protocol::{BoardCounters, Command, Phase, Sample};
 
 use crate::decode::{command_error, create_csv, csv_row, describe, missing_name};
 use crate::frames::{Item, Message};
@@ -212,6 +212,9 @@ struct Recorder {
     /// A status frame said the device's stream is off since [`record`]
     /// last looked.
     stream_off: bool,
+    /// The board's counters as the last status gave them: a rise is
+    /// reported once.
+    board: BoardCounters,
 }
 
 impl Recorder {
@@ -224,6 +227,7 @@ impl Recorder {
             written: 0,
             before_out: Some(0),
             stream_off: false,
+            board: BoardCounters::default(),
         }
     }
 
@@ -233,6 +237,18 @@ impl Recorder {
             Item::Frame(Message::Header(h)) => self.learn_rate(h.sample_rate_hz)?,
             Item::Frame(Message::Status(s)) => {
                 self.stream_off |= !s.streaming;
+                if s.board != self.board {
+                    // The counters start again at a device's boot.
+                    if s.board.conversions_lost > self.board.conversions_lost
+                        || s.board.line_errors > self.board.line_errors
+                    {
+                        self.line(&format!(
+                            "board   {} conversions lost, {} receive errors since the device started",
+                            s.board.conversions_lost, s.board.line_errors
+                        ));
+                    }
+                    self.board = s.board;
+                }
                 self.learn_rate(s.sample_rate_hz)?
             }
             Item::Frame(frame @ (Message::Event(_) | Message::Halt(_) | Message::Reply(_))) => {

@@ -2,7 +2,7 @@
 //! alike: the frames the device sends ([`Frame`]), the commands it takes
 //! ([`command`]), and how both are framed on the wire ([`wire`]).
 //!
-//! **The stream (version 4).** After boot the device sends a [`Header`],
+//! **The stream (version 5).** After boot the device sends a [`Header`],
 //! a [`ConfigFrame`] (everything the pipeline computes with: calibration,
 //! tissue model, detectors, assist) and a [`Snapshot`] of the pipeline's
 //! state; then the samples as [`batch`]es of raw readings, which the host
@@ -34,7 +34,7 @@ use crate::pipeline::PipelineState;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// Version of the frame format; the host refuses other versions.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// Samples between two status heartbeats.
 pub const STATUS_PERIOD_SAMPLES: u32 = 250;
@@ -135,6 +135,24 @@ pub struct Status {
     pub streaming: bool,
     /// Sequence number the device takes for the next command.
     pub next_command_seq: u32,
+    /// What the board counts below the core. Last: a protocol-4 status
+    /// is this one without it.
+    pub board: BoardCounters,
+}
+
+/// What a board counts below the core, since boot: zero on a board that
+/// has neither (the QEMU boards, whose converter is a replay and whose
+/// link cannot err).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct BoardCounters {
+    /// Conversions whose data-ready fell but that were never read (the
+    /// sample task held off past a period): each made its sample
+    /// `sample_overrun`.
+    pub conversions_lost: u32,
+    /// Receive errors on the command line (overrun, noise, framing);
+    /// the frames they fell in failed their CRC and were answered so.
+    pub line_errors: u32,
 }
 
 /// Why the device asserted the halt line.
@@ -281,15 +299,15 @@ mod tests {
     fn golden_bytes_pin_the_wire_format() {
         let mut encoder = FrameEncoder::default();
         let bytes = encoder.encode(&batch_frame());
-        assert_eq!(PROTOCOL_VERSION, 4);
+        assert_eq!(PROTOCOL_VERSION, 5);
         // COBS code, tag 2, index 1234, 2 samples, the check, 5 raw bytes,
-        // the CRC (0x30e4, checked against a bitwise CRC-16/X.25 over the
-        // implied version byte 4 and the body), the zero.
+        // the CRC (0x78ce, checked against a bitwise CRC-16/X.25 over the
+        // implied version byte 5 and the body), the zero.
         assert_eq!(
             bytes,
             &[
                 0x11, 0x02, 0xd2, 0x09, 0x02, 0x01, 0x02, 0x03, 0x04, 0x05, 0x80, 0x01, 0x02, 0x03,
-                0x04, 0xe4, 0x30, 0x00
+                0x04, 0xce, 0x78, 0x00
             ][..]
         );
     }
@@ -368,6 +386,10 @@ mod tests {
                 halt: true,
                 streaming: true,
                 next_command_seq: u32::MAX,
+                board: BoardCounters {
+                    conversions_lost: u32::MAX,
+                    line_errors: u32::MAX,
+                },
             }),
             Frame::Halt(Halt {
                 index: u32::MAX,

@@ -207,8 +207,8 @@ mod app {
         // than one, and the converter overwrote the ones between (this
         // task was held off past a period). The sample is late.
         let edges = cx.local.edge_clock.edges_since(cx.local.edges.latest());
+        let lost = cx.local.conversions_lost;
         if edges > 1 {
-            let lost = cx.local.conversions_lost;
             *lost = lost.saturating_add(edges - 1);
             defmt::warn!(
                 "{=u32} conversions lost ({=u32} since boot)",
@@ -241,6 +241,9 @@ mod app {
                     }
                 }
                 Conversion::Sample(sample) => {
+                    if let Some(d) = device.as_mut() {
+                        d.board_counters_mut().conversions_lost = *lost;
+                    }
                     if device.is_none() {
                         match tare.add(sample.counts) {
                             TareResult::Collecting => {}
@@ -321,12 +324,18 @@ mod app {
         // A byte with a line error is in the buffer all the same: the
         // frame it is in fails its CRC and the device says so.
         let errors = cx.local.serial.take_line_events();
+        let device = &mut cx.shared.device;
         if errors > 0 {
-            *cx.local.line_errors = cx.local.line_errors.saturating_add(errors);
-            defmt::warn!("USART2 receive errors: {=u32}", *cx.local.line_errors);
+            let total = cx.local.line_errors.saturating_add(errors);
+            *cx.local.line_errors = total;
+            defmt::warn!("USART2 receive errors: {=u32}", total);
+            device.lock(|device| {
+                if let Some(d) = device.as_mut() {
+                    d.board_counters_mut().line_errors = total;
+                }
+            });
         }
         let commands = cx.local.commands;
-        let device = &mut cx.shared.device;
         cx.local.receiver.read(|byte| {
             if let Some(frame) = commands.push(byte) {
                 // Before arming (the boot tare, a quarter second) there is
