@@ -53,6 +53,10 @@ pub struct Device<W: Write, H: OutputPin> {
     unsaved: bool,
     /// What the board counts below the core, for the status frames.
     board: BoardCounters,
+    /// Samples processed when a fault was last raised from outside the
+    /// pipeline (a converter that stopped, a reset by the watchdog): a
+    /// re-arm needs a sample after it, the proof that the cause is gone.
+    raised_outside_at: Option<u32>,
 }
 
 /// Counters and flags at the end of a run.
@@ -104,6 +108,21 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         sink: W,
         halt: H,
     ) -> Self {
+        Self::restored_with(config, tissue, stored, Faults::NONE, sink, halt)
+    }
+
+    /// [`Self::restored`] with `faults` the board found before arming (a
+    /// reset by its watchdog, a load at boot, a converter that did not
+    /// start) latched from the start: the halt line, which the board
+    /// drives high until it arms, is then never released.
+    pub fn restored_with(
+        config: DeviceConfig,
+        tissue: TissueSource,
+        stored: Loaded,
+        faults: Faults,
+        sink: W,
+        halt: H,
+    ) -> Self {
         let mut device = Self {
             config,
             tissue,
@@ -124,8 +143,9 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             stored,
             unsaved: false,
             board: BoardCounters::default(),
+            raised_outside_at: None,
         };
-        if device.halt.set_low().is_err() {
+        if faults.is_empty() && device.halt.set_low().is_err() {
             device.faults = device.faults.union(Faults::HALT_OUTPUT);
         }
         device.send(&Frame::Header(Header {
@@ -134,6 +154,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         }));
         device.send_config();
         device.send_snapshot();
+        device.raise(faults);
         device
     }
 
@@ -174,8 +195,13 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         &mut self.board
     }
 
-    /// Raise faults found outside the pipeline (e.g. a truncated replay).
+    /// Raise faults found outside the pipeline (e.g. a truncated replay,
+    /// a converter that stopped): a re-arm waits for a sample after them.
     pub fn raise(&mut self, faults: Faults) {
+        if faults.is_empty() {
+            return;
+        }
+        self.raised_outside_at = Some(self.samples);
         self.raise_at(faults, (self.samples, Nanometres::ZERO, MicroNewtons::ZERO));
     }
 
@@ -308,6 +334,10 @@ impl<W: Write, H: OutputPin> Device<W, H> {
                 Ok(())
             }
             Command::SetLoadCellGain(gain_q16) => {
+                // The force's scale does not jump under a needle in tissue.
+                if self.state.phase().phase != Phase::Out {
+                    return Err(CommandError::NeedleInTissue);
+                }
                 if gain_q16.unsigned_abs() < command::MIN_GAIN_Q16 {
                     return Err(CommandError::out_of_range("gain"));
                 }
@@ -356,6 +386,11 @@ impl<W: Write, H: OutputPin> Device<W, H> {
     fn rearm(&mut self) -> Result<(), CommandError> {
         if !self.halt_asserted {
             return Ok(());
+        }
+        if self.raised_outside_at == Some(self.samples) {
+            return Err(CommandError::HaltCausePersists {
+                reason: HaltReason::Fault,
+            });
         }
         if let Some((sample, faults)) = self.last {
             if !faults.is_empty() {

@@ -82,7 +82,7 @@ impl Settings {
             && self.model.check().is_ok()
             && self.assist_modes.is_known()
             && crate::assist::target_depth_is_valid(self.target_depth)
-            && self.load_cell.gain_q16 != 0
+            && self.load_cell.gain_q16.unsigned_abs() >= crate::protocol::command::MIN_GAIN_Q16
             && self.load_cell.full_scale_counts > 0
     }
 }

@@ -10,7 +10,7 @@
 //!
 //! | quantity | format | range |
 //! |---|---|---|
-//! | captured time | timer ticks, `u16`, wrapping | a gap is measured up to 2^16 ticks (655 ms at the real board's 10 µs tick), beyond it modulo that |
+//! | captured time | timer ticks, `u16`, wrapping | a gap is measured up to 2^16 ticks (655 ms at the real board's 10 µs tick), beyond it modulo that (a converter silent that long, `adc_timeout`, counts a few too many when it comes back) |
 //! | period | ticks, `u16` | ≥ 1 |
 
 /// The times of the edges seen so far.
@@ -40,7 +40,8 @@ impl EdgeClock {
         };
         let elapsed = u32::from(captured.wrapping_sub(last));
         let period = u32::from(self.period_ticks);
-        (elapsed + period / 2) / period
+        // `period` ≥ 1 (`new`): checked so that no panic path is linked.
+        (elapsed + period / 2).checked_div(period).unwrap_or(0)
     }
 }
 

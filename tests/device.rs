@@ -583,3 +583,41 @@ fn a_gain_set_by_command_scales_the_force_is_kept_and_a_tiny_one_is_refused() {
         "twice the gain"
     );
 }
+
+#[test]
+fn faults_found_before_arming_never_release_the_halt_and_a_rearm_waits_for_a_sample() {
+    use needle_holder::persist::Loaded;
+    // The line is only ever driven high: never low, not for an instant.
+    let mut pin = PinMock::new(&[Transaction::set(State::High)]);
+    let mut sink = Vec::new();
+    let mut device = Device::restored_with(
+        DeviceConfig::default(),
+        needle_holder::device::default_tissue(),
+        Loaded::NotKept,
+        Faults::WATCHDOG_RESET,
+        &mut sink,
+        pin.clone(),
+    );
+    let summary = device.summary();
+    assert!(summary.halt && summary.faults == Faults::WATCHDOG_RESET);
+    // No sample since the fault: its cause is not known to be gone.
+    device.receive(&command_bytes(1, protocol::Command::Rearm));
+    assert!(device.summary().halt, "refused without a sample");
+    drop(device);
+    pin.done();
+    let refused = frames(&sink)
+        .into_iter()
+        .any(|f| matches!(f, Frame::Reply(r) if r.seq == 1 && r.result.is_err()));
+    assert!(refused);
+
+    // A converter that stopped after arming: the same until a sample.
+    let mut sink = Vec::new();
+    let mut device = Device::new(DeviceConfig::default(), &mut sink, RecordingPin::default());
+    device.tick(&mut ok(0), &mut Enc(0));
+    device.raise(Faults::ADC_TIMEOUT);
+    device.receive(&command_bytes(1, protocol::Command::Rearm));
+    assert!(device.summary().halt, "no sample since adc_timeout");
+    device.tick(&mut ok(0), &mut Enc(0));
+    device.receive(&command_bytes(2, protocol::Command::Rearm));
+    assert!(!device.summary().halt, "a sample came: released");
+}

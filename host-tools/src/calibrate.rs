@@ -11,8 +11,8 @@ use std::io::BufRead;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use needle_holder::protocol::command::MIN_GAIN_Q16;
-use needle_holder::protocol::Command;
+use needle_holder::protocol::command::{MIN_GAIN_Q16, NO_READING_YET};
+use needle_holder::protocol::{Command, CommandError};
 
 use crate::decode::command_error;
 use crate::frames::{Item, Message};
@@ -113,14 +113,17 @@ pub fn run(link: &mut Link, port: &str, args: &CalibrateArgs) -> Result<()> {
     }
     if !args.loaded {
         ask("Take every load off the needle holder and hold it still")?;
-        refused(port, link.command(Command::Tare)?)?;
+        tare(link, port)?;
         ask(&format!(
             "Hang the {} g mass from the needle holder and let it settle",
             args.mass_g
         ))?;
     }
-    // Starting the stream sends the config frame, with the gain in force.
+    // The stream on (it may be off), then the configuration read: the
+    // config frame that answers the read marks where fresh samples start
+    // (all before it may be from before the mass hung).
     refused(port, link.command(Command::Stream(true))?)?;
+    refused(port, link.command(Command::ReadConfig)?)?;
     let (gain_q16, forces_n) = measure(link, port, Duration::from_secs_f64(args.seconds))?;
     let found = calibrated_gain(gain_q16, &forces_n, args.mass_g / 1e3)?;
     refused(
@@ -140,36 +143,57 @@ pub fn run(link: &mut Link, port: &str, args: &CalibrateArgs) -> Result<()> {
     Ok(())
 }
 
-fn refused(port: &str, reply: Result<(), needle_holder::protocol::CommandError>) -> Result<()> {
+/// Zero the load cell; a device that has no reading yet to zero (just
+/// started, or its stream only now on) is asked again for a second.
+fn tare(link: &mut Link, port: &str) -> Result<()> {
+    let mut until = None;
+    loop {
+        let reply = link.command(Command::Tare)?;
+        let no_reading_yet = matches!(
+            &reply,
+            Err(CommandError::OutOfRange { field }) if field.as_str() == NO_READING_YET
+        );
+        let until = *until.get_or_insert_with(|| Instant::now() + Duration::from_secs(1));
+        if !no_reading_yet || Instant::now() >= until {
+            return refused(port, reply);
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn refused(port: &str, reply: Result<(), CommandError>) -> Result<()> {
     reply.map_err(|e| anyhow::anyhow!("{port}: the device refused: {}", command_error(&e)))
 }
 
-/// The gain in force (from the first config frame) and the forces of the
-/// samples over `window` after it.
+/// The gain in force and the forces of the samples over `window`, from
+/// the last config frame among what arrived up to the reply to a config
+/// read (the one that answered it, or a later one) on.
 fn measure(link: &mut Link, port: &str, window: Duration) -> Result<(i32, Vec<f64>)> {
-    let deadline = Instant::now() + window + Duration::from_secs(3);
-    let mut gain = None;
-    let mut until = None;
-    let mut forces = Vec::new();
-    while Instant::now() < deadline && !link.closed() {
-        for item in link.poll()? {
-            match item {
-                Item::Frame(Message::Config(c)) if gain.is_none() => {
-                    gain = Some(c.config.load_cell.gain_q16);
-                    until = Some(Instant::now() + window);
-                }
-                Item::Sample(s) if gain.is_some() => forces.push(s.force.as_n()),
-                _ => {}
-            }
-        }
-        if until.is_some_and(|u| Instant::now() >= u) {
-            break;
-        }
-    }
-    let Some(gain) = gain else {
-        bail!("{port}: the device started its stream but sent no configuration frame");
+    let arrived = link.poll()?;
+    let last_config = arrived
+        .iter()
+        .enumerate()
+        .rev()
+        .find_map(|(at, item)| match item {
+            Item::Frame(Message::Config(c)) => Some((at, c.config.load_cell.gain_q16)),
+            _ => None,
+        });
+    let Some((at, gain)) = last_config else {
+        bail!("{port}: the device answered the configuration read but sent no configuration frame");
     };
+    let mut forces: Vec<f64> = arrived[at..].iter().filter_map(force_of).collect();
+    let until = Instant::now() + window;
+    while Instant::now() < until && !link.closed() {
+        forces.extend(link.poll()?.iter().filter_map(force_of));
+    }
     Ok((gain, forces))
+}
+
+fn force_of(item: &Item) -> Option<f64> {
+    match item {
+        Item::Sample(s) => Some(s.force.as_n()),
+        _ => None,
+    }
 }
 
 #[cfg(test)]

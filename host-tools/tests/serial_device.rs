@@ -907,3 +907,77 @@ fn needle_device_calibrate_sets_the_gain_that_reads_the_mass_and_the_device_keep
     });
     assert!((force_n - 0.980_665).abs() < 2e-3, "{force_n} N");
 }
+
+#[test]
+fn needle_device_calibrate_asks_tares_and_measures_only_once_the_mass_hangs() {
+    use std::io::Write;
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    // 2 s unloaded, then 0.5 N: the samples from before the second
+    // answer (unloaded, streamed while the person was hanging the mass)
+    // must not enter the measurement.
+    let rate_hz = 500u16;
+    let n = 30 * usize::from(rate_hz);
+    let loaded_from = 2 * usize::from(rate_hz);
+    let trial = host_tools::trial::Trial {
+        t_s: (0..n).map(|i| i as f64 / f64::from(rate_hz)).collect(),
+        x_m: vec![0.0; n],
+        f_n: (0..n)
+            .map(|i| if i < loaded_from { 0.0 } else { 0.5 } + 2e-4 * ((i * 7) % 5) as f64)
+            .collect(),
+    };
+    let config = DeviceConfig::default();
+    let replay = dir.path().join("hang_later.replay");
+    std::fs::write(
+        &replay,
+        sim::to_replay(&trial, rate_hz, &config.load_cell, &config.encoder),
+    )
+    .unwrap();
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let mut calibrate = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args([
+            "device",
+            "--port",
+            &device.port,
+            "calibrate",
+            "--mass-g",
+            "100",
+            "--seconds",
+            "1",
+        ])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut answer = calibrate.stdin.take().unwrap();
+    // Unloaded: Enter at once (the tare); the mass hangs from 2 s on;
+    // Enter again at 5 s.
+    answer.write_all(b"\n").unwrap();
+    std::thread::sleep(Duration::from_secs(5));
+    // (A needle that stopped already is reported below, with its words.)
+    let _ = answer.write_all(b"\n");
+    drop(answer);
+    let out = calibrate.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("Take every load off") && stderr.contains("Hang the 100 g"),
+        "{stderr}"
+    );
+    // Only loaded samples: 0.5 N (the noise's mean, 0.4 mN, the tare
+    // took away for the most part); a mean with unloaded samples in it
+    // would be far less, with a spread of tenths of a newton.
+    let read = |after: &str| -> f64 {
+        let at = stdout.find(after).expect(after) + after.len();
+        stdout[at..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert!((read("mass read ") - 0.5).abs() < 1e-3, "{stdout}");
+    assert!(read("N ± ") < 1e-3, "{stdout}");
+}

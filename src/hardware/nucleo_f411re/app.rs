@@ -133,15 +133,13 @@ mod app {
         };
         if let Err(e) = parts.converter_started {
             defmt::error!("ADS1220 did not start: {}", defmt::Debug2Format(&e));
-            let device = arm(
+            arm(
                 &mut shared.device,
                 &mut shared.unarmed,
                 &config,
                 shared.origin,
+                Faults::ADC_ERROR,
             );
-            if let Some(device) = device {
-                device.raise(Faults::ADC_ERROR);
-            }
         }
         // Edges latched during start-up (the converter runs from
         // `setup` on; an erase above stalls for seconds): the first sample
@@ -160,7 +158,9 @@ mod app {
                 encoder: parts.encoder,
                 // Beyond 0.5 N the needle is loaded, and taring would hide
                 // the load.
-                tare: BootTare::new(config.load_cell.most_tare_offset_counts() as i32),
+                tare: BootTare::new(
+                    i32::try_from(config.load_cell.most_tare_offset_counts()).unwrap_or(i32::MAX),
+                ),
                 serial,
                 receiver,
                 line_errors: 0,
@@ -179,21 +179,25 @@ mod app {
         u16::try_from(TICK_HZ.checked_div(sps).unwrap_or(1)).unwrap_or(u16::MAX)
     }
 
-    /// The device, armed now with `config` if it was not yet, with the
-    /// faults the boot found raised.
+    /// The device, armed now with `config` if it was not yet, with
+    /// `faults` and those the boot found raised. Armed with a fault, it
+    /// never releases the halt line the board held high until then.
     fn arm<'a>(
         device: &'a mut Option<Dev>,
         unarmed: &mut Option<(QueueWriter, HaltLine)>,
         config: &DeviceConfig,
         (tissue, stored, boot_faults): (TissueSource, Loaded, Faults),
+        faults: Faults,
     ) -> Option<&'a mut Dev> {
-        if device.is_none() {
-            if let Some((sink, halt)) = unarmed.take() {
-                let mut armed = Device::restored(*config, tissue, stored, sink, halt);
-                if !boot_faults.is_empty() {
-                    armed.raise(boot_faults);
+        match device {
+            Some(d) => d.raise(faults),
+            None => {
+                if let Some((sink, halt)) = unarmed.take() {
+                    let faults = boot_faults.union(faults);
+                    *device = Some(Device::restored_with(
+                        *config, tissue, stored, faults, sink, halt,
+                    ));
                 }
-                *device = Some(armed);
             }
         }
         device.as_mut()
@@ -236,7 +240,7 @@ mod app {
                 Conversion::Partial | Conversion::Stale => {}
                 Conversion::Failed(e) => {
                     defmt::error!("ADS1220: {}", defmt::Debug2Format(&e));
-                    if let Some(d) = arm(device, unarmed, config, *origin) {
+                    if let Some(d) = arm(device, unarmed, config, *origin, Faults::ADC_ERROR) {
                         d.tick(&mut Broken, encoder);
                     }
                 }
@@ -250,13 +254,11 @@ mod app {
                             TareResult::Zero(zero) => {
                                 config.load_cell.tare_counts = zero;
                                 defmt::info!("tare {=i32} counts: armed", zero);
-                                arm(device, unarmed, config, *origin);
+                                arm(device, unarmed, config, *origin, Faults::NONE);
                             }
                             TareResult::Loaded(mean) => {
                                 defmt::error!("load at boot: {=i32} counts", mean);
-                                if let Some(d) = arm(device, unarmed, config, *origin) {
-                                    d.raise(Faults::LOAD_AT_BOOT);
-                                }
+                                arm(device, unarmed, config, *origin, Faults::LOAD_AT_BOOT);
                             }
                         }
                     } else if let Some(d) = device.as_mut() {
@@ -288,41 +290,45 @@ mod app {
                 super::super::stack::high_water_bytes()
             );
         }
-        let halted_for_fault = cx.shared.device.lock(|device| {
+        let seen = cx.shared.seen.lock(|s| *s);
+        if seen != *cx.local.last_seen {
+            (*cx.local.last_seen, *cx.local.quiet) = (seen, 0);
+        } else {
+            *cx.local.quiet = cx.local.quiet.saturating_add(1);
+        }
+        let quiet = *cx.local.quiet >= 2;
+        let mut shared = (
+            cx.shared.device,
+            cx.shared.unarmed,
+            cx.shared.config,
+            cx.shared.origin,
+        );
+        let halted_for_fault = shared.lock(|device, unarmed, config, origin| {
+            if quiet {
+                // Raised again on every quiet tick (a no-op while latched):
+                // a re-arm with the converter still silent halts again.
+                arm(device, unarmed, config, *origin, Faults::ADC_TIMEOUT);
+            }
             device
                 .as_ref()
                 .is_some_and(|d| d.summary().halted_for_fault())
         });
+        if quiet && *cx.local.quiet == 2 {
+            defmt::error!("no data-ready: adc_timeout");
+            rtic::pend(pac::Interrupt::USART2);
+        }
+        // After the raise: the tick that finds the converter silent also
+        // keeps the independent watchdog from resetting the report away.
         if halted_for_fault {
             cx.shared.iwdg.lock(|iwdg| iwdg.feed());
-        }
-        let seen = cx.shared.seen.lock(|s| *s);
-        if seen != *cx.local.last_seen {
-            (*cx.local.last_seen, *cx.local.quiet) = (seen, 0);
-            return;
-        }
-        *cx.local.quiet = cx.local.quiet.saturating_add(1);
-        if *cx.local.quiet == 2 {
-            defmt::error!("no data-ready: adc_timeout");
-            let mut shared = (
-                cx.shared.device,
-                cx.shared.unarmed,
-                cx.shared.config,
-                cx.shared.origin,
-            );
-            shared.lock(|device, unarmed, config, origin| {
-                if let Some(d) = arm(device, unarmed, config, *origin) {
-                    d.raise(Faults::ADC_TIMEOUT);
-                }
-            });
-            rtic::pend(pac::Interrupt::USART2);
         }
     }
 
     #[task(binds = USART2, priority = 1, shared = [device], local = [serial, receiver, line_errors, commands, outgoing])]
     fn link(mut cx: link::Context) {
-        // A byte with a line error is in the buffer all the same: the
-        // frame it is in fails its CRC and the device says so.
+        // A byte with a framing or noise error is in the buffer all the
+        // same, an overrun loses one: either way the frame fails its CRC
+        // and the device says so.
         let errors = cx.local.serial.take_line_events();
         let device = &mut cx.shared.device;
         if errors > 0 {

@@ -8,7 +8,9 @@
 use stm32f4::stm32f411 as pac;
 
 /// The counter's tick: 10 µs, so its 16 bits span 655 ms, longer than
-/// the independent watchdog lets the sample task stop.
+/// the independent watchdog lets the sample task stop while the device
+/// runs (halted by `adc_timeout`, it may stop longer: see
+/// [`EdgeClock`](needle_holder::sample_clock::EdgeClock)).
 pub const TICK_HZ: u32 = 100_000;
 
 /// TIM1 capturing falling edges on channel 3.

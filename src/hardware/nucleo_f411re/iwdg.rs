@@ -19,25 +19,25 @@ const LSI_SLOWEST_HZ: u32 = 17_000;
 const LSI_FASTEST_HZ: u32 = 47_000;
 /// The LSI divided by 8 (PR = 1).
 const PRESCALER: u32 = 8;
-/// Reload, in prescaled LSI ticks: 188 ms at the typical 32 kHz.
-const RELOAD: u16 = 750;
+/// Reload, in prescaled LSI ticks: 250 ms at the typical 32 kHz.
+const RELOAD: u16 = 1000;
 
 /// The shortest and longest time from the last feed to the reset, ms,
-/// over the LSI's spread: 127–352 ms.
+/// over the LSI's spread: 170–470 ms.
 pub const TIMEOUT_MS: (u32, u32) = (
     RELOAD as u32 * PRESCALER * 1000 / LSI_FASTEST_HZ,
     RELOAD as u32 * PRESCALER * 1000 / LSI_SLOWEST_HZ,
 );
 
 // A converter that stops is the data-ready watchdog's `adc_timeout`
-// (within two TIM5 periods), after which the TIM5 task feeds this one:
-// the reset must not come first, even on the fastest LSI, with a TIM5
-// period to spare.
-const _: () = assert!(TIMEOUT_MS.0 > 3 * 1000 / super::setup::WATCHDOG_HZ);
+// within three TIM5 periods of the last sample (the tick that still saw
+// it, then two quiet ones), and that tick feeds this one: the reset must
+// not come first, even on the fastest LSI, with a TIM5 period to spare.
+const _: () = assert!(TIMEOUT_MS.0 > 4 * 1000 / super::setup::WATCHDOG_HZ);
 
-/// Polls of the prescaler and reload update flags before starting anyway:
-/// the update takes five LSI periods (≤ 300 µs); at 100 MHz this bound is
-/// far longer.
+/// Polls of the prescaler and reload update flags before going on
+/// anyway: an update takes five LSI periods once the LSI runs (≤ 300 µs);
+/// at 100 MHz this bound is far longer.
 const UPDATE_POLLS: u32 = 100_000;
 
 /// The running watchdog.
@@ -48,16 +48,19 @@ impl IndependentWatchdog {
     /// while a debugger halts the core.
     pub fn start(iwdg: pac::IWDG, dbgmcu: &pac::DBGMCU) -> Self {
         dbgmcu.apb1_fz().modify(|_, w| w.dbg_iwdg_stop().set_bit());
+        // ST's order: start first (it starts the LSI, which the update of
+        // the prescaler and reload needs), then unlock and write them,
+        // wait for the update, and reload the counter with them.
+        iwdg.kr().write(|w| w.key().start());
         iwdg.kr().write(|w| w.key().unlock());
         iwdg.pr().write(|w| w.pr().divide_by8());
         iwdg.rlr().write(|w| w.rl().set(RELOAD));
-        // Whether the values reached the LSI domain or not, the watchdog
-        // starts (with the reset values, 512 ms, if they did not).
+        // If the update never lands, the reset values (512 ms) stay.
         let _ = (0..UPDATE_POLLS).any(|_| {
             let sr = iwdg.sr().read();
             sr.pvu().bit_is_clear() && sr.rvu().bit_is_clear()
         });
-        iwdg.kr().write(|w| w.key().start());
+        iwdg.kr().write(|w| w.key().feed());
         Self(iwdg)
     }
 

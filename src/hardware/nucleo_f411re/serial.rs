@@ -27,8 +27,8 @@ fn divider(pclk_hz: u32, baud: u32) -> u16 {
 }
 
 impl Usart2 {
-    /// Enabled at `baud` from APB1's `pclk1_hz`, receiving; with the
-    /// receive interrupt if `rx_interrupt`.
+    /// Enabled at `baud` from APB1's `pclk1_hz`, sending and receiving
+    /// (into nothing until [`RxDma::start`]).
     pub fn new(usart: pac::USART2, pclk1_hz: u32, baud: u32) -> Self {
         let brr = divider(pclk1_hz, baud);
         let actual = pclk1_hz.checked_div(u32::from(brr)).unwrap_or(0);
@@ -53,10 +53,17 @@ impl Usart2 {
         Self(usart)
     }
 
-    /// Receive by DMA from here on, with the idle-line interrupt.
+    /// Receive by DMA from here on, with the idle-line and error
+    /// interrupts (in DMA mode, errors interrupt only through EIE, RM0383
+    /// §19.6.6). What the receiver flagged before (bytes a host sent
+    /// during the boot, an overrun) is cleared first.
     #[cfg(not(feature = "f411-replay"))]
     fn receive_by_dma(&mut self) {
-        self.0.cr3().modify(|_, w| w.dmar().set_bit());
+        let _ = self.0.sr().read();
+        let _ = self.0.dr().read();
+        self.0
+            .cr3()
+            .modify(|_, w| w.dmar().set_bit().eie().set_bit());
         self.0.cr1().modify(|_, w| w.idleie().set_bit());
     }
 
@@ -67,18 +74,19 @@ impl Usart2 {
     }
 
     /// Acknowledge the idle line and count the receive errors flagged
-    /// since the last call (overrun, noise, framing: a flagged byte goes
-    /// to the buffer all the same, and the frame it is in fails its CRC,
-    /// which the device answers). Several errors between two calls count
-    /// once.
+    /// since the last call (noise and framing: the flagged byte goes to
+    /// the buffer all the same; overrun: a byte is lost; either way the
+    /// frame it is in fails its CRC, which the device answers). Several
+    /// errors between two calls count once; so does one whose flags a
+    /// transmit's SR read and the DMA's DR read cleared in between.
     #[cfg(not(feature = "f411-replay"))]
     pub fn take_line_events(&mut self) -> u32 {
         let sr = self.0.sr().read();
         let error = sr.ore().bit_is_set() || sr.nf().bit_is_set() || sr.fe().bit_is_set();
-        if error || sr.idle().bit_is_set() {
-            // SR then DR clears IDLE and the error flags (RM0383
-            // §19.6.1); DMA has taken the byte already, so the read
-            // takes nothing from it.
+        // SR then DR clears IDLE and the error flags (RM0383 §19.6.1).
+        // With a byte waiting (RXNE) the DMA's own read of DR finishes
+        // the sequence: a read here would take that byte from it.
+        if (error || sr.idle().bit_is_set()) && sr.rxne().bit_is_clear() {
             let _ = self.0.dr().read();
         }
         u32::from(error)
@@ -137,6 +145,14 @@ impl RxDma {
         // The stream is off before it is set up (a reset leaves it off;
         // a debugger's restart may not): at most a few cycles.
         let _ = (0..10_000).any(|_| stream.cr().read().en().bit_is_clear());
+        // Its event flags cleared before it is enabled (RM0383 §9.5.5).
+        dma.hifcr().write(|w| {
+            w.ctcif5().set_bit();
+            w.chtif5().set_bit();
+            w.cteif5().set_bit();
+            w.cdmeif5().set_bit();
+            w.cfeif5().set_bit()
+        });
         // SAFETY: the addresses of USART2's data register and of a
         // 'static buffer the DMA owns from here on (the CPU reads it only
         // through `buffer`, volatile); the count is the buffer's length.

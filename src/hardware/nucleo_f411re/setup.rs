@@ -23,8 +23,9 @@ use super::timer::Watchdog;
 pub const BAUD: u32 = 921_600;
 /// The ADS1220's fastest SPI clock (datasheet §7.6: 150 ns period).
 const SPI_MOST_HZ: u32 = 6_600_000;
-/// How often the watchdog looks for samples; two looks without one is an
-/// `adc_timeout` (40–80 ms: 20 samples at the slowest rate).
+/// How often the watchdog looks for samples; two looks without one after
+/// a look with some is an `adc_timeout` (80–120 ms after the last sample:
+/// 40 samples at the slowest rate).
 pub const WATCHDOG_HZ: u32 = 25;
 
 /// Everything the application runs on.
