@@ -757,9 +757,11 @@ pub fn command_error(e: &CommandError) -> String {
                 .into()
         }
         CommandError::OutOfRange { field } => format!("{field} is out of range"),
-        CommandError::NeedleInTissue => "the needle is in tissue: withdraw it before taring".into(),
+        CommandError::NeedleInTissue => {
+            "the needle is in tissue: withdraw it first (a tare or a new gain would move the force under it)".into()
+        }
         CommandError::LoadOnNeedle { force } => format!(
-            "{:.3} N on the load cell is a load, not an offset (over 5 % of full scale)",
+            "{:.3} N on the load cell is a load, not an offset (over 0.5 N)",
             force.as_n()
         ),
         CommandError::HaltCausePersists { reason } => format!(

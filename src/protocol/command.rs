@@ -27,7 +27,7 @@ use crate::units::{MicroNewtons, Nanometres};
 pub enum Command {
     /// Make the load cell's present reading its zero (the mean of the last
     /// quarter second or so). Refused with the needle in tissue, or with
-    /// more than 5 % of full scale on it.
+    /// more than 0.5 N on it ([`crate::calibration::MOST_TARE_OFFSET`]).
     Tare,
     /// Model and detectors from the on-device tissue library, by position
     /// (`needle device tissues` lists them).
@@ -98,9 +98,10 @@ pub enum CommandError {
         /// Which.
         field: ReplyText,
     },
-    /// Taring with the needle in tissue would zero the tissue's force.
+    /// Taring or setting the gain with the needle in tissue would move
+    /// the tissue's force under it.
     NeedleInTissue,
-    /// More than 5 % of full scale on the load cell: a load, not an offset.
+    /// More than 0.5 N on the load cell: a load, not an offset.
     LoadOnNeedle {
         /// The force the present zero reads.
         force: MicroNewtons,
