@@ -186,6 +186,9 @@ impl Config {
     }
 }
 
+/// The configuration registers as read back, and as written.
+pub type ReadBack = ([u8; 4], [u8; 4]);
+
 /// What can go wrong talking to the converter.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Error<E> {
@@ -262,6 +265,22 @@ impl<SPI: SpiDevice, DRDY: InputPin> Ads1220<SPI, DRDY> {
         self.written = Some(wrote);
         self.linear_range = config.linear_range();
         Ok(())
+    }
+
+    /// The configuration registers as read back now, and as written at
+    /// the start (`None` before a start): for a self-test.
+    pub fn registers(&mut self) -> Result<Option<ReadBack>, Error<SPI::Error>> {
+        let Some(wrote) = self.written else {
+            return Ok(None);
+        };
+        let mut read = [0; 4];
+        self.spi
+            .transaction(&mut [
+                Operation::Write(&[command::RREG | 0b11]),
+                Operation::Read(&mut read),
+            ])
+            .map_err(Error::Spi)?;
+        Ok(Some((read, wrote)))
     }
 
     /// Read the configuration registers back and compare them with

@@ -15,9 +15,9 @@ use crate::pipeline::{PipelineState, RawSample};
 use crate::protocol::batch::{samples_per_batch, BatchCheck, BatchWriter};
 use crate::protocol::command::{self, CommandReader};
 use crate::protocol::{
-    BoardCounters, Command, CommandError, CommandFrame, ConfigFrame, Event, EventKind, Frame,
-    FrameEncoder, Halt, HaltReason, Header, Phase, Reply, Sample, Snapshot, Status, TissueSource,
-    PROTOCOL_VERSION, STATUS_PERIOD_SAMPLES,
+    BoardCounters, BoardFindings, Command, CommandError, CommandFrame, ConfigFrame, Event,
+    EventKind, Frame, FrameEncoder, Halt, HaltReason, Header, Phase, Reply, Sample, SelfTest,
+    Snapshot, Status, TissueSource, PROTOCOL_VERSION, STATUS_PERIOD_SAMPLES,
 };
 use crate::units::{MicroNewtons, Nanometres};
 
@@ -57,6 +57,8 @@ pub struct Device<W: Write, H: OutputPin> {
     /// pipeline (a converter that stopped, a reset by the watchdog): a
     /// re-arm needs a sample after it, the proof that the cause is gone.
     raised_outside_at: Option<u32>,
+    /// A self-test was asked for and the board has not yet answered it.
+    self_test_asked: bool,
 }
 
 /// Counters and flags at the end of a run.
@@ -144,6 +146,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             unsaved: false,
             board: BoardCounters::default(),
             raised_outside_at: None,
+            self_test_asked: false,
         };
         if faults.is_empty() && device.halt.set_low().is_err() {
             device.faults = device.faults.union(Faults::HALT_OUTPUT);
@@ -188,6 +191,23 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             self.send_snapshot();
             self.send_status();
         }
+    }
+
+    /// Whether a self-test was asked for since the last call: the board
+    /// then looks and answers with [`Self::send_self_test`].
+    pub fn self_test_asked(&mut self) -> bool {
+        core::mem::take(&mut self.self_test_asked)
+    }
+
+    /// Send the self-test with what the board found.
+    pub fn send_self_test(&mut self, board: BoardFindings) {
+        let report = SelfTest {
+            board,
+            halt: self.halt_asserted,
+            faults: self.faults,
+            counters: self.board,
+        };
+        self.send(&Frame::SelfTest(report));
     }
 
     /// The board's counters, which the next status frames report.
@@ -331,6 +351,10 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             }
             Command::ReadConfig => {
                 self.send_config();
+                Ok(())
+            }
+            Command::SelfTest => {
+                self.self_test_asked = true;
                 Ok(())
             }
             Command::SetLoadCellGain(gain_q16) => {

@@ -301,9 +301,19 @@ impl<R: Read, W: Write, H: OutputPin> Replayer<R, W, H> {
         }
     }
 
-    /// Commands from the host, between samples (see [`Device::receive`]).
+    /// Commands from the host, between samples (see [`Device::receive`]);
+    /// a self-test is answered at once: no converter, nothing measured,
+    /// the replay's rate and encoder count.
     pub fn receive(&mut self, bytes: &[u8]) {
         self.device.receive(bytes);
+        if self.device.self_test_asked() {
+            self.device.send_self_test(crate::protocol::BoardFindings {
+                adc_registers: None,
+                data_ready_per_s: None,
+                data_ready_expected_per_s: u32::from(self.sample_rate_hz),
+                encoder_count: self.encoder.count,
+            });
+        }
     }
 
     /// Send the final status and return the counters.

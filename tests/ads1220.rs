@@ -261,3 +261,19 @@ fn at_gain_128_on_the_supply_codes_past_the_pgas_linear_range_are_saturated() {
     spi.done();
     drdy.done();
 }
+
+#[test]
+fn a_self_test_reads_the_registers_back_beside_those_written() {
+    let (mut spi, mut drdy, mut adc) = started(rreg([0x3e, 0xc4, 0x00, 0x00]), 0);
+    assert_eq!(
+        adc.registers(),
+        Ok(Some(([0x3e, 0xc4, 0x00, 0x00], AT_1000_SPS)))
+    );
+    spi.done();
+    drdy.done();
+    let mut idle = Ads1220::new(Spi::new(&[]), Pin::new(&[]));
+    assert_eq!(idle.registers(), Ok(None), "not started: nothing written");
+    let (mut spi, mut drdy) = idle.release();
+    spi.done();
+    drdy.done();
+}

@@ -813,6 +813,7 @@ pub fn describe(frame: &Message, rate_hz: Option<u16>) -> String {
             h.x.as_m() * 1e3,
             h.hold_x.as_m() * 1e3
         ),
+        Message::SelfTest(t) => crate::selftest::summary(t),
         Message::Reply(r) => match &r.result {
             Ok(()) => format!("reply   command {} done", r.seq),
             Err(e) => format!("reply   command {} refused: {}", r.seq, command_error(e)),

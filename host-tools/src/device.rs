@@ -61,6 +61,9 @@ pub enum Action {
     /// Calibrate the load cell with a known mass: zero it unloaded, then
     /// set its gain from the mass hanging (kept in the device's settings).
     Calibrate(crate::calibrate::CalibrateArgs),
+    /// Ask the board to test itself: converter registers, data-ready rate,
+    /// encoder, halt line, link counters; exit 1 if a check fails.
+    Selftest,
 }
 
 pub fn run(args: &DeviceArgs) -> Result<()> {
@@ -88,10 +91,38 @@ pub fn run(args: &DeviceArgs) -> Result<()> {
         Ok(()) => crate::out!("done")?,
         Err(e) => bail!("{port}: the device refused: {}", command_error(&e)),
     }
-    if let Action::Config = args.action {
-        print_config(&mut link, port)?;
+    match args.action {
+        Action::Config => print_config(&mut link, port)?,
+        Action::Selftest => print_self_test(&mut link, port)?,
+        _ => {}
     }
     Ok(())
+}
+
+/// Wait for the self-test that follows the reply and print its checks.
+fn print_self_test(link: &mut Link, port: &str) -> Result<()> {
+    let until = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < until && !link.closed() {
+        for item in link.poll()? {
+            if let Item::Frame(Message::SelfTest(t)) = item {
+                let checks = crate::selftest::checks(&t);
+                for c in &checks {
+                    let verdict = match c.ok {
+                        Some(true) => "ok  ",
+                        Some(false) => "FAIL",
+                        None => "    ",
+                    };
+                    crate::out!("{verdict} {}", c.line)?;
+                }
+                let failed = checks.iter().filter(|c| c.ok == Some(false)).count();
+                if failed > 0 {
+                    bail!("{port}: {failed} self-test checks failed");
+                }
+                return Ok(());
+            }
+        }
+    }
+    bail!("{port}: the device acknowledged but sent no self-test")
 }
 
 /// The command an action sends.
@@ -115,6 +146,7 @@ pub fn command_of(action: &Action) -> Result<Command> {
         Action::Rearm => Command::Rearm,
         Action::Stream { state } => Command::Stream(state == "on"),
         Action::Config => Command::ReadConfig,
+        Action::Selftest => Command::SelfTest,
     })
 }
 

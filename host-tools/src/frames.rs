@@ -13,7 +13,7 @@
 
 use needle_holder::protocol::wire::{self, DecodeError, FRAME_CRC};
 use needle_holder::protocol::{
-    self, ConfigFrame, Event, Frame, Halt, Header, Reply, Sample, Snapshot, Status,
+    self, ConfigFrame, Event, Frame, Halt, Header, Reply, Sample, SelfTest, Snapshot, Status,
     MAX_ENCODED_FRAME, PROTOCOL_VERSION,
 };
 use needle_holder::stream::{Reconstructor, Withheld};
@@ -114,6 +114,7 @@ pub enum Message {
     Status(Status),
     Halt(Halt),
     Reply(Reply),
+    SelfTest(SelfTest),
 }
 
 /// Why samples are missing.
@@ -465,6 +466,7 @@ impl StreamDecoder {
             Frame::Event(e) => Message::Event(e),
             Frame::Halt(h) => Message::Halt(h),
             Frame::Reply(r) => Message::Reply(r),
+            Frame::SelfTest(t) => Message::SelfTest(t),
         };
         self.message(message, on_item);
         Ok(())

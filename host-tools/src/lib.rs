@@ -16,6 +16,7 @@ pub mod input;
 pub mod link;
 pub mod plot;
 pub mod record;
+pub mod selftest;
 pub mod sim;
 pub mod stdout;
 pub mod tissue;

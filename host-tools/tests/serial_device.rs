@@ -981,3 +981,32 @@ fn needle_device_calibrate_asks_tares_and_measures_only_once_the_mass_hangs() {
     assert!((read("mass read ") - 0.5).abs() < 1e-3, "{stdout}");
     assert!(read("N ± ") < 1e-3, "{stdout}");
 }
+
+#[test]
+fn needle_device_selftest_reads_the_boards_checklist() {
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let replay = replay_file(dir.path(), &Plan::PAPER, 0);
+    let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
+    let out = Process::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["device", "--port", &device.port, "selftest"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The CI board replays: no converter to read, its rate as configured,
+    // its encoder where the replay starts, nothing failed.
+    for line in [
+        "converter registers: none on this board",
+        "data-ready not counted on this board (configured 500 a second)",
+        "encoder count",
+        "ok   halt line released (no fault)",
+        "ok   link: 0 receive errors; 0 conversions lost",
+    ] {
+        assert!(stdout.contains(line), "{line:?} in {stdout}");
+    }
+}

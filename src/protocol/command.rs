@@ -54,6 +54,10 @@ pub enum Command {
     /// stays the tare's. Kept in the settings. At least
     /// [`MIN_GAIN_Q16`] in magnitude; the sign is the wiring's.
     SetLoadCellGain(i32),
+    /// Test the board: a [`crate::protocol::SelfTest`] frame follows the
+    /// reply (the board reads its converter's registers, counts its
+    /// data-ready edges, reads its encoder).
+    SelfTest,
 }
 
 /// A command as it goes on the wire.
@@ -261,6 +265,7 @@ mod tests {
             Command::Stream(false),
             Command::ReadConfig,
             Command::SetLoadCellGain(i32::MIN),
+            Command::SelfTest,
         ];
         for command in commands {
             let frame = CommandFrame {

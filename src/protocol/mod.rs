@@ -155,6 +155,40 @@ pub struct BoardCounters {
     pub line_errors: u32,
 }
 
+/// What the board found when asked to test itself
+/// ([`Command::SelfTest`]): what a person bringing it up would check with
+/// a probe, from the device's side.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct SelfTest {
+    /// The board's own findings.
+    pub board: BoardFindings,
+    /// The halt line as the device drives it (true: high, stop).
+    pub halt: bool,
+    /// Latched faults.
+    pub faults: Faults,
+    /// The board's counters since boot.
+    pub counters: BoardCounters,
+}
+
+/// What only the board can look at for a [`SelfTest`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct BoardFindings {
+    /// The converter's configuration registers read back now, and as
+    /// written at its start; `None` on a board without a converter (the
+    /// replay boards).
+    pub adc_registers: Option<([u8; 4], [u8; 4])>,
+    /// Data-ready edges over the last whole second; `None` where nothing
+    /// measures them (the replay boards, or in the first second).
+    pub data_ready_per_s: Option<u32>,
+    /// How many the converter's configuration makes a second (the
+    /// replay's rate on the replay boards).
+    pub data_ready_expected_per_s: u32,
+    /// The encoder's count now.
+    pub encoder_count: u16,
+}
+
 /// Why the device asserted the halt line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
@@ -256,6 +290,8 @@ pub enum Frame<'a> {
     Halt(Halt),
     /// The answer to a command.
     Reply(Reply),
+    /// The board's self-test, after [`Command::SelfTest`]'s reply.
+    SelfTest(SelfTest),
 }
 
 /// Largest frame before COBS, CRC included: a full batch and its

@@ -38,9 +38,21 @@ mod app {
     use super::super::setup::setup;
     use super::super::store::{SaveError, Store};
     use super::super::timer::Watchdog;
+    use needle_holder::ads1220::Config as AdcConfig;
+    use needle_holder::hal::EncoderCounter;
+    use needle_holder::protocol::BoardFindings;
     use needle_holder::sample_clock::EdgeClock;
 
     type Dev = Device<QueueWriter, HaltLine>;
+
+    /// The sample task's runs and the data-ready edges TIM1 timed, and
+    /// the edges of the last whole second (the watchdog task counts it).
+    #[derive(Clone, Copy, Default)]
+    pub struct Seen {
+        runs: u32,
+        edges: u32,
+        edges_per_s: Option<u32>,
+    }
 
     #[shared]
     struct Shared {
@@ -48,8 +60,9 @@ mod app {
         device: Option<Dev>,
         /// Its sink and halt line until then.
         unarmed: Option<(QueueWriter, HaltLine)>,
-        /// Samples taken, for the watchdog.
-        seen: u32,
+        /// What the sample task has seen, for the watchdog and the
+        /// self-test.
+        seen: Seen,
         config: DeviceConfig,
         /// Where the configuration came from (the tissue's source and
         /// what the settings store held) and the faults the boot found
@@ -126,7 +139,7 @@ mod app {
         let mut shared = Shared {
             device: None,
             unarmed: Some((needle_holder::link::QueueWriter(producer), parts.halt)),
-            seen: 0,
+            seen: Seen::default(),
             config,
             origin: (tissue, load.loaded, boot_faults),
             iwdg: IndependentWatchdog::start(iwdg, &dbgmcu),
@@ -232,7 +245,8 @@ mod app {
         );
         let (encoder, tare) = (cx.local.encoder, cx.local.tare);
         shared.lock(|device, unarmed, seen, config, origin, iwdg| {
-            *seen = seen.wrapping_add(1);
+            seen.runs = seen.runs.wrapping_add(1);
+            seen.edges = seen.edges.wrapping_add(edges);
             if !matches!(conversion, Conversion::Stale) {
                 iwdg.feed();
             }
@@ -266,6 +280,24 @@ mod app {
                     }
                 }
             }
+            let asked = device.as_mut().is_some_and(|d| d.self_test_asked());
+            if let Some(d) = device.as_mut().filter(|_| asked) {
+                let findings = BoardFindings {
+                    // A bus that fails reads as all zeros: a failed check.
+                    adc_registers: match acquisition.converter.registers() {
+                        Ok(registers) => registers,
+                        Err(_) => Some((
+                            [0; 4],
+                            AdcConfig::bridge(rate_for(config.velocity.sample_rate_hz).0)
+                                .registers(),
+                        )),
+                    },
+                    data_ready_per_s: seen.edges_per_s,
+                    data_ready_expected_per_s: rate_for(config.velocity.sample_rate_hz).0.sps(),
+                    encoder_count: encoder.count(),
+                };
+                d.send_self_test(findings);
+            }
         });
         // Data-ready fell again while this sample was in hand: the next
         // one is late.
@@ -275,7 +307,7 @@ mod app {
         rtic::pend(pac::Interrupt::USART2);
     }
 
-    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config, origin, iwdg], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0, ticks: u32 = 0])]
+    #[task(binds = TIM5, priority = 2, shared = [device, unarmed, seen, config, origin, iwdg], local = [watchdog, last_seen: u32 = 0, quiet: u8 = 0, ticks: u32 = 0, second_began: Option<u32> = None])]
     fn watchdog(mut cx: watchdog::Context) {
         cx.local.watchdog.clear();
         // Every 10 s, how deep the stack has been.
@@ -290,7 +322,18 @@ mod app {
                 super::super::stack::high_water_bytes()
             );
         }
-        let seen = cx.shared.seen.lock(|s| *s);
+        let whole_second = cx
+            .local
+            .ticks
+            .is_multiple_of(super::super::setup::WATCHDOG_HZ);
+        let began = cx.local.second_began;
+        let seen = cx.shared.seen.lock(|s| {
+            if whole_second {
+                s.edges_per_s = began.map(|b| s.edges.wrapping_sub(b));
+                *began = Some(s.edges);
+            }
+            s.runs
+        });
         if seen != *cx.local.last_seen {
             (*cx.local.last_seen, *cx.local.quiet) = (seen, 0);
         } else {
