@@ -54,8 +54,9 @@ pub struct Device<W: Write, H: OutputPin> {
     /// What the board counts below the core, for the status frames.
     board: BoardCounters,
     /// Samples processed when a fault was last raised from outside the
-    /// pipeline (a converter that stopped, a reset by the watchdog): a
-    /// re-arm needs a sample after it, the proof that the cause is gone.
+    /// pipeline (a converter that stopped, a reset by the watchdog), until
+    /// the next sample: a re-arm needs one, the proof that the cause is
+    /// gone.
     raised_outside_at: Option<u32>,
     /// A self-test was asked for and the board has not yet answered it.
     self_test_asked: bool,
@@ -169,6 +170,9 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         };
         let out = self.config.step(&mut self.state, raw);
         self.samples = self.samples.saturating_add(1);
+        // A sample came: what was raised outside the samples may be
+        // re-armed past now.
+        self.raised_outside_at = None;
         // A late conversion's counts are not a reading of this sample.
         if let Some(adc) = raw.adc.filter(|a| !a.overrun) {
             self.zero.add(adc.counts);
@@ -278,6 +282,9 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             Ok((frame, check)) => {
                 let (last_seq, last_check, ref last_result) = self.last_command;
                 if frame.seq == last_seq && check == last_check {
+                    // A repeated self-test is asked again: its frame may
+                    // have been lost with the reply.
+                    self.self_test_asked |= matches!(frame.command, Command::SelfTest);
                     (frame.seq, last_result.clone())
                 } else if frame.seq <= last_seq {
                     let next_seq = last_seq.saturating_add(1);
@@ -411,7 +418,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         if !self.halt_asserted {
             return Ok(());
         }
-        if self.raised_outside_at == Some(self.samples) {
+        if self.raised_outside_at.is_some() {
             return Err(CommandError::HaltCausePersists {
                 reason: HaltReason::Fault,
             });

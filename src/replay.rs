@@ -311,7 +311,7 @@ impl<R: Read, W: Write, H: OutputPin> Replayer<R, W, H> {
                 adc_registers: None,
                 data_ready_per_s: None,
                 data_ready_expected_per_s: u32::from(self.sample_rate_hz),
-                encoder_count: self.encoder.count,
+                encoder_count: Some(self.encoder.count),
             });
         }
     }

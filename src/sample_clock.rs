@@ -10,7 +10,7 @@
 //!
 //! | quantity | format | range |
 //! |---|---|---|
-//! | captured time | timer ticks, `u16`, wrapping | a gap is measured up to 2^16 ticks (655 ms at the real board's 10 µs tick), beyond it modulo that (a converter silent that long, `adc_timeout`, counts a few too many when it comes back) |
+//! | captured time | timer ticks, `u16`, wrapping | a gap is measured up to 2^16 ticks (655 ms at the real board's 10 µs tick), beyond it modulo that: after a silence the board calls [`EdgeClock::resync`] |
 //! | period | ticks, `u16` | ≥ 1 |
 
 /// The times of the edges seen so far.
@@ -29,6 +29,13 @@ impl EdgeClock {
             last: None,
             period_ticks: if period_ticks == 0 { 1 } else { period_ticks },
         }
+    }
+
+    /// Start again from the next capture, which counts one: after the
+    /// converter was silent (an `adc_timeout`), its gap is that fault,
+    /// not conversions lost.
+    pub fn resync(&mut self) {
+        self.last = None;
     }
 
     /// The edges that fell since the last call, given the time of the
@@ -68,5 +75,8 @@ mod tests {
         // A converter 3 % slow over ten missed periods still counts right.
         t = t.wrapping_add(11 * 103);
         assert_eq!(clock.edges_since(t), 11);
+        // After a silence, resynchronised: the gap is not counted.
+        clock.resync();
+        assert_eq!(clock.edges_since(t.wrapping_add(40_000)), 1);
     }
 }

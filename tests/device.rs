@@ -621,3 +621,17 @@ fn faults_found_before_arming_never_release_the_halt_and_a_rearm_waits_for_a_sam
     device.receive(&command_bytes(2, protocol::Command::Rearm));
     assert!(!device.summary().halt, "a sample came: released");
 }
+
+#[test]
+fn a_self_test_asked_again_with_the_same_frame_is_answered_again() {
+    let mut sink = Vec::new();
+    let mut device = Device::new(DeviceConfig::default(), &mut sink, RecordingPin::default());
+    let ask = command_bytes(1, protocol::Command::SelfTest);
+    device.receive(&ask);
+    assert!(device.self_test_asked());
+    assert!(!device.self_test_asked(), "taken once");
+    // The reply (or the self-test frame) was lost: the host sends the
+    // same frame again; it is not carried out twice, but answered.
+    device.receive(&ask);
+    assert!(device.self_test_asked());
+}

@@ -797,11 +797,18 @@ pub fn describe(frame: &Message, rate_hz: Option<u16>) -> String {
             f64::from(e.confidence_permille) / 10.0
         ),
         Message::Status(s) => format!(
-            "status  {} samples, {} frames dropped, {} conversions lost, {} receive errors, faults {}, halt {}{}",
+            "status  {} samples, {} frames dropped, {}faults {}, halt {}{}",
             s.samples,
             s.frames_dropped,
-            s.board.conversions_lost,
-            s.board.line_errors,
+            // Protocol 5 on: older devices never counted them.
+            if s.protocol_version >= 5 {
+                format!(
+                    "{} conversions lost, {} receive errors, ",
+                    s.board.conversions_lost, s.board.line_errors
+                )
+            } else {
+                String::new()
+            },
             fault_names(s.faults),
             if s.halt { "ASSERTED" } else { "released" },
             if s.streaming { "" } else { ", stream stopped" }

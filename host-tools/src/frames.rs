@@ -419,7 +419,7 @@ impl StreamDecoder {
         on_item(Item::Frame(message));
     }
 
-    /// A frame of this build's protocol (or of version 3, read as one:
+    /// A frame of this build's protocol (or of version 3 or 4, read as one:
     /// `version` says which); `chunk` is its bytes as received (a config
     /// frame's seed the batch checks).
     fn accept(

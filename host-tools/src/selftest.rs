@@ -35,7 +35,7 @@ pub fn checks(t: &SelfTest) -> Vec<Check> {
             ok: Some(read == written),
         },
         None => Check {
-            line: "converter registers: none on this board (a replay)".into(),
+            line: "converter registers not read (a replay board, or a converter that did not start or has stopped: see data-ready)".into(),
             ok: None,
         },
     });
@@ -49,12 +49,17 @@ pub fn checks(t: &SelfTest) -> Vec<Check> {
             ),
         },
         None => Check {
-            line: format!("data-ready not counted on this board (configured {expected} a second)"),
+            line: format!(
+                "data-ready not counted (a replay board, or less than two seconds since boot; configured {expected} a second)"
+            ),
             ok: None,
         },
     });
     out.push(Check {
-        line: format!("encoder count {}", t.board.encoder_count),
+        line: match t.board.encoder_count {
+            Some(count) => format!("encoder count {count}"),
+            None => "encoder not read (the converter is silent)".into(),
+        },
         ok: None,
     });
     out.push(Check {
@@ -67,14 +72,22 @@ pub fn checks(t: &SelfTest) -> Vec<Check> {
                 format!("faults {}", crate::decode::fault_names(t.faults))
             }
         ),
-        ok: Some(t.faults.is_empty()),
+        // Asserted for an assist's stop, with no fault: information.
+        ok: if !t.faults.is_empty() {
+            Some(false)
+        } else if t.halt {
+            None
+        } else {
+            Some(true)
+        },
     });
+    // Since boot: one glitch at the port's opening is not a failed board.
     out.push(Check {
         line: format!(
-            "link: {} receive errors; {} conversions lost",
+            "link since boot: {} receive errors; {} conversions lost",
             t.counters.line_errors, t.counters.conversions_lost
         ),
-        ok: Some(t.counters.line_errors == 0 && t.counters.conversions_lost == 0),
+        ok: None,
     });
     out
 }
@@ -109,7 +122,7 @@ mod tests {
                 adc_registers: Some((read, [0x3e, 0xc4, 0x40, 0x00])),
                 data_ready_per_s: Some(counted),
                 data_ready_expected_per_s: 1000,
-                encoder_count: 7,
+                encoder_count: Some(7),
             },
             halt: false,
             faults: Faults::NONE,

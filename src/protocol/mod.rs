@@ -176,17 +176,20 @@ pub struct SelfTest {
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct BoardFindings {
     /// The converter's configuration registers read back now, and as
-    /// written at its start; `None` on a board without a converter (the
-    /// replay boards).
+    /// written at its start; `None` where they were not read: a board
+    /// without a converter (the replay boards), one that did not start,
+    /// or one that has stopped converting.
     pub adc_registers: Option<([u8; 4], [u8; 4])>,
     /// Data-ready edges over the last whole second; `None` where nothing
-    /// measures them (the replay boards, or in the first second).
+    /// counts them (the replay boards) or before a whole second was.
     pub data_ready_per_s: Option<u32>,
     /// How many the converter's configuration makes a second (the
     /// replay's rate on the replay boards).
     pub data_ready_expected_per_s: u32,
-    /// The encoder's count now.
-    pub encoder_count: u16,
+    /// The encoder's count now; `None` where the task that owns the
+    /// encoder did not run (a silent converter stops it on the real
+    /// board).
+    pub encoder_count: Option<u16>,
 }
 
 /// Why the device asserted the halt line.

@@ -52,6 +52,9 @@ mod app {
         runs: u32,
         edges: u32,
         edges_per_s: Option<u32>,
+        /// The converter was silent (`adc_timeout`): the next edge starts
+        /// the count again, its gap not taken for lost conversions.
+        resync: bool,
     }
 
     #[shared]
@@ -217,12 +220,15 @@ mod app {
     }
 
     #[task(binds = EXTI15_10, priority = 3, shared = [device, unarmed, seen, config, origin, iwdg], local = [acquisition, edges, edge_clock, conversions_lost, encoder, tare])]
-    fn sample(cx: sample::Context) {
+    fn sample(mut cx: sample::Context) {
         let acquisition = cx.local.acquisition;
         acquisition.converter.data_ready_pin().clear_pending();
         // Edges the timer captured since the last conversion taken: more
         // than one, and the converter overwrote the ones between (this
         // task was held off past a period). The sample is late.
+        if cx.shared.seen.lock(|s| core::mem::take(&mut s.resync)) {
+            cx.local.edge_clock.resync();
+        }
         let edges = cx.local.edge_clock.edges_since(cx.local.edges.latest());
         let lost = cx.local.conversions_lost;
         if edges > 1 {
@@ -294,7 +300,7 @@ mod app {
                     },
                     data_ready_per_s: seen.edges_per_s,
                     data_ready_expected_per_s: rate_for(config.velocity.sample_rate_hz).0.sps(),
-                    encoder_count: encoder.count(),
+                    encoder_count: Some(encoder.count()),
                 };
                 d.send_self_test(findings);
             }
@@ -327,17 +333,20 @@ mod app {
             .ticks
             .is_multiple_of(super::super::setup::WATCHDOG_HZ);
         let began = cx.local.second_began;
-        let seen = cx.shared.seen.lock(|s| {
-            if whole_second {
+        let (last_seen, was_quiet) = (*cx.local.last_seen, *cx.local.quiet >= 2);
+        let (seen, edges_per_s) = cx.shared.seen.lock(|s| {
+            if began.is_none() || whole_second {
                 s.edges_per_s = began.map(|b| s.edges.wrapping_sub(b));
                 *began = Some(s.edges);
             }
-            s.runs
+            s.resync |= s.runs == last_seen && was_quiet;
+            (s.runs, s.edges_per_s)
         });
-        if seen != *cx.local.last_seen {
-            (*cx.local.last_seen, *cx.local.quiet) = (seen, 0);
-        } else {
+        let silent = seen == *cx.local.last_seen;
+        if silent {
             *cx.local.quiet = cx.local.quiet.saturating_add(1);
+        } else {
+            (*cx.local.last_seen, *cx.local.quiet) = (seen, 0);
         }
         let quiet = *cx.local.quiet >= 2;
         let mut shared = (
@@ -351,6 +360,17 @@ mod app {
                 // Raised again on every quiet tick (a no-op while latched):
                 // a re-arm with the converter still silent halts again.
                 arm(device, unarmed, config, *origin, Faults::ADC_TIMEOUT);
+            }
+            // The sample task answers a self-test; with the converter
+            // silent it does not run, and this does, with what it has.
+            let asked = silent && device.as_mut().is_some_and(|d| d.self_test_asked());
+            if let Some(d) = device.as_mut().filter(|_| asked) {
+                d.send_self_test(BoardFindings {
+                    adc_registers: None,
+                    data_ready_per_s: edges_per_s,
+                    data_ready_expected_per_s: rate_for(config.velocity.sample_rate_hz).0.sps(),
+                    encoder_count: None,
+                });
             }
             device
                 .as_ref()
@@ -387,7 +407,7 @@ mod app {
         let commands = cx.local.commands;
         cx.local.receiver.read(|byte| {
             if let Some(frame) = commands.push(byte) {
-                // Before arming (the boot tare, a quarter second) there is
+                // Before arming (the boot tare, half a second) there is
                 // no device to answer: the host sends again.
                 device.lock(|device| {
                     if let Some(d) = device.as_mut() {
