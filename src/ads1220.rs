@@ -273,6 +273,16 @@ impl<SPI: SpiDevice, DRDY: InputPin> Ads1220<SPI, DRDY> {
         let Some(wrote) = self.written else {
             return Ok(None);
         };
+        Ok(Some((self.read_registers()?, wrote)))
+    }
+
+    /// The configuration registers written at the start (`None` before).
+    pub fn written(&self) -> Option<[u8; 4]> {
+        self.written
+    }
+
+    /// The four configuration registers, by RREG.
+    fn read_registers(&mut self) -> Result<[u8; 4], Error<SPI::Error>> {
         let mut read = [0; 4];
         self.spi
             .transaction(&mut [
@@ -280,19 +290,13 @@ impl<SPI: SpiDevice, DRDY: InputPin> Ads1220<SPI, DRDY> {
                 Operation::Read(&mut read),
             ])
             .map_err(Error::Spi)?;
-        Ok(Some((read, wrote)))
+        Ok(read)
     }
 
     /// Read the configuration registers back and compare them with
     /// `wrote`.
     fn check_registers(&mut self, wrote: [u8; 4]) -> Result<(), Error<SPI::Error>> {
-        let mut read = [0; 4];
-        self.spi
-            .transaction(&mut [
-                Operation::Write(&[command::RREG | 0b11]),
-                Operation::Read(&mut read),
-            ])
-            .map_err(Error::Spi)?;
+        let read = self.read_registers()?;
         if read != wrote {
             return Err(Error::Readback { wrote, read });
         }

@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use needle_holder::protocol::command::{MIN_GAIN_Q16, NO_READING_YET};
 use needle_holder::protocol::{Command, CommandError};
 
-use crate::decode::command_error;
+use crate::device::refused;
 use crate::frames::{Item, Message};
 use crate::link::Link;
 
@@ -159,10 +159,6 @@ fn tare(link: &mut Link, port: &str) -> Result<()> {
         }
         std::thread::sleep(Duration::from_millis(100));
     }
-}
-
-fn refused(port: &str, reply: Result<(), CommandError>) -> Result<()> {
-    reply.map_err(|e| anyhow::anyhow!("{port}: the device refused: {}", command_error(&e)))
 }
 
 /// The gain in force and the forces of the samples over `window`, from

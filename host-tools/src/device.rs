@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
 use needle_holder::model::params::LIBRARY;
-use needle_holder::protocol::{Command, TissueSource};
+use needle_holder::protocol::{Command, CommandError, TissueSource};
 use needle_holder::units::Nanometres;
 
 use crate::decode::{command_error, describe};
@@ -87,10 +87,8 @@ pub fn run(args: &DeviceArgs) -> Result<()> {
     }
     let command = command_of(&args.action)?;
     let mut link = Link::open(port, args.baud)?;
-    match link.command(command)? {
-        Ok(()) => crate::out!("done")?,
-        Err(e) => bail!("{port}: the device refused: {}", command_error(&e)),
-    }
+    refused(port, link.command(command)?)?;
+    crate::out!("done")?;
     match args.action {
         Action::Config => print_config(&mut link, port)?,
         Action::Selftest => print_self_test(&mut link, port)?,
@@ -123,6 +121,11 @@ fn print_self_test(link: &mut Link, port: &str) -> Result<()> {
         }
     }
     bail!("{port}: the device acknowledged but sent no self-test")
+}
+
+/// A refused command as an error naming the port and the reason.
+pub fn refused(port: &str, reply: Result<(), CommandError>) -> Result<()> {
+    reply.map_err(|e| anyhow::anyhow!("{port}: the device refused: {}", command_error(&e)))
 }
 
 /// The command an action sends.

@@ -60,7 +60,7 @@ mod v2 {
 /// reconstruction.
 mod older {
     use needle_holder::model::relax::{RelaxState, Relaxation};
-    use needle_holder::protocol::wire::{self, FRAME_CRC};
+    use needle_holder::protocol::wire;
     use needle_holder::protocol::{BoardCounters, MAX_ENCODED_FRAME};
 
     /// The postcard tags of `Frame::Config`, `Frame::Snapshot` and
@@ -82,12 +82,7 @@ mod older {
 
     fn unframed(chunk: &[u8], version: u16) -> Option<Vec<u8>> {
         let mut buffer = [0u8; MAX_ENCODED_FRAME];
-        let check = |b: &[u8]| {
-            let mut digest = FRAME_CRC.digest();
-            digest.update(&[version as u8]);
-            digest.update(b);
-            digest.finalize()
-        };
+        let check = |b: &[u8]| wire::frame_check_of_version(version, b);
         Some(wire::unframe(chunk, &mut buffer, check).ok()?.to_vec())
     }
 
@@ -551,12 +546,7 @@ fn check_version(found: u16, expected: u16) -> Result<(), VersionMismatch> {
 fn newer_framing(chunk: &[u8]) -> Option<u16> {
     (PROTOCOL_VERSION + 1..=PROTOCOL_VERSION + NEWER_VERSIONS).find(|&v| {
         let mut buffer = [0u8; MAX_ENCODED_FRAME];
-        let check = |b: &[u8]| {
-            let mut digest = FRAME_CRC.digest();
-            digest.update(&[v as u8]);
-            digest.update(b);
-            digest.finalize()
-        };
+        let check = |b: &[u8]| wire::frame_check_of_version(v, b);
         wire::unframe(chunk, &mut buffer, check).is_ok()
     })
 }

@@ -61,8 +61,14 @@ pub const CRC_START: u16 = crc16_update(0xFFFF, PROTOCOL_VERSION as u8);
 
 /// The check of a frame's bytes, implied version byte included.
 pub fn frame_check(body: &[u8]) -> u16 {
+    frame_check_of_version(PROTOCOL_VERSION, body)
+}
+
+/// The check a build of protocol `version` gives a frame's bytes: what a
+/// host reads older (and recognises newer) streams by.
+pub fn frame_check_of_version(version: u16, body: &[u8]) -> u16 {
     let mut digest = FRAME_CRC.digest();
-    digest.update(&[PROTOCOL_VERSION as u8]);
+    digest.update(&[version as u8]);
     digest.update(body);
     digest.finalize()
 }

@@ -38,7 +38,6 @@ mod app {
     use super::super::setup::setup;
     use super::super::store::{SaveError, Store};
     use super::super::timer::Watchdog;
-    use needle_holder::ads1220::Config as AdcConfig;
     use needle_holder::hal::EncoderCounter;
     use needle_holder::protocol::BoardFindings;
     use needle_holder::sample_clock::EdgeClock;
@@ -188,10 +187,15 @@ mod app {
         )
     }
 
-    /// Timer ticks between two of the converter's conversions at the rate
-    /// a sample rate sets it to.
+    /// The converter's conversions a second at the rate a sample rate
+    /// sets it to.
+    fn conversions_per_s(sample_rate_hz: u16) -> u32 {
+        rate_for(sample_rate_hz).0.sps()
+    }
+
+    /// Timer ticks between two of the converter's conversions.
     fn conversion_period_ticks(sample_rate_hz: u16) -> u16 {
-        let sps = rate_for(sample_rate_hz).0.sps();
+        let sps = conversions_per_s(sample_rate_hz);
         u16::try_from(TICK_HZ.checked_div(sps).unwrap_or(1)).unwrap_or(u16::MAX)
     }
 
@@ -292,14 +296,10 @@ mod app {
                     // A bus that fails reads as all zeros: a failed check.
                     adc_registers: match acquisition.converter.registers() {
                         Ok(registers) => registers,
-                        Err(_) => Some((
-                            [0; 4],
-                            AdcConfig::bridge(rate_for(config.velocity.sample_rate_hz).0)
-                                .registers(),
-                        )),
+                        Err(_) => acquisition.converter.written().map(|w| ([0; 4], w)),
                     },
                     data_ready_per_s: seen.edges_per_s,
-                    data_ready_expected_per_s: rate_for(config.velocity.sample_rate_hz).0.sps(),
+                    data_ready_expected_per_s: conversions_per_s(config.velocity.sample_rate_hz),
                     encoder_count: Some(encoder.count()),
                 };
                 d.send_self_test(findings);
@@ -368,7 +368,7 @@ mod app {
                 d.send_self_test(BoardFindings {
                     adc_registers: None,
                     data_ready_per_s: edges_per_s,
-                    data_ready_expected_per_s: rate_for(config.velocity.sample_rate_hz).0.sps(),
+                    data_ready_expected_per_s: conversions_per_s(config.velocity.sample_rate_hz),
                     encoder_count: None,
                 });
             }
