@@ -848,26 +848,37 @@ fn needle_record_goes_on_after_the_device_is_reset() {
     drop(device);
 }
 
-#[test]
-fn needle_device_calibrate_sets_the_gain_that_reads_the_mass_and_the_device_keeps_it() {
-    let _alone = one_at_a_time();
-    let dir = tempfile::tempdir().unwrap();
-    // 20 s at rest with 0.5 N on the cell, a little noise on it: a 100 g
-    // mass (0.981 N) on a cell whose gain is half what it should be.
+/// A replay of `seconds` at rest at 500 Hz, unloaded for the first
+/// `loaded_from_s` and 0.5 N on the cell after, with a little noise on it
+/// (a pattern of mean 0.4 mN).
+fn hung_mass_replay(dir: &Path, seconds: usize, loaded_from_s: usize) -> PathBuf {
     let rate_hz = 500u16;
-    let n = 20 * usize::from(rate_hz);
+    let n = seconds * usize::from(rate_hz);
+    let loaded_from = loaded_from_s * usize::from(rate_hz);
     let trial = host_tools::trial::Trial {
         t_s: (0..n).map(|i| i as f64 / f64::from(rate_hz)).collect(),
         x_m: vec![0.0; n],
-        f_n: (0..n).map(|i| 0.5 + 2e-4 * ((i * 7) % 5) as f64).collect(),
+        f_n: (0..n)
+            .map(|i| if i < loaded_from { 0.0 } else { 0.5 } + 2e-4 * ((i * 7) % 5) as f64)
+            .collect(),
     };
     let config = DeviceConfig::default();
-    let replay = dir.path().join("hung_mass.replay");
+    let replay = dir.join("hung_mass.replay");
     std::fs::write(
         &replay,
         sim::to_replay(&trial, rate_hz, &config.load_cell, &config.encoder),
     )
     .unwrap();
+    replay
+}
+
+#[test]
+fn needle_device_calibrate_sets_the_gain_that_reads_the_mass_and_the_device_keeps_it() {
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    // 20 s at rest with 0.5 N on the cell: a 100 g mass (0.981 N) on a
+    // cell whose gain is half what it should be.
+    let replay = hung_mass_replay(dir.path(), 20, 0);
     let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
     let port = device.port.as_str();
     let out = Process::new(env!("CARGO_BIN_EXE_needle"))
@@ -916,23 +927,7 @@ fn needle_device_calibrate_asks_tares_and_measures_only_once_the_mass_hangs() {
     // 2 s unloaded, then 0.5 N: the samples from before the second
     // answer (unloaded, streamed while the person was hanging the mass)
     // must not enter the measurement.
-    let rate_hz = 500u16;
-    let n = 30 * usize::from(rate_hz);
-    let loaded_from = 2 * usize::from(rate_hz);
-    let trial = host_tools::trial::Trial {
-        t_s: (0..n).map(|i| i as f64 / f64::from(rate_hz)).collect(),
-        x_m: vec![0.0; n],
-        f_n: (0..n)
-            .map(|i| if i < loaded_from { 0.0 } else { 0.5 } + 2e-4 * ((i * 7) % 5) as f64)
-            .collect(),
-    };
-    let config = DeviceConfig::default();
-    let replay = dir.path().join("hang_later.replay");
-    std::fs::write(
-        &replay,
-        sim::to_replay(&trial, rate_hz, &config.load_cell, &config.encoder),
-    )
-    .unwrap();
+    let replay = hung_mass_replay(dir.path(), 30, 2);
     let device = QemuLive::start(Board::Lm3s6965, &elf(), &replay).unwrap();
     let mut calibrate = Process::new(env!("CARGO_BIN_EXE_needle"))
         .args([
