@@ -23,7 +23,9 @@ pub struct DemoArgs {
     /// QEMU board to run.
     #[arg(long, value_enum, default_value_t = Board::Lm3s6965)]
     pub board: Board,
-    /// Directory for the replay, frame capture and defmt log.
+    /// Directory for the replay, frame capture and defmt log (default:
+    /// `demo/` in the target directory, `target/demo` unless
+    /// `CARGO_TARGET_DIR` says otherwise).
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
@@ -45,10 +47,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     crate::out!("building the firmware for {} …", args.board.target())?;
     let elf = firmware::build(args.board)?;
 
-    let dir = args
-        .out
-        .clone()
-        .unwrap_or_else(|| firmware::repo_root().join("target").join("demo"));
+    let dir = match &args.out {
+        Some(dir) => dir.clone(),
+        None => firmware::target_directory(&firmware::repo_root())?.join("demo"),
+    };
     crate::input::create_out_dir(&dir)?;
     let (trial, truth) = sim::insertion(&tissue, &plan);
     let config = DeviceConfig::default();

@@ -42,11 +42,12 @@ impl Board {
         }
     }
 
-    /// Its own target directory where it shares a target with another
-    /// board, so that building one never overwrites the other's image.
-    fn target_dir(self) -> Option<&'static str> {
+    /// Its own directory under the workspace's target directory where it
+    /// shares a target with another board, so that building one never
+    /// overwrites the other's image.
+    fn target_subdir(self) -> Option<&'static str> {
         match self {
-            Board::NucleoF411re => Some("target/f411-replay"),
+            Board::NucleoF411re => Some("f411-replay"),
             _ => None,
         }
     }
@@ -84,7 +85,7 @@ pub fn repo_root() -> PathBuf {
 /// Build the firmware image for `board`; returns the ELF path. Installs the
 /// board's Rust target first when the toolchain lacks it.
 pub fn build(board: Board) -> Result<PathBuf> {
-    build_image(board.target(), board.features(), board.target_dir())
+    build_image(board.target(), board.features(), board.target_subdir())
 }
 
 /// The real board's image (Nucleo-F411RE, feature `board-f411`, what
@@ -95,13 +96,45 @@ pub fn build_nucleo_f411re() -> Result<PathBuf> {
     build_image(
         "thumbv7em-none-eabihf",
         &["--features", "board-f411"],
-        Some("target/f411"),
+        Some("f411"),
     )
 }
 
-fn build_image(target: &str, features: &[&str], target_dir: Option<&str>) -> Result<PathBuf> {
+/// The workspace's target directory as cargo resolves it
+/// (`CARGO_TARGET_DIR`, `build.target-dir` in a cargo config, or
+/// `target/`): the image is looked for where cargo put it, never in a
+/// `target/` an earlier build left behind.
+pub fn target_directory(root: &Path) -> Result<PathBuf> {
+    #[derive(serde::Deserialize)]
+    struct Metadata {
+        target_directory: PathBuf,
+    }
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .current_dir(root)
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--no-deps",
+            "--offline",
+        ])
+        .stderr(Stdio::inherit())
+        .output()
+        .context("cannot run `cargo metadata` to find the target directory")?;
+    if !out.status.success() {
+        bail!("`cargo metadata` failed ({})", out.status);
+    }
+    let meta: Metadata =
+        serde_json::from_slice(&out.stdout).context("`cargo metadata` gave no target directory")?;
+    Ok(meta.target_directory)
+}
+
+fn build_image(target: &str, features: &[&str], subdir: Option<&str>) -> Result<PathBuf> {
     let root = repo_root();
     ensure_target(&root, target)?;
+    let base = target_directory(&root)?;
+    let target_dir = subdir.map_or_else(|| base.clone(), |d| base.join(d));
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut command = Command::new(cargo);
     command
@@ -115,18 +148,16 @@ fn build_image(target: &str, features: &[&str], target_dir: Option<&str>) -> Res
             "--target",
             target,
         ])
-        .args(features);
-    if let Some(dir) = target_dir {
-        command.args(["--target-dir", dir]);
-    }
+        .args(features)
+        .arg("--target-dir")
+        .arg(&target_dir);
     let status = command
         .status()
         .context("cannot run cargo to build the firmware")?;
     if !status.success() {
         bail!("firmware build for {target} {features:?} failed ({status})");
     }
-    let elf = root
-        .join(target_dir.unwrap_or("target"))
+    let elf = target_dir
         .join(target)
         .join("firmware")
         .join("needle-holder");

@@ -394,3 +394,31 @@ fn defmt_print(elf: &Path, log: &[u8]) -> String {
     let out = child.wait_with_output().unwrap();
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
+
+/// `needle demo` builds the firmware where cargo puts it: with
+/// `CARGO_TARGET_DIR` set to an empty directory it builds and runs the
+/// image there (not one an earlier build left in the repository's
+/// `target/`), and keeps its capture there too.
+#[test]
+fn needle_demo_builds_and_runs_the_image_where_cargo_target_dir_points() {
+    firmware::ensure_qemu().expect("qemu-system-arm is needed and could not be installed");
+    let target = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .arg("demo")
+        .env("CARGO_TARGET_DIR", target.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("0 faults"), "{stdout}");
+    let image = target
+        .path()
+        .join("thumbv7m-none-eabi/firmware/needle-holder");
+    assert!(image.exists(), "no image at {}", image.display());
+    assert!(stdout.contains(&image.display().to_string()), "{stdout}");
+    assert!(target.path().join("demo/frames.bin").exists());
+}
