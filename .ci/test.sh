@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The full test command (README, and what CI runs). Installs what a fresh
-# machine lacks, then: format, lints, firmware builds for the three targets,
+# machine lacks, then: format, lints, rustdoc, firmware builds for the three targets,
 # and the host test suite, which runs the firmware in QEMU and compares it
 # byte for byte with the host twin.
 set -euo pipefail
@@ -33,6 +33,9 @@ cargo clippy --target thumbv7m-none-eabi --lib --bins -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf --features board-mps2 --lib --bins -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf --features board-f411 --lib --bins --target-dir target/f411 -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf --features f411-replay --lib --bins --target-dir target/f411-replay -- -D warnings
+
+step "docs (rustdoc, warnings denied)"
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --workspace
 
 step "firmware builds"
 cargo fw-m0

@@ -91,7 +91,7 @@ pub struct DetectConfig {
     pub puncture_min_peak: MicroNewtons,
     /// Fall, within 30 ms, that confirms a puncture from the force the
     /// tissue expects (half its expected drop less the drop's spread:
-    /// [`puncture_drop_n`]); from a smaller peak a quarter of the peak
+    /// `puncture_drop_n`); from a smaller peak a quarter of the peak
     /// suffices ([`puncture::needed_drop`]).
     pub puncture_drop: MicroNewtons,
     /// Least rise of the force that can be an interior structure.
@@ -118,9 +118,9 @@ pub struct DetectConfig {
 impl DetectConfig {
     /// Thresholds for a tissue: contact at its `contact_force_n`; puncture
     /// once the force has peaked above 30 % of the expected puncture force
-    /// (or four measured spreads under it: [`puncture_min_peak_n`]) and
+    /// (or four measured spreads under it: `puncture_min_peak_n`) and
     /// fallen by half the expected drop within 30 ms
-    /// ([`puncture_drop_n`]); exit at half the cutting
+    /// (`puncture_drop_n`); exit at half the cutting
     /// force; a stuck encoder once the force has risen by a quarter of the
     /// puncture force without the encoder moving; a structure's rise and
     /// fall at 2 and 1.6 times the contact force (0.1 N and 80 mN for

@@ -9,7 +9,7 @@
 //!
 //! Configuration ([`ModelConfig`], built from [`params::TissueParams`] at
 //! compile time for the firmware) is apart from state ([`ModelState`]).
-//! The `f64` twin in [`reference`] is the test oracle; the fixed-point
+//! The `f64` twin in [`reference`](mod@reference) is the test oracle; the fixed-point
 //! error against it is bounded by the property tests in `tests/model.rs`.
 
 use serde::{Deserialize, Serialize};

@@ -35,7 +35,7 @@ pub enum Backfit {
     /// Its fitted force, from the measured force.
     Force,
     /// The tissue's displacement, from the needle's position: the nominal
-    /// is then fitted in the tissue's frame ([`super::motion`]).
+    /// is then fitted in the tissue's frame (`super::motion`).
     TissueFrame,
 }
 

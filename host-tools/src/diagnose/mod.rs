@@ -106,7 +106,7 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
 /// and an effect in the withdrawal moves it. The friction scale is the
 /// nominal's own friction term, the stiffness scale its own loading
 /// force and the held term the force it holds in its first dwell (the
-/// static band's, [`held_in_first_dwell`]), which [`SPREAD`] frees per
+/// static band's, `held_in_first_dwell`), which [`SPREAD`] frees per
 /// trial.
 pub const NOMINAL_CORRECTIONS: [&str; 13] = [
     "a1_n_per_m",
@@ -136,7 +136,7 @@ pub const NOMINAL_CORRECTIONS: [&str; 13] = [
 /// per-trial numbers cannot. Indices into [`NOMINAL_CORRECTIONS`]:
 /// `cutting_force_n`, `friction_scale`, `stiffness_scale`,
 /// `held_first_dwell`, and the withdrawal's stick (`stick_held_n`,
-/// `stick_n_per_m`, [`dragged_tent`]).
+/// `stick_n_per_m`, `dragged_tent`).
 pub const SPREAD: [usize; 6] = [6, 8, 9, 10, 11, 12];
 
 /// Columns of the nominal corrections and of a set of candidates (each at

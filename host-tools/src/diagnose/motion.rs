@@ -63,7 +63,7 @@ impl TissueShift {
     }
 
     /// [`Self::at`] from the harmonics' sines and cosines there
-    /// ([`harmonics_along`]).
+    /// (`harmonics_along`).
     pub fn at_harmonics(&self, [s1, c1, s2, c2]: [f64; 4]) -> (f64, f64) {
         let w = self.omega_rad_s;
         let [a, b, c, d] = self.coeffs_m;

@@ -174,7 +174,7 @@ impl Prepared {
 
 /// Prepare a trial against `params`, with its geometry as `needle fit`'s
 /// code found it, its relaxed surface at `params.relaxation`, and the
-/// needle's velocity ([`needle_velocity`] of the measured positions, less
+/// needle's velocity ([`needle_velocity`](crate::fit::predict::needle_velocity) of the measured positions, less
 /// the tissue's own where the trial is in the tissue's frame).
 pub fn prepare(
     file: String,

@@ -23,7 +23,7 @@ pub struct FitArgs {
     /// Write the estimates as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Write a tissue-library entry (TOML, section [fitted]) here.
+    /// Write a tissue-library entry (TOML, section `[fitted]`) here.
     #[arg(long)]
     pub toml: Option<PathBuf>,
     /// Draw force against position of the first trial, with the fitted

@@ -59,7 +59,7 @@ pub struct TrialFit {
     /// placed x_s3 there.
     pub let_go_x_m: Option<f64>,
     /// `let_go_x_m` is where the measured force snapped back to zero
-    /// ([`snapped_free`]), not where the friction line reaches it.
+    /// (`snapped_free`), not where the friction line reaches it.
     pub let_go_snapped: bool,
     /// Relaxation of the force during the longest rest inside the tissue.
     pub dwell: Option<DwellRelaxation>,

@@ -212,7 +212,7 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
 /// look like*): the stage starts 2–15 mm before the surface, inserts 25 mm
 /// past it at 1, 2 or 3 mm/s, holds 5 s and withdraws; the tissue lets go of
 /// the withdrawing needle 1.5–9 mm before the contact point; up to
-/// `max_layers` membranes ([`draw_layers`]).
+/// `max_layers` membranes (`draw_layers`).
 pub fn insert_dwell_withdraw(
     tissue: &TissueParams,
     max_layers: u32,
