@@ -16,10 +16,13 @@
 //! first sample's index, and each frame its CRC.
 //!
 //! Changing any type here changes the bytes on the wire: bump
-//! [`PROTOCOL_VERSION`] (the golden-bytes test below fails until you do).
+//! [`PROTOCOL_VERSION`] (the golden tests fail until you do: `golden.rs`
+//! pins every frame and command kind, the snapshot's whole state with it).
 
 pub mod batch;
 pub mod command;
+#[cfg(test)]
+mod golden;
 pub mod wire;
 
 use serde::{Deserialize, Serialize};

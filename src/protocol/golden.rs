@@ -1,0 +1,231 @@
+//! Pins the bytes of every frame and every command on the wire, so that no
+//! change to a type any of them carries — down to a detector's state in
+//! the snapshot — passes unnoticed. Each kind is encoded with typical
+//! contents (the compiled configuration, the pipeline's state after a
+//! loading ramp, a library tissue) and its length and CRC-32 compared with
+//! the table below. When it fails you changed the wire: bump
+//! [`super::PROTOCOL_VERSION`] (and teach the host the old version if its
+//! captures should still decode), then paste the table it prints.
+
+use super::command::{CommandFrame, MAX_ENCODED_COMMAND};
+use super::*;
+use crate::assist::AssistModes;
+use crate::config::{DEFAULT, LIBRARY_MODELS};
+use crate::hal::AdcSample;
+use crate::pipeline::RawSample;
+
+/// The pipeline's state after a loading ramp: every counter and filter
+/// away from its start.
+fn stepped_state() -> PipelineState {
+    let mut state = PipelineState::default();
+    for i in 0..400i32 {
+        DEFAULT.step(
+            &mut state,
+            RawSample {
+                adc: Some(AdcSample {
+                    counts: 20 * i * i,
+                    saturated: false,
+                    overrun: false,
+                }),
+                encoder_count: (i * 40) as u16,
+            },
+        );
+    }
+    state
+}
+
+fn frames() -> std::vec::Vec<(&'static str, Frame<'static>)> {
+    static RAW: [u8; 12] = [0x80, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11];
+    let status = Status {
+        protocol_version: PROTOCOL_VERSION,
+        sample_rate_hz: 500,
+        samples: 1234,
+        frames_dropped: 1,
+        faults: Faults(0x0010),
+        halt: false,
+        streaming: true,
+        next_command_seq: 7,
+        board: BoardCounters {
+            conversions_lost: 2,
+            line_errors: 3,
+        },
+    };
+    std::vec![
+        (
+            "header",
+            Frame::Header(Header {
+                protocol_version: PROTOCOL_VERSION,
+                sample_rate_hz: 500,
+            }),
+        ),
+        (
+            "config",
+            Frame::Config(ConfigFrame {
+                tissue: TissueSource::Library(0),
+                stored: crate::persist::Loaded::NotKept,
+                config: DEFAULT,
+            }),
+        ),
+        (
+            "batch",
+            Frame::Batch(Batch {
+                first_index: 1234,
+                samples: 3,
+                check: [1, 2, 3, 4],
+                raw: &RAW,
+            }),
+        ),
+        (
+            "snapshot",
+            Frame::Snapshot(Snapshot {
+                next_index: 400,
+                state: stepped_state(),
+            }),
+        ),
+        (
+            "event",
+            Frame::Event(Event {
+                index: 321,
+                kind: EventKind::Puncture,
+                x: Nanometres(21_650_000),
+                force: MicroNewtons(2_300_000),
+                confidence_permille: 930,
+            }),
+        ),
+        ("status", Frame::Status(status)),
+        (
+            "halt",
+            Frame::Halt(Halt {
+                index: 322,
+                reason: HaltReason::SpeedLimit,
+                x: Nanometres(21_700_000),
+                hold_x: Nanometres(21_000_000),
+            }),
+        ),
+        (
+            "reply",
+            Frame::Reply(Reply {
+                seq: 7,
+                result: Err(CommandError::InvalidTissue {
+                    field: command::text("cutting_force_n"),
+                    problem: command::text("negative"),
+                }),
+            }),
+        ),
+        (
+            "selftest",
+            Frame::SelfTest(SelfTest {
+                board: BoardFindings {
+                    adc_registers: Some(([1, 2, 3, 4], [1, 2, 3, 4])),
+                    data_ready_per_s: Some(1999),
+                    data_ready_expected_per_s: 2000,
+                    encoder_count: Some(40),
+                },
+                halt: true,
+                faults: Faults(0),
+                counters: status.board,
+            }),
+        ),
+    ]
+}
+
+fn commands() -> std::vec::Vec<(&'static str, Command)> {
+    std::vec![
+        ("tare", Command::Tare),
+        ("select_tissue", Command::SelectTissue(2)),
+        ("upload_tissue", Command::UploadTissue(LIBRARY_MODELS[0])),
+        (
+            "set_assist",
+            Command::SetAssist {
+                modes: AssistModes(0b101),
+                target_depth: Nanometres(20_000_000),
+            },
+        ),
+        ("rearm", Command::Rearm),
+        ("stream", Command::Stream(true)),
+        ("read_config", Command::ReadConfig),
+        ("set_load_cell_gain", Command::SetLoadCellGain(78_000)),
+        ("self_test", Command::SelfTest),
+    ]
+}
+
+/// (kind, encoded length, CRC-32 of the encoded bytes).
+const PINNED: &[(&str, usize, u32)] = &[
+    ("header", 8, 0xb0e5208a),
+    ("config", 109, 0x93453499),
+    ("batch", 25, 0x76c84921),
+    ("snapshot", 130, 0x8e0efa5a),
+    ("event", 18, 0x5fd4667d),
+    ("status", 17, 0xb2ea2c12),
+    ("halt", 16, 0x66689832),
+    ("reply", 33, 0xe6713a2d),
+    ("selftest", 25, 0x82474087),
+    ("tare", 6, 0xd14cecb3),
+    ("select_tissue", 7, 0xf12f2b13),
+    ("upload_tissue", 80, 0xa9951103),
+    ("set_assist", 11, 0xa0e386d2),
+    ("rearm", 6, 0xc8f9e20d),
+    ("stream", 7, 0x6847171d),
+    ("read_config", 6, 0xc3fb2af9),
+    ("set_load_cell_gain", 9, 0x0fff7a8a),
+    ("self_test", 6, 0xf2f75035),
+];
+
+/// A kind added to [`Frame`] or [`Command`] does not compile here until
+/// it is in [`frames`] or [`commands`] and pinned.
+#[allow(dead_code)]
+fn every_kind_is_listed(frame: &Frame, command: &Command) {
+    match frame {
+        Frame::Header(_)
+        | Frame::Config(_)
+        | Frame::Batch(_)
+        | Frame::Snapshot(_)
+        | Frame::Event(_)
+        | Frame::Status(_)
+        | Frame::Halt(_)
+        | Frame::Reply(_)
+        | Frame::SelfTest(_) => {}
+    }
+    match command {
+        Command::Tare
+        | Command::SelectTissue(_)
+        | Command::UploadTissue(_)
+        | Command::SetAssist { .. }
+        | Command::Rearm
+        | Command::Stream(_)
+        | Command::ReadConfig
+        | Command::SetLoadCellGain(_)
+        | Command::SelfTest => {}
+    }
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(bytes)
+}
+
+#[test]
+fn every_frame_and_command_kind_has_the_pinned_bytes() {
+    let mut measured = std::vec::Vec::new();
+    for (kind, frame) in frames() {
+        let bytes = FrameEncoder::default().encode(&frame).to_vec();
+        measured.push((kind, bytes.len(), crc32(&bytes)));
+    }
+    for (kind, command) in commands() {
+        let frame = CommandFrame { seq: 7, command };
+        let bytes = wire::Encoder::<MAX_ENCODED_COMMAND>::default()
+            .encode(&frame)
+            .to_vec();
+        measured.push((kind, bytes.len(), crc32(&bytes)));
+    }
+    let table: std::string::String = measured
+        .iter()
+        .map(|(k, n, c)| std::format!("    (\"{k}\", {n}, 0x{c:08x}),\n"))
+        .collect();
+    assert_eq!(PINNED.len(), measured.len(), "pin every kind:\n{table}");
+    for (pinned, got) in PINNED.iter().zip(&measured) {
+        assert_eq!(
+            pinned, got,
+            "the bytes on the wire changed: bump PROTOCOL_VERSION, then pin:\n{table}"
+        );
+    }
+}
