@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The full test command (README, and what CI runs). Installs what a fresh
-# machine lacks, then: format, lints, rustdoc, firmware builds for the three targets,
+# The full test command (the README's, and what CI runs). Installs what a fresh
+# machine lacks, then: format, lints, rustdoc and the book, firmware builds for the three targets,
 # and the host test suite, which runs the firmware in QEMU and compares it
 # byte for byte with the host twin.
 set -euo pipefail
@@ -23,6 +23,10 @@ if ! command -v defmt-print >/dev/null; then
     cargo install defmt-print --version 1.2.0 --locked
 fi
 defmt-print --version
+if ! command -v mdbook >/dev/null; then
+    cargo install mdbook --version 0.4.52 --locked --no-default-features
+fi
+mdbook --version
 
 step "format"
 cargo fmt --all -- --check
@@ -34,8 +38,14 @@ cargo clippy --target thumbv7em-none-eabihf --features board-mps2 --lib --bins -
 cargo clippy --target thumbv7em-none-eabihf --features board-f411 --lib --bins --target-dir target/f411 -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf --features f411-replay --lib --bins --target-dir target/f411-replay -- -D warnings
 
-step "docs (rustdoc, warnings denied)"
+step "docs (rustdoc with warnings denied, the book, a README of at most 150 lines)"
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --workspace
+mdbook build book
+readme_lines=$(wc -l < README.md)
+if [ "$readme_lines" -gt 150 ]; then
+    echo "README.md has $readme_lines lines: the front door stays at 150 at most; the rest goes in the book" >&2
+    exit 1
+fi
 
 step "firmware builds"
 cargo fw-m0

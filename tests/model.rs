@@ -11,7 +11,7 @@ use needle_holder::protocol::Phase;
 use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 use proptest::prelude::*;
 
-/// The bound this suite holds the fixed-point model to, µN (README).
+/// The bound this suite holds the fixed-point model to, µN (book, *The force model on the device*).
 const BOUND_UN: f64 = 1000.0;
 
 /// Fixed-point result against the f64 reference clipped to the same range.
@@ -23,7 +23,7 @@ fn error_un(fixed: MicroNewtons, reference_n: f64) -> f64 {
 #[test]
 fn liver_1_punctures_at_the_papers_force_and_depth() {
     let stiffness = Stiffness::from_params(&LIVER1);
-    // 0.0480·16.65 + 0.0052·16.65² = 2.2408 N (README, *The paper's numbers*).
+    // 0.0480·16.65 + 0.0052·16.65² = 2.2408 N (book, *The paper's numbers*).
     let f = stiffness.force(Nanometres::from_m(0.01665));
     assert!((f.as_n() - 2.2408).abs() < 1e-3, "{f:?}");
     // And the deformation at the paper's mean puncture force, 2.304 N,

@@ -1,5 +1,5 @@
 //! `needle decode`: frames from a capture file or a serial port to text or
-//! to the trial CSV (README, *Trial CSV*), reporting gaps and skipped bytes.
+//! to the trial CSV (book, *Trial CSV*), reporting gaps and skipped bytes.
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -606,7 +606,7 @@ impl Output {
     }
 }
 
-/// The trial CSV's columns (README, *Trial CSV*), then the device's own.
+/// The trial CSV's columns (book, *Trial CSV*), then the device's own.
 pub const CSV_HEADER: [&str; 7] = [
     "t_s",
     "x_m",
@@ -668,7 +668,7 @@ pub fn phase_name(phase: Phase) -> &'static str {
     }
 }
 
-/// Event kind name (README, *Names*, plus `fault`).
+/// Event kind name (book, *Names*, plus `fault`).
 pub fn event_name(kind: EventKind) -> &'static str {
     match kind {
         EventKind::Contact => "contact",

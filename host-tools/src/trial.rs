@@ -1,4 +1,4 @@
-//! Trial CSV files (README, *Trial CSV*): header `t_s,x_m,f_n`, extra columns
+//! Trial CSV files (book, *Trial CSV*): header `t_s,x_m,f_n`, extra columns
 //! allowed. Readers reject bad files with the file and line at fault.
 
 use std::path::{Path, PathBuf};

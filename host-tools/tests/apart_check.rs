@@ -462,7 +462,7 @@ fn effects_stand_above_the_noise() {
         let floors = rms / c.noise_n;
         lines.push(format!("{:45} {floors:8.1} noise floors", c.name));
         // Effects that need velocity changes or reversals barely show in
-        // a constant-speed insert-dwell-withdraw trial (see README).
+        // a constant-speed insert-dwell-withdraw trial (see apart/README.md).
         let weak =
             c.protocol == Protocol::InsertDwellWithdraw && c.name.contains("holder_inertia/rigid");
         if !weak && floors < 2.0 {

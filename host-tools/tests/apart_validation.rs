@@ -2,7 +2,7 @@
 //! independent generator from the physics literature, whose forms and
 //! parameters the diagnosis, the fit and the detectors were never tuned
 //! on). What they make of it is printed as measured — the confusion of
-//! the diagnosis, the detectors' hits and misses — and the README carries
+//! the diagnosis, the detectors' hits and misses — and the book carries
 //! those figures (`cargo test -p host-tools --test apart_validation --
 //! --nocapture`). Asserted is only what must hold on any data: every
 //! verdict is one the tool can give, the waterfall
@@ -142,7 +142,7 @@ type KindRow = (String, u64, u64, u64, u64, f64, f64);
 /// kind, and how many
 /// insertions reported their first puncture before the force's peak.
 /// With no `config`, the tissue `needle fit --toml` writes from the
-/// trials themselves (the README's workflow).
+/// trials themselves (the book's workflow).
 fn detection(trials: &[apart::Trial], config: Option<&DeviceConfig>) -> (Vec<KindRow>, usize) {
     let dir = tempfile::tempdir().unwrap();
     apart::write_dataset(dir.path(), trials).unwrap();

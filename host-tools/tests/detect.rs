@@ -157,7 +157,7 @@ fn exits_into_air_are_found_without_false_alarms() {
 }
 
 /// Every other unmodelled effect at once, at 10 mN: the puncture detector
-/// still neither misses nor false-alarms (other kinds degrade; the README
+/// still neither misses nor false-alarms (other kinds degrade; the book
 /// gives the figures).
 #[test]
 fn puncture_holds_up_under_every_unmodelled_effect() {

@@ -1,5 +1,5 @@
 //! `needle diagnose` on simulated datasets with the effect hidden from it:
-//! every effect of README, *Names* and `none`, two pairs, another physical
+//! every effect of the book, *Names* and `none`, two pairs, another physical
 //! form of each effect, and the device's own residual stream as input.
 
 use std::path::Path;
@@ -75,7 +75,7 @@ fn assert_named(out: &Value, effect: &str, least_shrink: f64) {
 /// the paper's strokes is nearly the nominal's c + b·v with each trial's
 /// own friction scale, once the first dwell holds D_p·l whatever the
 /// speed. Below the bar an effect must clear, `none` is the rule's answer
-/// (README, "Targets not met").
+/// (book, "Targets not met").
 fn below_the_bar(out: &Value, effect: &str) -> bool {
     if effect != "rate_dependent_friction" || out["verdict"]["effect"] != "none" {
         return false;
@@ -99,7 +99,7 @@ fn each_effect_and_none_is_named_with_a_real_shrink() {
         ("holder_inertia", 0.45, 1.5),
         ("sensor_drift", 0.7, 1.5),
         // The nominal refitted in the tissue's frame leaves 2.5 noise
-        // floors (README, "Targets not met"): whether the needle cuts turns
+        // floors (book, "Targets not met"): whether the needle cuts turns
         // on where it is in the moving tissue to a micrometre, which the
         // fitted displacement is not; the cutting state is followed from
         // the force one sample behind, and each switch still costs about
@@ -123,7 +123,7 @@ fn each_effect_and_none_is_named_with_a_real_shrink() {
 
 #[test]
 fn tissue_motions_fitted_displacement_does_nearly_as_well_as_the_true_one() {
-    // What tissue motion leaves (README, "Targets") is the cutting state's
+    // What tissue motion leaves (book, "Targets") is the cutting state's
     // switches, which the model places only to the encoder's resolution
     // and the needle's velocity, not the fitted displacement's error: the
     // true displacement leaves nearly as much.
@@ -172,7 +172,7 @@ fn both_effects_of_a_pair_are_named() {
     // sensor_drift shrinks most beside viscoelasticity, but not
     // significantly (t = 3.0 under its residual); viscoelasticity is
     // significant, and drift on top of it. The relaxation time it is named
-    // with there is off, and 3.2 noise floors are left (README).
+    // with there is off, and 3.2 noise floors are left (book, *Sim-to-real gap diagnosis*).
     for (pair, seed, most) in [
         (["sensor_drift", "internal_structures"], 7, 1.5),
         (["holder_inertia", "depth_dependent_cutting"], 7, 1.5),

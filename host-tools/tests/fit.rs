@@ -92,7 +92,7 @@ fn a_rational_tissue_is_recognised_and_its_a_and_b_recovered() {
     }
 }
 
-/// The drift table of the README: each effect at its default strength,
+/// The drift table of the book: each effect at its default strength,
 /// fitted with the nominal model (run with `--nocapture` to print it).
 /// Asserted: the nominal within 10 %, and the four effects that act on
 /// what the fit estimates (friction's rate, cutting, relaxation, the

@@ -1,5 +1,5 @@
 //! `fit`, `detect` and `diagnose` on recordings shaped like a real rig's
-//! (README, *What real recordings look like*): insert 25 mm at 1–3 mm/s, hold
+//! (book, *What real recordings look like*): insert 25 mm at 1–3 mm/s, hold
 //! 5 s, withdraw, with no oscillation; 100 Hz with jittered timing and gaps
 //! up to 70 ms; the stage coordinate starting 2–15 mm before the surface; a
 //! tare offset; up to two membranes below the capsule; the tissue dragged out
@@ -418,7 +418,7 @@ const SNAPSHOT: [(&str, &str, &str); 9] = [
 #[test]
 fn a_puncture_drop_spread_over_samples_is_no_exit() {
     // 100 Hz at 2 mm/s into a skin phantom: loading to 4.8 N, the drop to
-    // 1.5 N over three samples (a real rig's skin, README, *What real recordings look like*), then
+    // 1.5 N over three samples (a real rig's skin, the book, *What real recordings look like*), then
     // cutting and a friction slowly growing. Before, the drop's tail read
     // as an exit.
     let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
@@ -494,7 +494,7 @@ fn misses_and_false_alarms(out: &Value, kind: &str) -> (u64, u64) {
     )
 }
 
-/// The README's workflow on real-rig-like data — membranes, jitter, a
+/// The book's workflow on real-rig-like data — membranes, jitter, a
 /// dragged withdrawal, each trial's tissue its own, relaxation or another
 /// effect — with the tissue `needle fit --toml` writes: every capsule and
 /// membrane puncture inside the scorer's window (from the force's peak to
@@ -553,7 +553,7 @@ fn the_fitted_tissue_finds_every_puncture_in_its_window_and_no_worse_than_the_de
 /// 10 % its own. The waterfall names relaxation first and leaves at most
 /// 5 % of the puncture force on the withheld trials. In the standard and
 /// the alternate form; the literature form (Fung's box spectrum) is
-/// `unexplained` here (README, "Targets not met").
+/// `unexplained` here (book, "Targets not met").
 #[test]
 fn relaxation_over_a_held_dwell_and_a_dragged_tent_is_named_leaving_under_5_percent() {
     for form in [Form::Standard, Form::Alternate] {

@@ -10,7 +10,7 @@
 //! puncture: it is a drifting or bumped load cell, or a stuck encoder, and
 //! raises [`Faults::FORCE_WITHOUT_CONTACT`]. A pull on a needle being
 //! withdrawn is the one exception: tissue dragged out with it lets go a
-//! few millimetres later (README, *What real recordings look like*), and the phase machine's own
+//! few millimetres later (book, *What real recordings look like*), and the phase machine's own
 //! judgement of where it let go is only as good as one noisy sample.
 
 use super::{confidence_permille, event, DetectConfig, DetectInput};

@@ -3,7 +3,7 @@
 //! built from ([`super::ModelConfig::from_params`]).
 //!
 //! Signs: force is positive when it resists insertion; `cn ≤ 0 ≤ cp`,
-//! `dn ≤ 0 ≤ dp`, `bp, bn ≥ 0` (README, *The paper's numbers*).
+//! `dn ≤ 0 ≤ dp`, `bp, bn ≥ 0` (book, *The paper's numbers*).
 
 use serde::{Deserialize, Serialize};
 

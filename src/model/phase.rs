@@ -11,7 +11,7 @@
 //! the length of needle in tissue is l = x − x_s3 from then on.
 //!
 //! A withdrawing needle drags the tissue out with it: real recordings pull
-//! on the needle until 1.5–9 mm *before* x_s1 (README, *What real
+//! on the needle until 1.5–9 mm *before* x_s1 (book, *What real
 //! recordings look like*). So behind x_s3 a withdrawal only ends once the
 //! tissue lets go — the pull falls under the contact threshold — or the tip is further before x_s1 than the
 //! capsule was pushed in before it gave way (x_s2 − x_s1): a tissue cannot

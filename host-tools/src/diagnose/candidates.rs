@@ -1,4 +1,4 @@
-//! The candidate effects, one per effect of README, *Names*: each is a few columns
+//! The candidate effects, one per effect of the book, *Names*: each is a few columns
 //! added to the nominal model, built from the trial's kinematics and the
 //! nominal model's own terms, linear in their parameters and with at most
 //! one nonlinear parameter searched on a grid. The forms are the physics of
@@ -47,7 +47,7 @@ fn grid_as_named(name: &'static str, g: f64) -> Vec<(&'static str, f64)> {
     }
 }
 
-/// All candidates, in the order of README, *Names*.
+/// All candidates, in the order of the book, *Names*.
 pub const CANDIDATES: [Candidate; 8] = [
     Candidate {
         effect: "viscoelasticity",

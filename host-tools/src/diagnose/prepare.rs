@@ -1,5 +1,5 @@
 //! One trial made ready for diagnosis: the nominal model along it, the
-//! residual, the phase of every sample (README, *Names*), and the
+//! residual, the phase of every sample (book, *Names*), and the
 //! kinematic signals the candidate effects are built from.
 
 use needle_holder::config::DeviceConfig;
@@ -10,7 +10,7 @@ use crate::fit::predict::{predict_parts_at, NeedleVelocity, Parts};
 use crate::fit::TrialFit;
 use crate::trial::Trial;
 
-/// Phases (README, *Names*): outside before contact, up to the
+/// Phases (book, *Names*): outside before contact, up to the
 /// puncture, advancing before the first step back, at rest in tissue,
 /// the strokes between the first step back and the last advance, the final
 /// retreat, outside after it.

@@ -570,7 +570,7 @@ fn spreads(fit: &Value) -> String {
 /// standing in tissue and holding a force shows it does). The static band
 /// is taken symmetric (the paper's D_p 30.4, D_n −29.3 N/m), so an
 /// unidentified side is the other side mirrored; anything else is the
-/// paper's liver value (README, *The paper's numbers*: b_p 904, b_n 458 N·s/m², cutting 0.94 N,
+/// paper's liver value (book, *The paper's numbers*: b_p 904, b_n 458 N·s/m², cutting 0.94 N,
 /// C_p = C_n ≈ 0 in liver).
 fn prior(key: &str, written: &[(&str, f64)]) -> f64 {
     let other = |k: &str| written.iter().find(|(w, _)| *w == k).map(|(_, v)| *v);

@@ -990,7 +990,7 @@ fn dwell_relaxation(trial: &Trial, v: &[f64], ip: usize) -> Option<DwellRelaxati
 
 /// Membranes after the capsule: while advancing into new tissue, a fall
 /// of more than max(0.3 N, 10 noise sd) within two samples (or 20 ms,
-/// whichever is longer), the sharp drop of README, *What real recordings
+/// whichever is longer), the sharp drop of the book, *What real recordings
 /// look like*; the peak before it and where the force fell to.
 fn layers_after(trial: &Trial, v: &[f64], ip: usize, noise_n: f64) -> Vec<LayerPuncture> {
     let (x, f) = (&trial.x_m, &trial.f_n);

@@ -1,6 +1,6 @@
 //! The unmodelled effects the simulator can add to the paper's model, each
 //! with a physical parameterisation and a default strength. Names are the
-//! names of README, *Names*.
+//! names of the book, *Names*.
 //!
 //! | effect | form | default | why this form |
 //! |---|---|---|---|
@@ -16,7 +16,7 @@
 use anyhow::{bail, Result};
 use serde::Serialize;
 
-/// Every effect name, in the order of README, *Names*.
+/// Every effect name, in the order of the book, *Names*.
 pub const NAMES: [&str; 8] = [
     "viscoelasticity",
     "rate_dependent_friction",
@@ -97,7 +97,7 @@ impl Effect {
         })
     }
 
-    /// The name (README, *Names*).
+    /// The name (book, *Names*).
     pub fn name(&self) -> &'static str {
         match self {
             Effect::Viscoelasticity { .. } => NAMES[0],

@@ -69,7 +69,7 @@ pub struct Protocol {
     /// How far before the contact point the withdrawing needle lets go of
     /// the tissue, m: the tissue is drawn out with the needle, so the
     /// withdrawal friction acts over the needle from a surface dragged
-    /// there (README, *What real recordings look like*: zero force
+    /// there (book, *What real recordings look like*: zero force
     /// 1.5–9 mm before first contact).
     /// 0: it lets go at x_s3, as the paper's model has it.
     pub drag_m: f64,
@@ -208,7 +208,7 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
     }
 }
 
-/// Insert–dwell–withdraw as real rigs run it (README, *What real recordings
+/// Insert–dwell–withdraw as real rigs run it (book, *What real recordings
 /// look like*): the stage starts 2–15 mm before the surface, inserts 25 mm
 /// past it at 1, 2 or 3 mm/s, holds 5 s and withdraws; the tissue lets go of
 /// the withdrawing needle 1.5–9 mm before the contact point; up to
@@ -1070,7 +1070,7 @@ fn clear_staging(staging: &Path) -> Result<()> {
 const STAGING: &str = ".simulating";
 
 /// A sample rate a simulation can be made at: 50 Hz (the slowest rigs the
-/// analysis commands take, README, *What real recordings look like*) to
+/// analysis commands take, the book, *What real recordings look like*) to
 /// 65 535 Hz (the replay header's u16), in whole hertz (the replay's header
 /// holds whole hertz: 99.5 was written as 100). `flag` names the argument
 /// in the message.
