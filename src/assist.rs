@@ -19,9 +19,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::insertion::{EventKind, Halt, HaltReason, Phase, Sample};
 use crate::model::params::TissueParams;
 use crate::model::phase::PhaseState;
-use crate::protocol::{EventKind, Halt, HaltReason, Phase, Sample};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// A set of assist modes, one bit each.

@@ -288,16 +288,6 @@ impl DeviceConfig {
         next
     }
 
-    /// This configuration with saved settings: their tissue, load-cell
-    /// calibration and assist.
-    pub fn with_settings(&self, settings: &crate::persist::Settings) -> Self {
-        let mut next = self.with_tissue(&settings.model);
-        next.load_cell = settings.load_cell;
-        next.assist.modes = settings.assist_modes;
-        next.assist.target_depth = settings.target_depth;
-        next
-    }
-
     /// The tissue this configuration computes with, in fixed point.
     pub fn tissue_model(&self) -> TissueModel {
         TissueModel {
@@ -341,6 +331,15 @@ impl DeviceConfig {
         }
         self
     }
+}
+
+/// Where the device's tissue model came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TissueSource {
+    /// The on-device library, by position.
+    Library(u8),
+    /// Uploaded by the host.
+    Uploaded,
 }
 
 #[cfg(test)]

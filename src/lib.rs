@@ -27,6 +27,7 @@ pub mod detect;
 pub mod device;
 pub mod faults;
 pub mod hal;
+pub mod insertion;
 pub mod kinematics;
 pub mod link;
 pub mod model;

@@ -33,8 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::assist::AssistModes;
 use crate::calibration::LoadCell;
-use crate::config::TissueModel;
-use crate::protocol::TissueSource;
+use crate::config::{DeviceConfig, TissueModel, TissueSource};
 use crate::units::Nanometres;
 
 /// First bytes of a record.
@@ -68,6 +67,16 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// `base` with these settings: their tissue, load-cell calibration and
+    /// assist.
+    pub fn applied_to(&self, base: &DeviceConfig) -> DeviceConfig {
+        let mut next = base.with_tissue(&self.model);
+        next.load_cell = self.load_cell;
+        next.assist.modes = self.assist_modes;
+        next.assist.target_depth = self.target_depth;
+        next
+    }
+
     /// The checks a command's settings pass, made again on what flash
     /// held: a record whose CRC holds can still come from another build
     /// (a `TissueModel` laid out differently under the same format
@@ -82,7 +91,7 @@ impl Settings {
             && self.model.check().is_ok()
             && self.assist_modes.is_known()
             && crate::assist::target_depth_is_valid(self.target_depth)
-            && self.load_cell.gain_q16.unsigned_abs() >= crate::protocol::command::MIN_GAIN_Q16
+            && self.load_cell.gain_q16.unsigned_abs() >= crate::calibration::MIN_GAIN_Q16
             && self.load_cell.full_scale_counts > 0
     }
 }

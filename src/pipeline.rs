@@ -5,11 +5,11 @@ use crate::config::DeviceConfig;
 use crate::detect::{DetectInput, DetectState};
 use crate::faults::Faults;
 use crate::hal::AdcSample;
+use crate::insertion::{Event, Halt, Sample};
 use crate::kinematics::{EncoderTracker, VelocityState};
 use crate::model::phase::PhaseState;
 use crate::model::relax::RelaxState;
 use crate::model::{ModelConfig, ModelState};
-use crate::protocol::{Event, Halt, Sample};
 use crate::units::MicroNewtons;
 use serde::{Deserialize, Serialize};
 

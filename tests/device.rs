@@ -343,7 +343,10 @@ fn settings_changed_by_a_command_are_handed_out_once_and_restore_the_same_config
     region[..record.len()].copy_from_slice(record);
     let loaded = persist::load(&region);
     assert_eq!(loaded.loaded, Loaded::Saved);
-    let restored = DeviceConfig::default().with_settings(&loaded.settings.unwrap());
+    let restored = loaded
+        .settings
+        .unwrap()
+        .applied_to(&DeviceConfig::default());
     assert_eq!(&restored, device.config());
 }
 

@@ -15,7 +15,7 @@
 
 use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::faults::Faults;
-use crate::protocol::{Event, EventKind};
+use crate::insertion::{Event, EventKind};
 use serde::{Deserialize, Serialize};
 
 /// Samples the force must stay above the threshold, advancing, for contact.

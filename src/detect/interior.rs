@@ -28,7 +28,7 @@
 //! fires on the drop's first sample, and the rest of it is no exit.
 
 use super::{confidence_permille, event, DetectConfig, DetectInput};
-use crate::protocol::{Event, EventKind};
+use crate::insertion::{Event, EventKind};
 use crate::units::{MicroNewtons, Nanometres};
 use serde::{Deserialize, Serialize};
 

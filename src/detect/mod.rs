@@ -17,9 +17,9 @@ pub mod interior;
 pub mod puncture;
 
 use crate::faults::Faults;
+use crate::insertion::{Event, EventKind, Phase};
 use crate::model::params::TissueParams;
 use crate::model::stiffness::Stiffness;
-use crate::protocol::{Event, EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// The fall that confirms a puncture, N: half the drop the tissue

@@ -20,7 +20,7 @@
 
 use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::faults::Faults;
-use crate::protocol::{Event, EventKind, Phase};
+use crate::insertion::{Event, EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres};
 use serde::{Deserialize, Serialize};
 

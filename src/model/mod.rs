@@ -27,7 +27,7 @@ use self::friction::{Friction, FrictionState};
 use self::params::{ParamError, TissueParams};
 use self::phase::{PhaseConfig, PhaseState};
 use self::stiffness::Stiffness;
-use crate::protocol::Phase;
+use crate::insertion::Phase;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// The model's parameters in fixed point.

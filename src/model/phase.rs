@@ -19,7 +19,7 @@
 //! fault for the contact detector to find.
 
 use super::fixed::FractionQ16;
-use crate::protocol::{EventKind, Phase};
+use crate::insertion::{EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 use serde::{Deserialize, Serialize};
 

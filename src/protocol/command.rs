@@ -126,10 +126,7 @@ impl From<DecodeError> for CommandError {
     }
 }
 
-/// The smallest load-cell gain a command may set, in magnitude: 0.01 µN
-/// a count (Q16.16), far finer than any cell on a 24-bit converter; a
-/// gain near zero would read every load as none.
-pub const MIN_GAIN_Q16: u32 = 656;
+pub use crate::calibration::MIN_GAIN_Q16;
 
 /// The [`CommandError::OutOfRange`] field of a tare asked for before the
 /// load cell's first readings: nothing is out of range, there is nothing

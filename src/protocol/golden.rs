@@ -13,6 +13,7 @@ use crate::assist::AssistModes;
 use crate::config::{DEFAULT, LIBRARY_MODELS};
 use crate::hal::AdcSample;
 use crate::pipeline::RawSample;
+use crate::units::{MicroNewtons, Nanometres};
 
 /// The pipeline's state after a loading ramp: every counter and filter
 /// away from its start.

@@ -31,46 +31,19 @@ pub use self::batch::Batch;
 pub use self::command::{Command, CommandError, CommandFrame, Reply};
 pub use self::wire::DecodeError;
 
+pub use crate::calibration::MIN_GAIN_Q16;
+pub use crate::config::TissueSource;
+pub use crate::insertion::{Event, EventKind, Halt, HaltReason, Phase, Sample};
+
 use crate::config::DeviceConfig;
 use crate::faults::Faults;
 use crate::pipeline::PipelineState;
-use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// Version of the frame format; the host refuses other versions.
 pub const PROTOCOL_VERSION: u16 = 5;
 
 /// Samples between two status heartbeats.
 pub const STATUS_PERIOD_SAMPLES: u32 = 250;
-
-/// Where the needle is in the insertion, as the device tracks it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
-pub enum Phase {
-    /// Tip outside the tissue.
-    Out,
-    /// Tip pressing on the capsule, before puncture.
-    Loading,
-    /// Tip inside the tissue, after puncture.
-    Inserted,
-    /// Needle moving out of the tissue.
-    Withdrawal,
-}
-
-/// What a detector saw.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
-pub enum EventKind {
-    /// The tip met the surface.
-    Contact,
-    /// The capsule gave way.
-    Puncture,
-    /// The tip struck and passed an interior structure (vessel).
-    Structure,
-    /// The tip left the tissue into another medium.
-    Exit,
-    /// A fault was raised (see the next status frame).
-    Fault,
-}
 
 /// Sent once at boot: what the stream is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -80,42 +53,6 @@ pub struct Header {
     pub protocol_version: u16,
     /// Sample rate, Hz: sample index / rate = time since boot.
     pub sample_rate_hz: u16,
-}
-
-/// One processed sample.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
-pub struct Sample {
-    /// Sample index since boot.
-    pub index: u32,
-    /// Needle position.
-    pub x: Nanometres,
-    /// Needle velocity (windowed difference, see `kinematics`).
-    pub v: NanometresPerSecond,
-    /// Measured force.
-    pub force: MicroNewtons,
-    /// Force the model expects here.
-    pub model: MicroNewtons,
-    /// `force − model`, saturating.
-    pub residual: MicroNewtons,
-    /// Phase at this sample.
-    pub phase: Phase,
-}
-
-/// A detected event.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
-pub struct Event {
-    /// Sample index at which it was flagged.
-    pub index: u32,
-    /// What it was.
-    pub kind: EventKind,
-    /// Needle position at the event.
-    pub x: Nanometres,
-    /// Force at the event (for a puncture: the peak before the drop).
-    pub force: MicroNewtons,
-    /// Detector's confidence figure, 0–1000 (per mille).
-    pub confidence_permille: u16,
 }
 
 /// Heartbeat with counters.
@@ -195,62 +132,6 @@ pub struct BoardFindings {
     pub encoder_count: Option<u16>,
 }
 
-/// Why the device asserted the halt line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
-pub enum HaltReason {
-    /// A fault (see the status frame).
-    Fault,
-    /// Stop on contact.
-    Contact,
-    /// Stop on capsule puncture.
-    Puncture,
-    /// Stop on an interior structure.
-    Structure,
-    /// Stop on exit from the tissue.
-    Exit,
-    /// The target depth past the surface was reached.
-    TargetDepth,
-    /// Faster than the speed limit before puncture.
-    SpeedLimit,
-}
-
-impl From<EventKind> for HaltReason {
-    fn from(kind: EventKind) -> Self {
-        match kind {
-            EventKind::Contact => Self::Contact,
-            EventKind::Puncture => Self::Puncture,
-            EventKind::Structure => Self::Structure,
-            EventKind::Exit => Self::Exit,
-            EventKind::Fault => Self::Fault,
-        }
-    }
-}
-
-/// Sent when the halt line goes up: why, and where the robot should hold
-/// the tip (behind it when the device asks for a back-off).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
-pub struct Halt {
-    /// Sample index at which the line went up.
-    pub index: u32,
-    /// Why.
-    pub reason: HaltReason,
-    /// Needle position then.
-    pub x: Nanometres,
-    /// Position the robot should bring the needle to and hold.
-    pub hold_x: Nanometres,
-}
-
-/// Where the device's tissue model came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum TissueSource {
-    /// The on-device library, by position.
-    Library(u8),
-    /// Uploaded by the host.
-    Uploaded,
-}
-
 /// What the device computes with, from the next sample on: sent after the
 /// header, after every change, on request, and now and then for a host
 /// that joined late. The same configuration always gives the same bytes,
@@ -320,6 +201,7 @@ pub fn decode<'b>(cobs_bytes: &[u8], buffer: &'b mut [u8]) -> Result<Frame<'b>, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::units::{MicroNewtons, Nanometres};
 
     fn decode_owned(bytes: &[u8]) -> std::string::String {
         let mut buf = [0u8; MAX_ENCODED_FRAME];

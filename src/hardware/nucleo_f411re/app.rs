@@ -119,7 +119,7 @@ mod app {
         let store_ready = store.prepare(load.settings.as_ref());
         defmt::info!("settings: {}", load.loaded);
         let (config, tissue) = match &load.settings {
-            Some(s) => (base.with_settings(s), s.tissue),
+            Some(s) => (s.applied_to(&base), s.tissue),
             None => (base, default_tissue()),
         };
         defmt::info!(
