@@ -8,12 +8,8 @@ use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
 use rand::{RngCore, SeedableRng};
 
-fn needle(args: &[&std::ffi::OsStr]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_needle"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+mod common;
+use common::run as needle;
 
 #[test]
 fn random_bytes_are_reported_as_skipped_and_refused_never_a_panic() {
@@ -73,7 +69,7 @@ fn capture_to_trial_csv_round_trips_the_simulated_trial() {
 
 #[test]
 fn a_missing_file_is_a_clear_error() {
-    let out = needle(&["decode".as_ref(), "/nonexistent/capture.bin".as_ref()]);
+    let out = needle(&["decode", "/nonexistent/capture.bin"]);
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(

@@ -6,12 +6,8 @@ mod library;
 use library::liver1_entry;
 use std::process::Command;
 
-fn needle(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_needle"))
-        .args(args)
-        .output()
-        .expect("run needle")
-}
+mod common;
+use common::run as needle;
 
 /// A fresh directory with `trials` simulated trials from `seed`.
 fn simulated(trials: u32, seed: u32) -> tempfile::TempDir {

@@ -5,12 +5,8 @@
 
 use std::process::Command;
 
-fn needle(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_needle"))
-        .args(args)
-        .output()
-        .expect("run needle")
-}
+mod common;
+use common::run as needle;
 
 /// Run needle with `args`: whether it exited 0, its own peak resident
 /// memory in kB (wait4, which reaps it — not the largest of the suite's),

@@ -98,9 +98,10 @@ impl<const N: usize> Encoder<N> {
     /// An empty slice means the message did not fit `N`: a bug in a size
     /// bound, which the caller counts as a dropped frame.
     ///
-    /// Out of line: inlined where each frame is built, the serialisers of
-    /// the configuration, the snapshot and the status were copied there
-    /// (6 KiB of flash); a call per frame costs nothing a sample.
+    /// Out of line, so that each message type's serialiser exists once
+    /// rather than once in every place a frame is built (6 KiB of flash
+    /// for the configuration, the snapshot and the status); a call per
+    /// frame costs nothing measurable a sample.
     #[inline(never)]
     pub fn encode<T: Serialize + ?Sized>(&mut self, message: &T) -> &[u8] {
         let flavor = WireFlavor {

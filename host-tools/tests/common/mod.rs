@@ -2,14 +2,24 @@
 //! read the device's residual over each dwell of `needle detect
 //! --samples`'s output.
 
+// Each test binary uses some of these, none all of them.
+#![allow(dead_code)]
+
+use std::ffi::OsStr;
 use std::path::Path;
+use std::process::{Command, Output};
+
+/// Run `needle` with `args` to its end, whatever it exits with.
+pub fn run<S: AsRef<OsStr>>(args: &[S]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args(args)
+        .output()
+        .expect("run needle")
+}
 
 /// Run `needle` with `args`; it must succeed (its stderr in the message).
 pub fn needle(args: &[&str]) {
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_needle"))
-        .args(args)
-        .output()
-        .unwrap();
+    let run = run(args);
     assert!(
         run.status.success(),
         "{args:?}: {}",
