@@ -110,8 +110,9 @@ pub fn target_directory(root: &Path) -> Result<PathBuf> {
         target_directory: PathBuf,
     }
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    // From the caller's directory, as cargo itself reads a relative
+    // `CARGO_TARGET_DIR`; the manifest names the workspace.
     let out = Command::new(cargo)
-        .current_dir(root)
         .args([
             "metadata",
             "--format-version",
@@ -119,6 +120,8 @@ pub fn target_directory(root: &Path) -> Result<PathBuf> {
             "--no-deps",
             "--offline",
         ])
+        .arg("--manifest-path")
+        .arg(root.join("Cargo.toml"))
         .stderr(Stdio::inherit())
         .output()
         .context("cannot run `cargo metadata` to find the target directory")?;

@@ -130,6 +130,90 @@ fn frames() -> std::vec::Vec<(&'static str, Frame<'static>)> {
     ]
 }
 
+/// Every variant of the enums the frames carry, one frame each: a variant
+/// inserted before another renumbers it on the wire.
+fn variants() -> std::vec::Vec<(&'static str, Frame<'static>)> {
+    use crate::persist::Loaded;
+    let event = |kind| {
+        Frame::Event(Event {
+            index: 1,
+            kind,
+            x: Nanometres(1),
+            force: MicroNewtons(1),
+            confidence_permille: 1,
+        })
+    };
+    let halt = |reason| {
+        Frame::Halt(Halt {
+            index: 1,
+            reason,
+            x: Nanometres(1),
+            hold_x: Nanometres(1),
+        })
+    };
+    let refused = |result| Frame::Reply(Reply { seq: 1, result });
+    let config = |tissue, stored| {
+        Frame::Config(ConfigFrame {
+            tissue,
+            stored,
+            config: DEFAULT,
+        })
+    };
+    let text = command::text;
+    let mut all = std::vec::Vec::new();
+    for kind in [
+        EventKind::Contact,
+        EventKind::Puncture,
+        EventKind::Structure,
+        EventKind::Exit,
+        EventKind::Fault,
+    ] {
+        all.push(("event_kinds", event(kind)));
+    }
+    for reason in [
+        HaltReason::Fault,
+        HaltReason::Contact,
+        HaltReason::Puncture,
+        HaltReason::Structure,
+        HaltReason::Exit,
+        HaltReason::TargetDepth,
+        HaltReason::SpeedLimit,
+    ] {
+        all.push(("halt_reasons", halt(reason)));
+    }
+    for error in [
+        CommandError::Corrupted,
+        CommandError::Unknown,
+        CommandError::Stale { next_seq: 2 },
+        CommandError::NoSuchTissue { library_len: 3 },
+        CommandError::InvalidTissue {
+            field: text("a"),
+            problem: text("b"),
+        },
+        CommandError::OutOfRange { field: text("c") },
+        CommandError::NeedleInTissue,
+        CommandError::LoadOnNeedle {
+            force: MicroNewtons(4),
+        },
+        CommandError::HaltCausePersists {
+            reason: HaltReason::Fault,
+        },
+    ] {
+        all.push(("command_errors", refused(Err(error))));
+    }
+    all.push(("command_errors", refused(Ok(()))));
+    for stored in [
+        Loaded::NotKept,
+        Loaded::Blank,
+        Loaded::Saved,
+        Loaded::SavedBeforeTorn,
+        Loaded::Invalid,
+    ] {
+        all.push(("stored_settings", config(TissueSource::Uploaded, stored)));
+    }
+    all
+}
+
 fn commands() -> std::vec::Vec<(&'static str, Command)> {
     std::vec![
         ("tare", Command::Tare),
@@ -161,6 +245,10 @@ const PINNED: &[(&str, usize, u32)] = &[
     ("halt", 16, 0x66689832),
     ("reply", 33, 0xe6713a2d),
     ("selftest", 25, 0x82474087),
+    ("event_kinds", 50, 0xe2a01edf),
+    ("halt_reasons", 63, 0x879cfb51),
+    ("command_errors", 89, 0xf6882253),
+    ("stored_settings", 540, 0x21a4ce3b),
     ("tare", 6, 0xd14cecb3),
     ("select_tissue", 7, 0xf12f2b13),
     ("upload_tissue", 80, 0xa9951103),
@@ -172,10 +260,57 @@ const PINNED: &[(&str, usize, u32)] = &[
     ("self_test", 6, 0xf2f75035),
 ];
 
-/// A kind added to [`Frame`] or [`Command`] does not compile here until
-/// it is in [`frames`] or [`commands`] and pinned.
+/// A kind added to [`Frame`] or [`Command`], or a variant to an enum they
+/// carry, does not compile here until it is in [`frames`], [`variants`] or
+/// [`commands`] and pinned.
 #[allow(dead_code)]
-fn every_kind_is_listed(frame: &Frame, command: &Command) {
+fn every_kind_is_listed(
+    frame: &Frame,
+    command: &Command,
+    error: &CommandError,
+    stored: &crate::persist::Loaded,
+    source: &TissueSource,
+    kind: EventKind,
+    reason: HaltReason,
+) {
+    use crate::persist::Loaded;
+    match error {
+        CommandError::Corrupted
+        | CommandError::Unknown
+        | CommandError::Stale { .. }
+        | CommandError::NoSuchTissue { .. }
+        | CommandError::InvalidTissue { .. }
+        | CommandError::OutOfRange { .. }
+        | CommandError::NeedleInTissue
+        | CommandError::LoadOnNeedle { .. }
+        | CommandError::HaltCausePersists { .. } => {}
+    }
+    match stored {
+        Loaded::NotKept
+        | Loaded::Blank
+        | Loaded::Saved
+        | Loaded::SavedBeforeTorn
+        | Loaded::Invalid => {}
+    }
+    match source {
+        TissueSource::Library(_) | TissueSource::Uploaded => {}
+    }
+    match kind {
+        EventKind::Contact
+        | EventKind::Puncture
+        | EventKind::Structure
+        | EventKind::Exit
+        | EventKind::Fault => {}
+    }
+    match reason {
+        HaltReason::Fault
+        | HaltReason::Contact
+        | HaltReason::Puncture
+        | HaltReason::Structure
+        | HaltReason::Exit
+        | HaltReason::TargetDepth
+        | HaltReason::SpeedLimit => {}
+    }
     match frame {
         Frame::Header(_)
         | Frame::Config(_)
@@ -206,10 +341,22 @@ fn crc32(bytes: &[u8]) -> u32 {
 
 #[test]
 fn every_frame_and_command_kind_has_the_pinned_bytes() {
-    let mut measured = std::vec::Vec::new();
+    let mut measured: std::vec::Vec<(&str, usize, u32)> = std::vec::Vec::new();
     for (kind, frame) in frames() {
         let bytes = FrameEncoder::default().encode(&frame).to_vec();
         measured.push((kind, bytes.len(), crc32(&bytes)));
+    }
+    // Each enum's variants together: their bytes one after the other.
+    let mut by_enum: std::vec::Vec<(&str, std::vec::Vec<u8>)> = std::vec::Vec::new();
+    for (name, frame) in variants() {
+        let bytes = FrameEncoder::default().encode(&frame).to_vec();
+        match by_enum.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, all)) => all.extend_from_slice(&bytes),
+            None => by_enum.push((name, bytes)),
+        }
+    }
+    for (name, bytes) in &by_enum {
+        measured.push((name, bytes.len(), crc32(bytes)));
     }
     for (kind, command) in commands() {
         let frame = CommandFrame { seq: 7, command };
