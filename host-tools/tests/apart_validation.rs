@@ -14,7 +14,7 @@ mod common;
 use host_tools::detect::detect_dataset;
 use host_tools::diagnose::candidates::CANDIDATES;
 use host_tools::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
-use host_tools::fit::{fit_dataset, to_toml};
+use host_tools::fit::fit_dataset;
 use needle_holder::config::DeviceConfig;
 use serde_json::Value;
 
@@ -150,8 +150,7 @@ fn detection(trials: &[apart::Trial], config: Option<&DeviceConfig>) -> (Vec<Kin
     let config = match config {
         Some(c) => c,
         None => {
-            let fit = fit_dataset(dir.path()).unwrap();
-            let tissue = host_tools::fit::fitted_tissue(&to_toml(&fit)).unwrap();
+            let tissue = fit_dataset(dir.path()).unwrap().tissue().unwrap();
             fitted = DeviceConfig::for_tissue(&tissue).unwrap();
             &fitted
         }

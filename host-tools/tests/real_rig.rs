@@ -11,7 +11,7 @@ use std::path::Path;
 
 use host_tools::detect::detect_dataset;
 use host_tools::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
-use host_tools::fit::{fit_dataset, to_toml, value_of, RELAXATION_PRIOR};
+use host_tools::fit::{fit_dataset, to_toml, Estimate, FitReport, RELAXATION_PRIOR};
 use host_tools::sim::{effects, Dataset, Form, ProtocolKind, Rig, Sensor};
 use needle_holder::config::DeviceConfig;
 use serde_json::Value;
@@ -101,8 +101,10 @@ fn simulate(dir: &Path, effect_list: &'static str) -> needle_holder::model::para
     .write(dir)
 }
 
-fn within(fit: &Value, key: &str, truth: f64, tolerance: f64) {
-    let got = value_of(&fit[key]).unwrap_or_else(|| panic!("{key}: {}", fit[key]));
+fn within(key: &str, estimate: &Estimate, truth: f64, tolerance: f64) {
+    let got = estimate
+        .value
+        .unwrap_or_else(|| panic!("{key}: {estimate:?}"));
     assert!(
         (got - truth).abs() <= tolerance * truth.abs(),
         "{key}: fitted {got}, true {truth}"
@@ -110,7 +112,7 @@ fn within(fit: &Value, key: &str, truth: f64, tolerance: f64) {
 }
 
 /// `needle detect --params` with the tissue `needle fit --toml` wrote.
-fn detect_with_fitted(dir: &Path, fit: &Value) -> Value {
+fn detect_with_fitted(dir: &Path, fit: &FitReport) -> Value {
     let tissue = host_tools::tissue::parse(&to_toml(fit), Path::new("fitted.toml"))
         .unwrap()
         .remove(0);
@@ -119,13 +121,8 @@ fn detect_with_fitted(dir: &Path, fit: &Value) -> Value {
 }
 
 /// Membrane punctures `needle fit` found after the capsule, all layers.
-fn membranes_found(fit: &Value) -> usize {
-    fit["layers"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|l| l["trials"].as_u64().unwrap() as usize)
-        .sum()
+fn membranes_found(fit: &FitReport) -> usize {
+    fit.layers.iter().map(|l| l.trials).sum()
 }
 
 fn truth_events(dir: &Path, kind: &str) -> usize {
@@ -145,44 +142,52 @@ fn fit_recovers_what_insert_dwell_withdraw_identifies() {
     let dir = tempfile::tempdir().unwrap();
     let p = simulate(dir.path(), "");
     let fit = fit_dataset(dir.path()).unwrap();
-    assert_eq!(fit["trials"], 10, "{}", fit["skipped"]);
-    within(&fit, "a1_n_per_m", p.a1_n_per_m, 0.1);
-    within(&fit, "a2_n_per_m2", p.a2_n_per_m2, 0.1);
-    within(&fit, "puncture_depth_m", p.puncture_depth_m, 0.1);
+    assert_eq!(fit.trials, 10, "{:?}", fit.skipped);
+    within("a1_n_per_m", &fit.a1_n_per_m, p.a1_n_per_m, 0.1);
+    within("a2_n_per_m2", &fit.a2_n_per_m2, p.a2_n_per_m2, 0.1);
     within(
-        &fit,
+        "puncture_depth_m",
+        &fit.puncture_depth_m,
+        p.puncture_depth_m,
+        0.1,
+    );
+    within(
         "puncture_force_n",
+        &fit.puncture_force_n,
         p.stiffness_n(p.puncture_depth_m),
         0.1,
     );
     // Trials at 1, 2 and 3 mm/s: c and b split over the speeds.
-    within(&fit, "cp_n_per_m", p.cp_n_per_m, 0.1);
-    within(&fit, "bp_ns_per_m2", p.bp_ns_per_m2, 0.1);
-    within(&fit, "cn_n_per_m", p.cn_n_per_m, 0.1);
-    within(&fit, "bn_ns_per_m2", p.bn_ns_per_m2, 0.1);
-    assert!(fit["bp_ns_per_m2"]["note"]
-        .as_str()
+    within("cp_n_per_m", &fit.cp_n_per_m, p.cp_n_per_m, 0.1);
+    within("bp_ns_per_m2", &fit.bp_ns_per_m2, p.bp_ns_per_m2, 0.1);
+    within("cn_n_per_m", &fit.cn_n_per_m, p.cn_n_per_m, 0.1);
+    within("bn_ns_per_m2", &fit.bn_ns_per_m2, p.bn_ns_per_m2, 0.1);
+    assert!(fit
+        .bp_ns_per_m2
+        .note
+        .as_deref()
         .unwrap()
         .contains("several speeds"));
     // The dragged tissue lets go before the contact point, and a stop into
     // the dwell holds the tip's force with the shaft's: x_s3 is not seen.
     // ρ is held at the stated prior (the simulator's own 0.5 here), and
     // the cutting force is the insertion line's value there.
-    assert!(
-        fit["relaxation"]["value"].is_null(),
-        "{}",
-        fit["relaxation"]
+    assert!(fit.relaxation.value.is_none(), "{:?}", fit.relaxation);
+    assert_eq!(fit.relaxation.model_uses, Some(RELAXATION_PRIOR));
+    within(
+        "cutting_force_n",
+        &fit.cutting_force_n,
+        p.cutting_force_n,
+        0.1,
     );
-    assert_eq!(fit["relaxation"]["model_uses"], RELAXATION_PRIOR);
-    within(&fit, "cutting_force_n", p.cutting_force_n, 0.1);
     // The static band from the dwell: the stop at the cutting front holds
     // D_p·l of the tip's and the shaft's force.
-    within(&fit, "dp_n_per_m", p.dp_n_per_m, 0.1);
+    within("dp_n_per_m", &fit.dp_n_per_m, p.dp_n_per_m, 0.1);
     // And D_n from the withdrawal's stick, which gives way at D_n·l.
-    within(&fit, "dn_n_per_m", p.dn_n_per_m, 0.1);
+    within("dn_n_per_m", &fit.dn_n_per_m, p.dn_n_per_m, 0.1);
     // Where the tissue let go, against the simulator's own drag per trial
     // (drawn within 1.5–9 mm): the fit's estimate is their mean.
-    let drag = value_of(&fit["let_go_before_contact_m"]).unwrap();
+    let drag = fit.let_go_before_contact_m.as_ref().unwrap().value.unwrap();
     let truth: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("truth.json")).unwrap())
             .unwrap();
@@ -198,7 +203,13 @@ fn fit_recovers_what_insert_dwell_withdraw_identifies() {
     // Every membrane's puncture, none from the stops.
     assert_eq!(membranes_found(&fit), truth_events(dir.path(), "structure"));
     // With no viscoelasticity nothing relaxes in the dwell but the noise.
-    let fraction = value_of(&fit["dwell_relaxation"]["fraction"]).unwrap();
+    let fraction = fit
+        .dwell_relaxation
+        .as_ref()
+        .unwrap()
+        .fraction
+        .value
+        .unwrap();
     assert!(fraction.abs() < 0.05, "{fraction}");
 }
 
@@ -208,12 +219,7 @@ fn fit_reports_one_speed_as_a_combination() {
     // Keep only the trials that ran at 2 mm/s (six of seed 5's ten).
     let p = simulate(dir.path(), "");
     let fit = fit_dataset(dir.path()).unwrap();
-    let speeds: Vec<f64> = fit["insertion_friction"]["speed_mps"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let speeds = fit.insertion_friction.as_ref().unwrap().speed_mps.clone();
     let commonest = 0.002;
     for (k, v) in speeds.iter().enumerate() {
         if (v - commonest).abs() > 2e-4 {
@@ -221,10 +227,10 @@ fn fit_reports_one_speed_as_a_combination() {
         }
     }
     let one = fit_dataset(dir.path()).unwrap();
-    let note = one["bp_ns_per_m2"]["note"].as_str().unwrap();
+    let note = one.bp_ns_per_m2.note.as_deref().unwrap();
     assert!(note.contains("not separable"), "{note}");
     // The combination at that speed is right.
-    let b = value_of(&one["bp_ns_per_m2"]).unwrap();
+    let b = one.bp_ns_per_m2.value.unwrap();
     let truth = p.cp_n_per_m + p.bp_ns_per_m2 * commonest;
     assert!((b * commonest - truth).abs() < 0.1 * truth, "{b}");
 }
@@ -465,7 +471,7 @@ fn fit_and_detect_hold_from_50_hz_to_2_khz() {
         }
         .write(dir.path());
         let fit = fit_dataset(dir.path()).unwrap();
-        assert_eq!(fit["trials"], 6, "{rate_hz} Hz: {}", fit["skipped"]);
+        assert_eq!(fit.trials, 6, "{rate_hz} Hz: {:?}", fit.skipped);
         assert_eq!(
             membranes_found(&fit),
             truth_events(dir.path(), "structure"),
@@ -520,7 +526,7 @@ fn the_fitted_tissue_finds_every_puncture_in_its_window_and_no_worse_than_the_de
         let fit = fit_dataset(dir.path()).unwrap();
         // The tissue carries the fall the trials made and the spreads the
         // detector takes its margins from.
-        let tissue = host_tools::fit::fitted_tissue(&to_toml(&fit)).unwrap();
+        let tissue = fit.tissue().unwrap();
         let truth = host_tools::tissue::resolve(Some("skin_phantom"), None)
             .unwrap()
             .params;

@@ -898,8 +898,8 @@ pub fn heldout_rms_with_displacement(data: &[Prepared], shifts: &[TissueShift]) 
 
 /// `needle fit`'s estimates over per-trial fits, as tissue parameters.
 fn nominal_params(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Result<TissueParams> {
-    let text = crate::fit::to_toml(&crate::fit::summarise(fits, skipped));
-    crate::fit::fitted_tissue(&text)
+    crate::fit::summarise(fits, skipped)
+        .tissue()
         .map_err(|e| anyhow::anyhow!("{e}: pass the tissue with --params or --tissue"))
 }
 

@@ -5,14 +5,18 @@ pub mod cutting;
 pub mod jumps;
 pub(crate) mod lsq;
 pub mod predict;
+pub mod report;
 pub mod trial;
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::model::params::TissueParams;
-use serde_json::{json, Value};
+use serde_json::Value;
 
+use self::report::{mean_sd, AtSpeeds, Bound, DwellSummary, LawFit, LayerSummary};
+pub use self::report::{Estimate, FitReport};
+use self::report::{PunctureMargins, StiffnessLaws, TrialGeometry};
 pub use self::trial::{fit_trial, TrialFit, RELAXATION_PRIOR};
 use crate::trial::Trial;
 
@@ -32,24 +36,13 @@ pub struct FitArgs {
     pub plot: Option<PathBuf>,
 }
 
-/// Mean and sample standard deviation (None for one value).
-fn mean_sd(values: &[f64]) -> (f64, Option<f64>) {
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let sd = (values.len() > 1)
-        .then(|| (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt());
-    (mean, sd)
+/// Mean ± sd over the trials.
+fn estimate(values: &[f64]) -> Estimate {
+    Estimate::of(values)
 }
 
-/// `{"value": mean, "sd": sd}`, or a bare number for a single trial.
-fn estimate(values: &[f64]) -> Value {
-    match mean_sd(values) {
-        (mean, Some(sd)) => json!({ "value": mean, "sd": sd }),
-        (mean, None) => json!(mean),
-    }
-}
-
-/// The value of an estimate (`value` of an object, or the number).
+/// The value of an estimate as the JSON has it (`value` of an object, or
+/// the number).
 pub fn value_of(v: &Value) -> Option<f64> {
     v.get("value")
         .and_then(Value::as_f64)
@@ -62,7 +55,7 @@ fn static_estimate(
     fits: &[&TrialFit],
     pick: fn(&TrialFit) -> Option<(f64, bool)>,
     positive: bool,
-) -> Value {
+) -> Estimate {
     // What the tissue held in full at a stop is a bound the static band
     // cannot be inside: a stop that looks clamped below it is a sliding
     // force misjudged on one trial (once, a tenth of the band from a call
@@ -86,16 +79,22 @@ fn static_estimate(
     if !clamped.is_empty() {
         return estimate(&clamped);
     }
-    json!({
-        "value": Value::Null,
-        if positive { "lower_bound" } else { "upper_bound" }: if bound.is_finite() { json!(bound) } else { Value::Null },
-        "note": "not identified: the needle never stopped from a sliding friction beyond the static band"
-    })
+    let bound = bound.is_finite().then_some(bound);
+    Estimate {
+        bound: Some(if positive {
+            Bound::Lower(bound)
+        } else {
+            Bound::Upper(bound)
+        }),
+        ..Estimate::noting(
+            "not identified: the needle never stopped from a sliding friction beyond the static band",
+        )
+    }
 }
 
 /// Fit every trial of a dataset and aggregate. Files that cannot be
 /// fitted are reported in `skipped` and left out.
-pub fn fit_dataset(dir: &Path) -> Result<Value> {
+pub fn fit_dataset(dir: &Path) -> Result<FitReport> {
     let (trials, unreadable) = crate::trial::read_dataset(dir, "fit")?;
     let total = trials.len() + unreadable.len();
     let mut fits = Vec::new();
@@ -125,7 +124,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
         bail!("{}: none of {total} trials could be fitted", dir.display());
     }
     let mut out = summarise(&fits, skipped);
-    if let Ok(params) = fitted_tissue(&to_toml(&out)) {
+    if let Ok(params) = out.tissue() {
         let fitted: Vec<(&Trial, &TrialFit)> = trials
             .iter()
             .filter_map(|(file, trial)| {
@@ -133,7 +132,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
                 Some((trial, fit))
             })
             .collect();
-        out["puncture_detection"] = puncture_margins(&params, &fitted);
+        out.puncture_detection = Some(puncture_margins(&params, &fitted));
     }
     Ok(out)
 }
@@ -146,7 +145,7 @@ pub fn fit_dataset(dir: &Path) -> Result<Value> {
 /// before each trial's peak, with its margin to firing early, and the
 /// smallest capsule fall within the detector's fall window after the
 /// peak, with its margin to being missed.
-fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Value {
+fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> PunctureMargins {
     use needle_holder::detect::{puncture, DetectConfig, DetectInput};
     use needle_holder::protocol::Phase;
     use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
@@ -196,20 +195,23 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Va
         smallest_fall_n = smallest_fall_n.min(fall_n);
         to_miss_n = to_miss_n.min(fall_margin_n);
     }
-    json!({
-        "threshold_n": n(puncture::needed_drop(&base, MicroNewtons::from_n(params.puncture_force_n))),
-        "least_peak_n": n(base.puncture_min_peak),
-        "largest_fall_before_peak_n": largest_before_n,
-        "margin_to_early_n": to_early_n,
-        "smallest_puncture_fall_n": smallest_fall_n,
-        "margin_to_miss_n": to_miss_n,
-        "note": "on the fitted trials, as the device's detector reads them: threshold_n is the fall that confirms from the expected peak (half the expected fall less its spread, or a quarter of the peak if less); from a smaller peak a quarter of the peak confirms, and below least_peak_n (30 % of the puncture force, or four spreads of it under it) nothing fires; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
-    })
+    PunctureMargins {
+        threshold_n: n(puncture::needed_drop(
+            &base,
+            MicroNewtons::from_n(params.puncture_force_n),
+        )),
+        least_peak_n: n(base.puncture_min_peak),
+        largest_fall_before_peak_n: largest_before_n,
+        margin_to_early_n: to_early_n,
+        smallest_puncture_fall_n: smallest_fall_n,
+        margin_to_miss_n: to_miss_n,
+        note: "on the fitted trials, as the device's detector reads them: threshold_n is the fall that confirms from the expected peak (half the expected fall less its spread, or a quarter of the peak if less); from a smaller peak a quarter of the peak confirms, and below least_peak_n (30 % of the puncture force, or four spreads of it under it) nothing fires; a margin at or below 0 means the device would report a puncture early (to_early) or miss one (to_miss) on some of them",
+    }
 }
 
 /// Mean ± sd of per-trial fits, with the per-trial geometry and the trials
 /// left out: `needle fit`'s JSON.
-pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
+pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport {
     let all: Vec<&TrialFit> = fits.iter().map(|(_, f)| f).collect();
     let col = |get: fn(&TrialFit) -> f64| all.iter().map(|t| get(t)).collect::<Vec<f64>>();
     let stats = |fit: fn(&TrialFit) -> trial::StiffnessFit| {
@@ -256,89 +258,109 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
                 .collect::<Vec<_>>(),
         );
         (
-            json!({ "value": rho, "sd": rho_sd, "note": note }),
-            json!({ "value": cut, "sd": cut_sd, "note": note }),
+            Estimate {
+                value: Some(rho),
+                sd: rho_sd,
+                ..Estimate::noting(note.clone())
+            },
+            Estimate {
+                value: Some(cut),
+                sd: cut_sd,
+                ..Estimate::noting(note)
+            },
         )
     } else {
         let note = format!("not identified: on withdrawal the tissue held the needle until it was behind the contact point (dragged out), so where the surface relaxed to is not seen (a stop into a dwell does not show it: the static band holds the tip's force with the shaft's); the prior ρ = {RELAXATION_PRIOR} is used, and the cutting force carries c_p·(x_s3 − x_s1)'s error");
         let (at_prior, sd) = mean_sd(&col(|t| t.cutting_force_n));
         (
-            json!({ "value": Value::Null, "model_uses": RELAXATION_PRIOR, "note": note }),
-            json!({ "value": at_prior, "sd": sd, "note": "confounded with friction × x_s3 (see relaxation)" }),
+            Estimate {
+                model_uses: Some(RELAXATION_PRIOR),
+                ..Estimate::noting(note)
+            },
+            Estimate {
+                value: Some(at_prior),
+                sd,
+                ..Estimate::noting("confounded with friction × x_s3 (see relaxation)")
+            },
         )
     };
     let drags: Vec<f64> = all
         .iter()
         .filter_map(|t| t.let_go_x_m.map(|x| t.contact_x_m - x))
         .collect();
-    let let_go = if drags.is_empty() {
-        Value::Null
-    } else {
-        estimate(&drags)
-    };
+    let let_go = (!drags.is_empty()).then(|| estimate(&drags));
     let dwells: Vec<_> = all.iter().filter_map(|t| t.dwell).collect();
-    let dwell = if dwells.is_empty() {
-        Value::Null
-    } else {
-        json!({
-            "trials": dwells.len(),
-            "duration_s": estimate(&dwells.iter().map(|d| d.duration_s).collect::<Vec<_>>()),
-            "fraction": estimate(&dwells.iter().map(|d| d.fraction).collect::<Vec<_>>()),
-            "tau_s": estimate(&dwells.iter().map(|d| d.tau_s).collect::<Vec<_>>()),
-            "gain": estimate(&dwells.iter().map(|d| d.gain).collect::<Vec<_>>()),
-            "fall_n": estimate(&dwells.iter().map(|d| d.fraction * d.start_level_n).collect::<Vec<_>>()),
-        })
+    let over_dwells = |get: fn(&trial::DwellRelaxation) -> f64| {
+        estimate(&dwells.iter().map(get).collect::<Vec<_>>())
     };
+    let dwell = (!dwells.is_empty()).then(|| DwellSummary {
+        trials: dwells.len(),
+        duration_s: over_dwells(|d| d.duration_s),
+        fraction: over_dwells(|d| d.fraction),
+        tau_s: over_dwells(|d| d.tau_s),
+        gain: over_dwells(|d| d.gain),
+        fall_n: over_dwells(|d| d.fraction * d.start_level_n),
+    });
     let most_layers = all.iter().map(|t| t.layers.len()).max().unwrap_or(0);
-    let layers: Vec<Value> = (0..most_layers)
+    let layers = (0..most_layers)
         .map(|k| {
             let of: Vec<_> = all.iter().filter_map(|t| t.layers.get(k)).collect();
-            json!({
-                "layer": k + 2,
-                "trials": of.len(),
-                "puncture_force_n": estimate(&of.iter().map(|l| l.force_n).collect::<Vec<_>>()),
-                "drop_to_n": estimate(&of.iter().map(|l| l.drop_to_n).collect::<Vec<_>>()),
-            })
+            LayerSummary {
+                layer: k + 2,
+                trials: of.len(),
+                puncture_force_n: estimate(&of.iter().map(|l| l.force_n).collect::<Vec<_>>()),
+                drop_to_n: estimate(&of.iter().map(|l| l.drop_to_n).collect::<Vec<_>>()),
+            }
         })
         .collect();
-    json!({
-        "trials": all.len(),
-        "a1_n_per_m": estimate(&col(|t| t.polynomial.p1)),
-        "a2_n_per_m2": estimate(&col(|t| t.polynomial.p2)),
-        "rational_a_per_n": estimate(&col(|t| t.rational.p1)),
-        "rational_b_m_per_n": estimate(&col(|t| t.rational.p2)),
-        "stiffness_fit": {
-            "polynomial": { "rms_n": poly_rms, "r2": poly_r2 },
-            "rational": { "rms_n": rat_rms, "r2": rat_r2 },
-            "better": better,
+    FitReport {
+        trials: all.len(),
+        a1_n_per_m: estimate(&col(|t| t.polynomial.p1)),
+        a2_n_per_m2: estimate(&col(|t| t.polynomial.p2)),
+        rational_a_per_n: estimate(&col(|t| t.rational.p1)),
+        rational_b_m_per_n: estimate(&col(|t| t.rational.p2)),
+        stiffness_fit: StiffnessLaws {
+            polynomial: LawFit {
+                rms_n: poly_rms,
+                r2: poly_r2,
+            },
+            rational: LawFit {
+                rms_n: rat_rms,
+                r2: rat_r2,
+            },
+            better,
         },
-        "puncture_force_n": estimate(&col(|t| t.puncture_force_n)),
-        "puncture_depth_m": estimate(&col(|t| t.puncture_depth_m)),
-        "puncture_drop_to_n": estimate(&col(|t| t.puncture_drop_to_n)),
-        "puncture_drop_n": estimate(&col(|t| t.puncture_force_n - t.puncture_drop_to_n)),
-        "cutting_force_n": cutting,
-        "cp_n_per_m": cp,
-        "cn_n_per_m": cn,
-        "bp_ns_per_m2": bp,
-        "bn_ns_per_m2": bn,
-        "insertion_friction": insertion,
-        "withdrawal_friction": withdrawal,
-        "dp_n_per_m": static_estimate(&all, |t| t.dp, true),
-        "dn_n_per_m": static_estimate(&all, |t| t.dn, false),
-        "relaxation": relaxation,
-        "let_go_before_contact_m": let_go,
-        "dwell_relaxation": dwell,
-        "layers": layers,
-        "noise_n": estimate(&col(|t| t.noise_n)),
-        "per_trial": fits.iter().map(|(file, t)| json!({
-            "file": crate::trial::name_of(file),
-            "contact_x_m": t.contact_x_m,
-            "puncture_x_m": t.puncture_x_m,
-            "puncture_force_n": t.puncture_force_n,
-            "relaxed_surface_x_m": t.relaxed_x_m,
-        })).collect::<Vec<_>>(),
-        "skipped": skipped,
-    })
+        puncture_force_n: estimate(&col(|t| t.puncture_force_n)),
+        puncture_depth_m: estimate(&col(|t| t.puncture_depth_m)),
+        puncture_drop_to_n: estimate(&col(|t| t.puncture_drop_to_n)),
+        puncture_drop_n: estimate(&col(|t| t.puncture_force_n - t.puncture_drop_to_n)),
+        cutting_force_n: cutting,
+        cp_n_per_m: cp,
+        cn_n_per_m: cn,
+        bp_ns_per_m2: bp,
+        bn_ns_per_m2: bn,
+        insertion_friction: insertion,
+        withdrawal_friction: withdrawal,
+        dp_n_per_m: static_estimate(&all, |t| t.dp, true),
+        dn_n_per_m: static_estimate(&all, |t| t.dn, false),
+        relaxation,
+        let_go_before_contact_m: let_go,
+        dwell_relaxation: dwell,
+        layers,
+        noise_n: estimate(&col(|t| t.noise_n)),
+        per_trial: fits
+            .iter()
+            .map(|(file, t)| TrialGeometry {
+                file: crate::trial::name_of(file),
+                contact_x_m: t.contact_x_m,
+                puncture_x_m: t.puncture_x_m,
+                puncture_force_n: t.puncture_force_n,
+                relaxed_surface_x_m: t.relaxed_x_m,
+            })
+            .collect(),
+        skipped,
+        puncture_detection: None,
+    }
 }
 
 /// Friction coefficients c and b of one direction. Trials with strokes
@@ -347,26 +369,26 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Value {
 /// spread by 1.5× or more a straight line in v splits them; at one speed
 /// they are confounded, and the combination is reported with c = 0 (the
 /// paper found c ≈ 0 in liver) so the model still holds at that speed.
-/// Returns (c, b, the speeds and coefficients as JSON or null).
+/// Returns (c, b, the speeds and coefficients where trials ran at one).
 fn split_by_speed(
     all: &[&TrialFit],
     at: fn(&TrialFit) -> Option<trial::AtSpeed>,
     per_trial: fn(&TrialFit) -> (f64, f64),
-) -> (Value, Value, Value) {
+) -> (Estimate, Estimate, Option<AtSpeeds>) {
     let seen: Vec<trial::AtSpeed> = all.iter().filter_map(|t| at(t)).collect();
     if seen.len() < all.len() || seen.is_empty() {
         let stroked: Vec<&&TrialFit> = all.iter().filter(|t| at(t).is_none()).collect();
         let c = estimate(&stroked.iter().map(|t| per_trial(t).0).collect::<Vec<_>>());
         let b = estimate(&stroked.iter().map(|t| per_trial(t).1).collect::<Vec<_>>());
-        return (c, b, Value::Null);
+        return (c, b, None);
     }
     let speeds: Vec<f64> = seen.iter().map(|a| a.speed_mps.abs()).collect();
     let (lo, hi) = speeds
         .iter()
         .fold((f64::INFINITY, 0.0_f64), |(l, h), &v| (l.min(v), h.max(v)));
-    let listed = json!({
-        "speed_mps": seen.iter().map(|a| a.speed_mps).collect::<Vec<_>>(),
-        "n_per_m": seen.iter().map(|a| a.n_per_m).collect::<Vec<_>>(),
+    let listed = Some(AtSpeeds {
+        speed_mps: seen.iter().map(|a| a.speed_mps).collect(),
+        n_per_m: seen.iter().map(|a| a.n_per_m).collect(),
     });
     let mut line = lsq::Lsq::<2>::default();
     for a in &seen {
@@ -375,11 +397,12 @@ fn split_by_speed(
     match line.solve().filter(|_| hi >= 1.5 * lo) {
         Some([c, b]) => {
             let sd = (line.sse(&[c, b]) / (seen.len() as f64 - 2.0).max(1.0)).sqrt();
-            (
-                json!({ "value": c, "residual_sd": sd, "note": "from c + b·v over trials at several speeds" }),
-                json!({ "value": b, "residual_sd": sd, "note": "from c + b·v over trials at several speeds" }),
-                listed,
-            )
+            let line = |value| Estimate {
+                value: Some(value),
+                residual_sd: Some(sd),
+                ..Estimate::noting("from c + b·v over trials at several speeds")
+            };
+            (line(c), line(b), listed)
         }
         None => {
             let (k, _) = mean_sd(&seen.iter().map(|a| a.n_per_m).collect::<Vec<_>>());
@@ -388,11 +411,11 @@ fn split_by_speed(
                 "not separable: every trial ran at about {:.2} mm/s, where c + b·v = {k:.2} N/m; written as damping alone (c = 0)",
                 v.abs() * 1e3
             );
-            (
-                json!({ "value": 0.0, "note": note }),
-                json!({ "value": k / v, "note": note }),
-                listed,
-            )
+            let said = |value| Estimate {
+                value: Some(value),
+                ..Estimate::noting(note.clone())
+            };
+            (said(0.0), said(k / v), listed)
         }
     }
 }
@@ -422,64 +445,134 @@ pub fn fitted_tissue(toml: &str) -> Result<TissueParams> {
     Ok(tissues.first().context("needle fit gave no tissue")?.params)
 }
 
+impl FitReport {
+    /// The tissue these estimates make, as `needle fit --toml` writes it
+    /// and the device's loader reads it; an error naming the key when it
+    /// is no tissue the device can run (beyond its fixed point, say).
+    pub fn tissue(&self) -> Result<TissueParams> {
+        fitted_tissue(&to_toml(self))
+    }
+}
+
 /// The estimates as a tissue-library entry (keys of `TissueParams`).
-pub fn to_toml(fit: &Value) -> String {
-    let get = |key: &str| fit.get(key).and_then(value_of);
-    let bound = |key: &str, side: &str| {
-        fit.get(key)
-            .and_then(|v| v.get(side))
-            .and_then(Value::as_f64)
-    };
-    let law = fit["stiffness_fit"]["better"]
-        .as_str()
-        .unwrap_or("polynomial");
+pub fn to_toml(fit: &FitReport) -> String {
     let mut out = String::from("# Written by `needle fit`.\n[fitted]\n");
-    out += &format!("source = \"needle fit over {} trials\"\n", fit["trials"]);
-    out += &format!("stiffness_law = \"{law}\"\n");
+    out += &format!("source = \"needle fit over {} trials\"\n", fit.trials);
+    out += &format!("stiffness_law = \"{}\"\n", fit.stiffness_fit.better);
+    // Not identified: the bound the data gives (what was seen held).
+    let or_bound = |e: &Estimate| {
+        e.value.or(match e.bound {
+            Some(report::Bound::Lower(b) | report::Bound::Upper(b)) => b,
+            None => None,
+        })
+    };
     // Each key with its estimate and the side of zero the model takes.
     use Sign::{Any, Derived, Negative, Positive};
     let keys = [
-        ("a1_n_per_m", get("a1_n_per_m"), Positive),
-        ("a2_n_per_m2", get("a2_n_per_m2"), Positive),
-        ("rational_a_per_n", get("rational_a_per_n"), Any),
-        ("rational_b_m_per_n", get("rational_b_m_per_n"), Any),
-        ("puncture_force_n", get("puncture_force_n"), Any),
-        ("puncture_depth_m", get("puncture_depth_m"), Any),
-        ("puncture_drop_to_n", get("puncture_drop_to_n"), Positive),
         (
-            "relaxation",
-            get("relaxation").or(fit["relaxation"].get("model_uses").and_then(Value::as_f64)),
+            "a1_n_per_m",
+            &fit.a1_n_per_m,
+            fit.a1_n_per_m.value,
+            Positive,
+        ),
+        (
+            "a2_n_per_m2",
+            &fit.a2_n_per_m2,
+            fit.a2_n_per_m2.value,
+            Positive,
+        ),
+        (
+            "rational_a_per_n",
+            &fit.rational_a_per_n,
+            fit.rational_a_per_n.value,
             Any,
         ),
-        ("cutting_force_n", get("cutting_force_n"), Positive),
-        ("cp_n_per_m", get("cp_n_per_m"), Positive),
-        ("cn_n_per_m", get("cn_n_per_m"), Negative),
-        ("bp_ns_per_m2", get("bp_ns_per_m2"), Positive),
-        ("bn_ns_per_m2", get("bn_ns_per_m2"), Positive),
-        // Not identified: the bound the data gives (what was seen held).
+        (
+            "rational_b_m_per_n",
+            &fit.rational_b_m_per_n,
+            fit.rational_b_m_per_n.value,
+            Any,
+        ),
+        (
+            "puncture_force_n",
+            &fit.puncture_force_n,
+            fit.puncture_force_n.value,
+            Any,
+        ),
+        (
+            "puncture_depth_m",
+            &fit.puncture_depth_m,
+            fit.puncture_depth_m.value,
+            Any,
+        ),
+        (
+            "puncture_drop_to_n",
+            &fit.puncture_drop_to_n,
+            fit.puncture_drop_to_n.value,
+            Positive,
+        ),
+        (
+            "relaxation",
+            &fit.relaxation,
+            fit.relaxation.value.or(fit.relaxation.model_uses),
+            Any,
+        ),
+        (
+            "cutting_force_n",
+            &fit.cutting_force_n,
+            fit.cutting_force_n.value,
+            Positive,
+        ),
+        (
+            "cp_n_per_m",
+            &fit.cp_n_per_m,
+            fit.cp_n_per_m.value,
+            Positive,
+        ),
+        (
+            "cn_n_per_m",
+            &fit.cn_n_per_m,
+            fit.cn_n_per_m.value,
+            Negative,
+        ),
+        (
+            "bp_ns_per_m2",
+            &fit.bp_ns_per_m2,
+            fit.bp_ns_per_m2.value,
+            Positive,
+        ),
+        (
+            "bn_ns_per_m2",
+            &fit.bn_ns_per_m2,
+            fit.bn_ns_per_m2.value,
+            Positive,
+        ),
         (
             "dp_n_per_m",
-            get("dp_n_per_m").or(bound("dp_n_per_m", "lower_bound")),
+            &fit.dp_n_per_m,
+            or_bound(&fit.dp_n_per_m),
             Positive,
         ),
         (
             "dn_n_per_m",
-            get("dn_n_per_m").or(bound("dn_n_per_m", "upper_bound")),
+            &fit.dn_n_per_m,
+            or_bound(&fit.dn_n_per_m),
             Negative,
         ),
         // The data cannot resolve the band: the library's usual value.
-        ("half_band_mps", Some(5e-6), Derived),
+        ("half_band_mps", &NOT_ESTIMATED, Some(5e-6), Derived),
         // A touch, and a structure's rise and fall (twice and 1.6 times
         // it), must stand as far above this recording's noise as liver's
         // 50 mN does above the 5–10 mN it was tuned for.
         (
             "contact_force_n",
-            Some(get("noise_n").map_or(0.05, |sd| (5.0 * sd).max(0.05))),
+            &NOT_ESTIMATED,
+            Some(fit.noise_n.value.map_or(0.05, |sd| (5.0 * sd).max(0.05))),
             Derived,
         ),
     ];
     let mut written: Vec<(&str, f64)> = Vec::new();
-    for (key, estimate, sign) in keys {
+    for (key, estimated, estimate, sign) in keys {
         // A sign the model cannot take is written as the limit, nothing
         // found as its prior; each said (in the file and, by `run`, on
         // stderr).
@@ -489,7 +582,7 @@ pub fn to_toml(fit: &Value) -> String {
             (Some(v), Negative) => v.min(0.0),
             (Some(v), Any | Derived) => v,
         };
-        let identified = get(key).is_some();
+        let identified = estimated.value.is_some();
         match estimate {
             Some(raw) if raw != value => {
                 out += &format!(
@@ -519,23 +612,21 @@ pub fn to_toml(fit: &Value) -> String {
 /// constant over their longest rest in the tissue, when the force falls
 /// there by more than three noise sd on average. One branch: a 5 s rest
 /// at 12 mN of noise does not tell two apart.
-fn relaxation_at_rest(fit: &Value) -> String {
-    let dwell = &fit["dwell_relaxation"];
-    let num = |v: &Value| value_of(v);
-    let (Some(gain), Some(tau_s), Some(fall_n)) = (
-        num(&dwell["gain"]),
-        num(&dwell["tau_s"]),
-        num(&dwell["fall_n"]),
-    ) else {
+fn relaxation_at_rest(fit: &FitReport) -> String {
+    let Some((dwell, Some(gain), Some(tau_s), Some(fall_n))) = fit
+        .dwell_relaxation
+        .as_ref()
+        .map(|d| (d, d.gain.value, d.tau_s.value, d.fall_n.value))
+    else {
         return format!("{NOTE} relax_gain_1 and relax_tau_1_s are left out: no trial rests in the tissue for {} s or more\n", trial::DWELL_MIN_S);
     };
     // Worth modelling when the fall left out would cost the residual more
     // than the noise (over a noise sd), and it is the tissue's, not chance:
     // three standard errors from the trials' spread (one trial: its own
     // two 0.1 s levels' noise).
-    let noise_n = fit.get("noise_n").and_then(value_of).unwrap_or(0.0);
-    let trials = dwell["trials"].as_f64().unwrap_or(1.0).max(1.0);
-    let error_n = match dwell["fall_n"].get("sd").and_then(Value::as_f64) {
+    let noise_n = fit.noise_n.value.unwrap_or(0.0);
+    let trials = (dwell.trials as f64).max(1.0);
+    let error_n = match dwell.fall_n.sd {
         Some(sd) => sd / trials.sqrt(),
         None => noise_n * 0.45,
     };
@@ -551,13 +642,13 @@ fn relaxation_at_rest(fit: &Value) -> String {
 
 /// The spreads between trials the puncture detector takes its margins
 /// from (the keys may be left out: one trial has none).
-fn spreads(fit: &Value) -> String {
+fn spreads(fit: &FitReport) -> String {
     let mut out = String::new();
     for (key, of) in [
-        ("puncture_force_sd_n", "puncture_force_n"),
-        ("puncture_drop_sd_n", "puncture_drop_n"),
+        ("puncture_force_sd_n", &fit.puncture_force_n),
+        ("puncture_drop_sd_n", &fit.puncture_drop_n),
     ] {
-        match fit[of].get("sd").and_then(Value::as_f64) {
+        match of.sd {
             Some(sd) => out += &format!("{key} = {sd:?}\n"),
             None => out += &format!("{NOTE} {key} is left out: one trial has no spread\n"),
         }
@@ -593,6 +684,16 @@ enum Sign {
     Negative,
     Derived,
 }
+
+/// What a key `to_toml` writes from no estimate has for one.
+const NOT_ESTIMATED: Estimate = Estimate {
+    value: None,
+    sd: None,
+    residual_sd: None,
+    bound: None,
+    model_uses: None,
+    note: None,
+};
 
 /// How `to_toml` marks a value written as other than estimated.
 const NOTE: &str = "# note:";
@@ -633,11 +734,13 @@ pub fn run(args: &FitArgs) -> Result<()> {
 }
 
 /// The first fitted trial with the fitted model over it.
-fn plot_first_trial(dir: &Path, fit: &Value, toml: &str, path: &Path) -> Result<()> {
+fn plot_first_trial(dir: &Path, fit: &FitReport, toml: &str, path: &Path) -> Result<()> {
     use crate::plot::{force_vs_position, Marker, Series};
-    let first = fit["per_trial"][0]["file"]
-        .as_str()
-        .context("no fitted trial to plot")?;
+    let first = &fit
+        .per_trial
+        .first()
+        .context("no fitted trial to plot")?
+        .file;
     let trial = crate::trial::read_for_analysis(&dir.join(first), None)?.trial;
     let geometry = fit_trial(&trial)?;
     let params = fitted_tissue(toml)?;
