@@ -395,8 +395,35 @@ fn read_truth(dir: &Path) -> Result<Option<Truth>> {
     })
 }
 
-/// Detect over a dataset; with truth.json, also score. Returns the JSON.
-pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Value> {
+/// `needle detect`'s result over a dataset (its JSON).
+#[derive(Clone, Debug, Serialize)]
+pub struct Detection {
+    /// Each trial read, in the dataset's order.
+    pub trials: Vec<TrialResult>,
+    /// The files left out, each `{"file", "reason"}`.
+    pub skipped: Vec<Value>,
+    /// Per event kind, with a `truth.json` beside the trials.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evaluation: Option<Vec<KindScore>>,
+}
+
+/// One trial's file and what the device made of it.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrialResult {
+    pub file: String,
+    #[serde(flatten)]
+    pub detection: TrialDetection,
+}
+
+impl Detection {
+    /// The evaluation of `kind`, if there is one.
+    pub fn kind(&self, kind: &str) -> Option<&KindScore> {
+        self.evaluation.as_ref()?.iter().find(|k| k.kind == kind)
+    }
+}
+
+/// Detect over a dataset; with truth.json, also score.
+pub fn detect_dataset(dir: &Path, config: &DeviceConfig) -> Result<Detection> {
     detect_dataset_to(dir, config, None)
 }
 
@@ -464,7 +491,7 @@ pub fn detect_dataset_to(
     dir: &Path,
     config: &DeviceConfig,
     samples: Option<&Path>,
-) -> Result<Value> {
+) -> Result<Detection> {
     if let Some(out) = samples {
         samples_dir(dir, out)?;
     }
@@ -510,19 +537,16 @@ pub fn detect_dataset_to(
                 &score(&true_events, &found, trial.rate_hz(), &kinds),
             );
         }
-        trials.push(serde_json::json!({
-            "file": name,
-            "events": events,
-            "halt": detection.halt,
-            "faults": detection.faults,
-        }));
+        trials.push(TrialResult {
+            file: name,
+            detection,
+        });
     }
-    let skipped: Vec<Value> = unreadable.iter().map(|u| u.to_json()).collect();
-    let mut out = serde_json::json!({ "trials": trials, "skipped": skipped });
-    if truth.is_some() {
-        out["evaluation"] = serde_json::to_value(&total)?;
-    }
-    Ok(out)
+    Ok(Detection {
+        trials,
+        skipped: unreadable.iter().map(|u| u.to_json()).collect(),
+        evaluation: truth.is_some().then_some(total),
+    })
 }
 
 /// Say so when `truth.json` and the CSVs beside it do not describe the
@@ -575,21 +599,21 @@ pub fn run(args: &DetectArgs) -> Result<()> {
     }
     config.assist.target_depth = depth;
     let out = detect_dataset_to(&args.dir, &config, args.samples.as_deref())?;
-    if let Some(eval) = out.get("evaluation").and_then(Value::as_array) {
+    if let Some(eval) = &out.evaluation {
         crate::note!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");
         crate::note!("|---|---|---|---|---|---|---|");
         for k in eval {
             crate::note!(
                 "| {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} |",
-                k["kind"].as_str().unwrap_or("?"),
-                k["true_events"],
-                k["detected"],
-                k["misses"],
-                k["false_alarms"],
-                k["latency_samples_mean"].as_f64().unwrap_or(0.0),
-                k["latency_ms_mean"].as_f64().unwrap_or(0.0),
-                k["latency_samples_max"].as_f64().unwrap_or(0.0),
-                k["latency_ms_max"].as_f64().unwrap_or(0.0),
+                k.kind,
+                k.true_events,
+                k.detected,
+                k.misses,
+                k.false_alarms,
+                k.latency_samples_mean,
+                k.latency_ms_mean,
+                k.latency_samples_max,
+                k.latency_ms_max,
             );
         }
     }

@@ -4,11 +4,10 @@
 //! device's detectors over them and prints one table row per cell: misses,
 //! false alarms and latency per event kind.
 
+use crate::detect::KindScore;
+use crate::sim::{effects, Dataset, Sensor};
 use anyhow::{bail, Context, Result};
 use needle_holder::config::DeviceConfig;
-use serde_json::Value;
-
-use crate::sim::{effects, Dataset, Sensor};
 
 #[derive(Debug, clap::Args)]
 pub struct EvaluateArgs {
@@ -41,7 +40,7 @@ pub struct Cell {
     pub rate_hz: f64,
     pub noise_n: f64,
     pub structures: bool,
-    pub evaluation: Value,
+    pub evaluation: Vec<KindScore>,
 }
 
 /// Simulate and score one cell.
@@ -81,35 +80,32 @@ pub fn cell(
         rate_hz,
         noise_n,
         structures: with_structures,
-        evaluation: out["evaluation"].clone(),
+        evaluation: out.evaluation.unwrap_or_default(),
     })
 }
 
-/// The figures of one kind in a cell's evaluation.
-pub fn kind<'a>(cell: &'a Cell, name: &str) -> &'a Value {
+/// The figures of one kind in a cell's evaluation (all zero if the kind
+/// was neither true nor found).
+pub fn kind(cell: &Cell, name: &str) -> KindScore {
     cell.evaluation
-        .as_array()
-        .and_then(|a| a.iter().find(|k| k["kind"] == name))
-        .unwrap_or(&Value::Null)
-}
-
-fn count(v: &Value, key: &str) -> u64 {
-    v[key].as_u64().unwrap_or(0)
+        .iter()
+        .find(|k| k.kind == name)
+        .cloned()
+        .unwrap_or_default()
 }
 
 /// `found/true, false alarms, max latency in samples` for one kind.
 fn summary(cell: &Cell, name: &str) -> String {
     let k = kind(cell, name);
-    let truth = count(k, "true_events");
-    if truth == 0 && count(k, "false_alarms") == 0 {
+    if k.true_events == 0 && k.false_alarms == 0 {
         return "–".into();
     }
     format!(
         "{}/{} · {} FA · ≤{:.0}",
-        truth - count(k, "misses"),
-        truth,
-        count(k, "false_alarms"),
-        k["latency_samples_max"].as_f64().unwrap_or(0.0)
+        k.true_events - k.misses,
+        k.true_events,
+        k.false_alarms,
+        k.latency_samples_max
     )
 }
 
@@ -154,12 +150,9 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
                 )?;
                 let contact = kind(&c, "contact");
                 // No contact found has no latency (it printed 0 ms).
-                let latency = match count(contact, "true_events") - count(contact, "misses") {
+                let latency = match contact.true_events - contact.misses {
                     0 => "–".to_owned(),
-                    _ => format!(
-                        "{:.0} ms",
-                        contact["latency_ms_mean"].as_f64().unwrap_or(0.0)
-                    ),
+                    _ => format!("{:.0} ms", contact.latency_ms_mean),
                 };
                 crate::stdout::write(&format!(
                     "| {rate:.0} Hz | {:.0} mN | {} | {latency} | {} | {} | {} |\n",

@@ -158,40 +158,33 @@ fn detection(trials: &[apart::Trial], config: Option<&DeviceConfig>) -> (Vec<Kin
     let out = detect_dataset(dir.path(), config).unwrap();
     let early = trials
         .iter()
-        .zip(out["trials"].as_array().unwrap())
+        .zip(&out.trials)
         .filter(|(truth, found)| {
             let peak = truth.events.iter().find(|e| e.kind == "puncture");
-            let first = found["events"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .find(|e| e["kind"] == "puncture");
-            matches!((peak, first), (Some(p), Some(f)) if num(&f["t_s"]) < p.peak_t_s - 1e-9)
+            let first = found.detection.events.iter().find(|e| e.kind == "puncture");
+            matches!((peak, first), (Some(p), Some(f)) if f.t_s < p.peak_t_s - 1e-9)
         })
         .count();
-    let kinds = out["evaluation"]
-        .as_array()
-        .unwrap()
-        .iter()
+    let kinds = out
+        .evaluation
+        .unwrap_or_default()
+        .into_iter()
         .map(|k| {
-            let n = |key: &str| k[key].as_u64().unwrap();
-            let (true_events, detected, misses, false_alarms) = (
-                n("true_events"),
-                n("detected"),
-                n("misses"),
-                n("false_alarms"),
-            );
             // Every true event is a hit or a miss; every detection a hit
             // or a false alarm.
-            assert_eq!(true_events - misses, detected - false_alarms, "{k}");
+            assert_eq!(
+                k.true_events - k.misses,
+                k.detected - k.false_alarms,
+                "{k:?}"
+            );
             (
-                k["kind"].as_str().unwrap().to_owned(),
-                true_events,
-                detected,
-                misses,
-                false_alarms,
-                num(&k["latency_samples_min"]),
-                num(&k["latency_samples_max"]),
+                k.kind,
+                k.true_events as u64,
+                k.detected as u64,
+                k.misses as u64,
+                k.false_alarms as u64,
+                k.latency_samples_min,
+                k.latency_samples_max,
             )
         })
         .collect();

@@ -12,7 +12,6 @@ use std::sync::OnceLock;
 mod common;
 
 use host_tools::evaluate::{cell, kind, Cell};
-use serde_json::Value;
 
 /// A 500 Hz trial's true puncture: peak at 10.000 s, fall at 10.002 s.
 fn true_event(kind: &str) -> host_tools::detect::TrueEvent {
@@ -80,10 +79,6 @@ fn a_detection_outside_its_window_is_a_miss_and_a_false_alarm() {
     assert!((s.latency_samples_min - 2.0).abs() < 1e-6, "{s:?}");
 }
 
-fn count(v: &Value, key: &str) -> u64 {
-    v[key].as_u64().unwrap()
-}
-
 /// 100 insertions at 500 Hz and 100 at 2 kHz, 5 mN, with structures and
 /// through the sample; computed once for the tests below.
 fn five_mn() -> &'static [Cell; 2] {
@@ -101,17 +96,13 @@ fn puncture_within_2_samples_no_miss_no_false_alarm_over_200_insertions() {
     let mut insertions = 0;
     for c in five_mn() {
         let p = kind(c, "puncture");
-        insertions += count(p, "true_events");
-        assert_eq!(
-            (count(p, "misses"), count(p, "false_alarms")),
-            (0, 0),
-            "{p}"
-        );
+        insertions += p.true_events;
+        assert_eq!((p.misses, p.false_alarms), (0, 0), "{p:?}");
         // The scorer's window already holds every hit between the peak and
         // 2 samples after the fall; the simulator's fall is one sample
         // after its peak, so no latency is below -1.
-        assert!(p["latency_samples_max"].as_f64().unwrap() <= 2.0, "{p}");
-        assert!(p["latency_samples_min"].as_f64().unwrap() >= -1.0, "{p}");
+        assert!(p.latency_samples_max <= 2.0, "{p:?}");
+        assert!(p.latency_samples_min >= -1.0, "{p:?}");
     }
     assert_eq!(insertions, 200);
 }
@@ -120,12 +111,12 @@ fn puncture_within_2_samples_no_miss_no_false_alarm_over_200_insertions() {
 fn structures_at_recall_and_precision_of_95_percent() {
     for c in five_mn() {
         let s = kind(c, "structure");
-        let (truth, detected) = (count(s, "true_events"), count(s, "detected"));
-        let hits = truth - count(s, "misses");
-        assert!(truth >= 100, "{s}");
-        assert!(hits as f64 >= 0.95 * truth as f64, "recall: {s}");
-        assert!(hits as f64 >= 0.95 * detected as f64, "precision: {s}");
-        assert!(s["latency_samples_max"].as_f64().unwrap() <= 5.0, "{s}");
+        let (truth, detected) = (s.true_events, s.detected);
+        let hits = truth - s.misses;
+        assert!(truth >= 100, "{s:?}");
+        assert!(hits as f64 >= 0.95 * truth as f64, "recall: {s:?}");
+        assert!(hits as f64 >= 0.95 * detected as f64, "precision: {s:?}");
+        assert!(s.latency_samples_max <= 5.0, "{s:?}");
     }
 }
 
@@ -133,12 +124,8 @@ fn structures_at_recall_and_precision_of_95_percent() {
 fn contacts_are_found_within_2_mm_of_travel_without_false_alarms() {
     for c in five_mn() {
         let k = kind(c, "contact");
-        assert_eq!(count(k, "true_events"), 100, "{k}");
-        assert_eq!(
-            (count(k, "misses"), count(k, "false_alarms")),
-            (0, 0),
-            "{k}"
-        );
+        assert_eq!(k.true_events, 100, "{k:?}");
+        assert_eq!((k.misses, k.false_alarms), (0, 0), "{k:?}");
     }
 }
 
@@ -146,13 +133,9 @@ fn contacts_are_found_within_2_mm_of_travel_without_false_alarms() {
 fn exits_into_air_are_found_without_false_alarms() {
     for c in five_mn() {
         let e = kind(c, "exit");
-        assert!(count(e, "true_events") >= 50, "{e}");
-        assert_eq!(
-            (count(e, "misses"), count(e, "false_alarms")),
-            (0, 0),
-            "{e}"
-        );
-        assert!(e["latency_samples_max"].as_f64().unwrap() <= 2.0, "{e}");
+        assert!(e.true_events >= 50, "{e:?}");
+        assert_eq!((e.misses, e.false_alarms), (0, 0), "{e:?}");
+        assert!(e.latency_samples_max <= 2.0, "{e:?}");
     }
 }
 
@@ -165,12 +148,8 @@ fn puncture_holds_up_under_every_unmodelled_effect() {
                   depth_dependent_cutting,holder_inertia,sensor_drift,tissue_motion";
     let c = cell(500.0, 0.01, true, others, 40, 33).unwrap();
     let p = kind(&c, "puncture");
-    assert_eq!(count(p, "true_events"), 40, "{p}");
-    assert_eq!(
-        (count(p, "misses"), count(p, "false_alarms")),
-        (0, 0),
-        "{p}"
-    );
+    assert_eq!(p.true_events, 40, "{p:?}");
+    assert_eq!((p.misses, p.false_alarms), (0, 0), "{p:?}");
 }
 
 /// Robot assist over simulated trials: stop on puncture halts at the

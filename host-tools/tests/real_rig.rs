@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use host_tools::detect::detect_dataset;
+use host_tools::detect::{detect_dataset, Detection};
 use host_tools::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
 use host_tools::fit::{fit_dataset, to_toml, Estimate, FitReport, RELAXATION_PRIOR};
 use host_tools::sim::{effects, Dataset, Form, ProtocolKind, Rig, Sensor};
@@ -112,7 +112,7 @@ fn within(key: &str, estimate: &Estimate, truth: f64, tolerance: f64) {
 }
 
 /// `needle detect --params` with the tissue `needle fit --toml` wrote.
-fn detect_with_fitted(dir: &Path, fit: &FitReport) -> Value {
+fn detect_with_fitted(dir: &Path, fit: &FitReport) -> Detection {
     let tissue = host_tools::tissue::parse(&to_toml(fit), Path::new("fitted.toml"))
         .unwrap()
         .remove(0);
@@ -240,22 +240,16 @@ fn detect_with_the_fitted_tissue_raises_no_fault_and_finds_every_membrane() {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), "viscoelasticity=5");
     let out = detect_with_fitted(dir.path(), &fit_dataset(dir.path()).unwrap());
-    for t in out["trials"].as_array().unwrap() {
-        assert_eq!(t["faults"], serde_json::json!([]), "{t}");
-        assert!(t["halt"].is_null(), "{t}");
-        let kinds: Vec<&str> = t["events"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|e| e["kind"].as_str().unwrap())
-            .collect();
+    for t in &out.trials {
+        assert!(t.detection.faults.is_empty(), "{t:?}");
+        assert!(t.detection.halt.is_none(), "{t:?}");
+        let kinds: Vec<&str> = t.detection.events.iter().map(|e| e.kind).collect();
         assert_eq!(kinds.iter().filter(|k| **k == "puncture").count(), 1);
-        assert!(!kinds.contains(&"exit"), "{t}");
+        assert!(!kinds.contains(&"exit"), "{t:?}");
     }
-    let eval = out["evaluation"].as_array().unwrap();
-    let structures = eval.iter().find(|k| k["kind"] == "structure").unwrap();
-    assert_eq!(structures["misses"], 0, "{structures}");
-    assert_eq!(structures["false_alarms"], 0, "{structures}");
+    let structures = out.kind("structure").unwrap();
+    assert_eq!(structures.misses, 0, "{structures:?}");
+    assert_eq!(structures.false_alarms, 0, "{structures:?}");
 }
 
 #[test]
@@ -478,26 +472,21 @@ fn fit_and_detect_hold_from_50_hz_to_2_khz() {
             "{rate_hz} Hz"
         );
         let out = detect_with_fitted(dir.path(), &fit);
-        for t in out["trials"].as_array().unwrap() {
-            assert_eq!(t["faults"], serde_json::json!([]), "{rate_hz} Hz: {t}");
+        for t in &out.trials {
+            assert!(t.detection.faults.is_empty(), "{rate_hz} Hz: {t:?}");
         }
-        let eval = out["evaluation"].as_array().unwrap();
         for kind in ["puncture", "structure", "exit"] {
-            let k = eval.iter().find(|k| k["kind"] == kind).unwrap();
-            assert_eq!(k["misses"], 0, "{rate_hz} Hz: {k}");
-            assert_eq!(k["false_alarms"], 0, "{rate_hz} Hz: {k}");
+            let k = out.kind(kind).unwrap();
+            assert_eq!(k.misses, 0, "{rate_hz} Hz: {k:?}");
+            assert_eq!(k.false_alarms, 0, "{rate_hz} Hz: {k:?}");
         }
     }
 }
 
 /// The misses and false alarms of `kind` in a detection's evaluation.
-fn misses_and_false_alarms(out: &Value, kind: &str) -> (u64, u64) {
-    let eval = out["evaluation"].as_array().unwrap();
-    let k = eval.iter().find(|k| k["kind"] == kind).unwrap();
-    (
-        k["misses"].as_u64().unwrap(),
-        k["false_alarms"].as_u64().unwrap(),
-    )
+fn misses_and_false_alarms(out: &Detection, kind: &str) -> (usize, usize) {
+    let k = out.kind(kind).unwrap();
+    (k.misses, k.false_alarms)
 }
 
 /// The book's workflow on real-rig-like data — membranes, jitter, a
