@@ -8,6 +8,11 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n== %s\n' "$*"; }
 
+# Where cargo builds (CARGO_TARGET_DIR, if set, as cargo reads it: relative
+# to this directory); the real board's images get directories of their own
+# beneath it, as `needle` gives them.
+target_dir=$(realpath -m "${CARGO_TARGET_DIR:-target}")
+
 step "prerequisites"
 # rust-toolchain.toml names the thumb targets; `rustup target add` is a no-op
 # when they are there and installs them when not.
@@ -35,12 +40,12 @@ step "lints (host, and firmware for each board)"
 cargo clippy --workspace --all-targets -- -D warnings
 cargo clippy --target thumbv7m-none-eabi --lib --bins -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf --features board-mps2 --lib --bins -- -D warnings
-cargo clippy --target thumbv7em-none-eabihf --features board-f411 --lib --bins --target-dir target/f411 -- -D warnings
-cargo clippy --target thumbv7em-none-eabihf --features f411-replay --lib --bins --target-dir target/f411-replay -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf --features board-f411 --lib --bins --target-dir "$target_dir/f411" -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf --features f411-replay --lib --bins --target-dir "$target_dir/f411-replay" -- -D warnings
 
 step "docs (rustdoc with warnings denied, the book, a README of at most 150 lines)"
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --workspace
-mdbook build book
+mdbook build book --dest-dir "$target_dir/book"
 readme_lines=$(wc -l < README.md)
 if [ "$readme_lines" -gt 150 ]; then
     echo "README.md has $readme_lines lines: the front door stays at 150 at most; the rest goes in the book" >&2
@@ -51,7 +56,7 @@ step "firmware builds"
 cargo fw-m0
 cargo fw-m3
 cargo fw-m4
-cargo fw-f411 --target-dir target/f411
+cargo fw-f411 --target-dir "$target_dir/f411"
 
 step "tests (host, QEMU, twin comparison)"
 log=$(mktemp)
