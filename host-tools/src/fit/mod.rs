@@ -36,11 +36,6 @@ pub struct FitArgs {
     pub plot: Option<PathBuf>,
 }
 
-/// Mean ± sd over the trials.
-fn estimate(values: &[f64]) -> Estimate {
-    Estimate::of(values)
-}
-
 /// The value of an estimate as the JSON has it (`value` of an object, or
 /// the number).
 pub fn value_of(v: &Value) -> Option<f64> {
@@ -77,7 +72,7 @@ fn static_estimate(
         .map(|e| e.0)
         .collect();
     if !clamped.is_empty() {
-        return estimate(&clamped);
+        return Estimate::of(&clamped);
     }
     let bound = bound.is_finite().then_some(bound);
     Estimate {
@@ -241,8 +236,8 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
     // force; the others' cutting carries friction × (x_s3 − x_s1).
     let (relaxation, cutting) = if identified.len() == all.len() {
         (
-            estimate(&col(|t| t.relaxation)),
-            estimate(&col(|t| t.cutting_force_n)),
+            Estimate::of(&col(|t| t.relaxation)),
+            Estimate::of(&col(|t| t.cutting_force_n)),
         )
     } else if !identified.is_empty() {
         let note = format!(
@@ -288,10 +283,10 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
         .iter()
         .filter_map(|t| t.let_go_x_m.map(|x| t.contact_x_m - x))
         .collect();
-    let let_go = (!drags.is_empty()).then(|| estimate(&drags));
+    let let_go = (!drags.is_empty()).then(|| Estimate::of(&drags));
     let dwells: Vec<_> = all.iter().filter_map(|t| t.dwell).collect();
     let over_dwells = |get: fn(&trial::DwellRelaxation) -> f64| {
-        estimate(&dwells.iter().map(get).collect::<Vec<_>>())
+        Estimate::of(&dwells.iter().map(get).collect::<Vec<_>>())
     };
     let dwell = (!dwells.is_empty()).then(|| DwellSummary {
         trials: dwells.len(),
@@ -308,17 +303,17 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
             LayerSummary {
                 layer: k + 2,
                 trials: of.len(),
-                puncture_force_n: estimate(&of.iter().map(|l| l.force_n).collect::<Vec<_>>()),
-                drop_to_n: estimate(&of.iter().map(|l| l.drop_to_n).collect::<Vec<_>>()),
+                puncture_force_n: Estimate::of(&of.iter().map(|l| l.force_n).collect::<Vec<_>>()),
+                drop_to_n: Estimate::of(&of.iter().map(|l| l.drop_to_n).collect::<Vec<_>>()),
             }
         })
         .collect();
     FitReport {
         trials: all.len(),
-        a1_n_per_m: estimate(&col(|t| t.polynomial.p1)),
-        a2_n_per_m2: estimate(&col(|t| t.polynomial.p2)),
-        rational_a_per_n: estimate(&col(|t| t.rational.p1)),
-        rational_b_m_per_n: estimate(&col(|t| t.rational.p2)),
+        a1_n_per_m: Estimate::of(&col(|t| t.polynomial.p1)),
+        a2_n_per_m2: Estimate::of(&col(|t| t.polynomial.p2)),
+        rational_a_per_n: Estimate::of(&col(|t| t.rational.p1)),
+        rational_b_m_per_n: Estimate::of(&col(|t| t.rational.p2)),
         stiffness_fit: StiffnessLaws {
             polynomial: LawFit {
                 rms_n: poly_rms,
@@ -330,10 +325,10 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
             },
             better,
         },
-        puncture_force_n: estimate(&col(|t| t.puncture_force_n)),
-        puncture_depth_m: estimate(&col(|t| t.puncture_depth_m)),
-        puncture_drop_to_n: estimate(&col(|t| t.puncture_drop_to_n)),
-        puncture_drop_n: estimate(&col(|t| t.puncture_force_n - t.puncture_drop_to_n)),
+        puncture_force_n: Estimate::of(&col(|t| t.puncture_force_n)),
+        puncture_depth_m: Estimate::of(&col(|t| t.puncture_depth_m)),
+        puncture_drop_to_n: Estimate::of(&col(|t| t.puncture_drop_to_n)),
+        puncture_drop_n: Estimate::of(&col(|t| t.puncture_force_n - t.puncture_drop_to_n)),
         cutting_force_n: cutting,
         cp_n_per_m: cp,
         cn_n_per_m: cn,
@@ -347,7 +342,7 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
         let_go_before_contact_m: let_go,
         dwell_relaxation: dwell,
         layers,
-        noise_n: estimate(&col(|t| t.noise_n)),
+        noise_n: Estimate::of(&col(|t| t.noise_n)),
         per_trial: fits
             .iter()
             .map(|(file, t)| TrialGeometry {
@@ -378,8 +373,8 @@ fn split_by_speed(
     let seen: Vec<trial::AtSpeed> = all.iter().filter_map(|t| at(t)).collect();
     if seen.len() < all.len() || seen.is_empty() {
         let stroked: Vec<&&TrialFit> = all.iter().filter(|t| at(t).is_none()).collect();
-        let c = estimate(&stroked.iter().map(|t| per_trial(t).0).collect::<Vec<_>>());
-        let b = estimate(&stroked.iter().map(|t| per_trial(t).1).collect::<Vec<_>>());
+        let c = Estimate::of(&stroked.iter().map(|t| per_trial(t).0).collect::<Vec<_>>());
+        let b = Estimate::of(&stroked.iter().map(|t| per_trial(t).1).collect::<Vec<_>>());
         return (c, b, None);
     }
     let speeds: Vec<f64> = seen.iter().map(|a| a.speed_mps.abs()).collect();
@@ -459,120 +454,36 @@ pub fn to_toml(fit: &FitReport) -> String {
     let mut out = String::from("# Written by `needle fit`.\n[fitted]\n");
     out += &format!("source = \"needle fit over {} trials\"\n", fit.trials);
     out += &format!("stiffness_law = \"{}\"\n", fit.stiffness_fit.better);
-    // Not identified: the bound the data gives (what was seen held).
-    let or_bound = |e: &Estimate| {
-        e.value.or(match e.bound {
-            Some(report::Bound::Lower(b) | report::Bound::Upper(b)) => b,
-            None => None,
-        })
-    };
+    // The data cannot resolve the band: the library's usual value.
+    let half_band = Estimate::chosen(5e-6);
+    // A touch, and a structure's rise and fall (twice and 1.6 times it),
+    // must stand as far above this recording's noise as liver's 50 mN
+    // does above the 5–10 mN it was tuned for.
+    let contact = Estimate::chosen(fit.noise_n.value.map_or(0.05, |sd| (5.0 * sd).max(0.05)));
     // Each key with its estimate and the side of zero the model takes.
     use Sign::{Any, Derived, Negative, Positive};
     let keys = [
-        (
-            "a1_n_per_m",
-            &fit.a1_n_per_m,
-            fit.a1_n_per_m.value,
-            Positive,
-        ),
-        (
-            "a2_n_per_m2",
-            &fit.a2_n_per_m2,
-            fit.a2_n_per_m2.value,
-            Positive,
-        ),
-        (
-            "rational_a_per_n",
-            &fit.rational_a_per_n,
-            fit.rational_a_per_n.value,
-            Any,
-        ),
-        (
-            "rational_b_m_per_n",
-            &fit.rational_b_m_per_n,
-            fit.rational_b_m_per_n.value,
-            Any,
-        ),
-        (
-            "puncture_force_n",
-            &fit.puncture_force_n,
-            fit.puncture_force_n.value,
-            Any,
-        ),
-        (
-            "puncture_depth_m",
-            &fit.puncture_depth_m,
-            fit.puncture_depth_m.value,
-            Any,
-        ),
-        (
-            "puncture_drop_to_n",
-            &fit.puncture_drop_to_n,
-            fit.puncture_drop_to_n.value,
-            Positive,
-        ),
-        (
-            "relaxation",
-            &fit.relaxation,
-            fit.relaxation.value.or(fit.relaxation.model_uses),
-            Any,
-        ),
-        (
-            "cutting_force_n",
-            &fit.cutting_force_n,
-            fit.cutting_force_n.value,
-            Positive,
-        ),
-        (
-            "cp_n_per_m",
-            &fit.cp_n_per_m,
-            fit.cp_n_per_m.value,
-            Positive,
-        ),
-        (
-            "cn_n_per_m",
-            &fit.cn_n_per_m,
-            fit.cn_n_per_m.value,
-            Negative,
-        ),
-        (
-            "bp_ns_per_m2",
-            &fit.bp_ns_per_m2,
-            fit.bp_ns_per_m2.value,
-            Positive,
-        ),
-        (
-            "bn_ns_per_m2",
-            &fit.bn_ns_per_m2,
-            fit.bn_ns_per_m2.value,
-            Positive,
-        ),
-        (
-            "dp_n_per_m",
-            &fit.dp_n_per_m,
-            or_bound(&fit.dp_n_per_m),
-            Positive,
-        ),
-        (
-            "dn_n_per_m",
-            &fit.dn_n_per_m,
-            or_bound(&fit.dn_n_per_m),
-            Negative,
-        ),
-        // The data cannot resolve the band: the library's usual value.
-        ("half_band_mps", &NOT_ESTIMATED, Some(5e-6), Derived),
-        // A touch, and a structure's rise and fall (twice and 1.6 times
-        // it), must stand as far above this recording's noise as liver's
-        // 50 mN does above the 5–10 mN it was tuned for.
-        (
-            "contact_force_n",
-            &NOT_ESTIMATED,
-            Some(fit.noise_n.value.map_or(0.05, |sd| (5.0 * sd).max(0.05))),
-            Derived,
-        ),
+        ("a1_n_per_m", &fit.a1_n_per_m, Positive),
+        ("a2_n_per_m2", &fit.a2_n_per_m2, Positive),
+        ("rational_a_per_n", &fit.rational_a_per_n, Any),
+        ("rational_b_m_per_n", &fit.rational_b_m_per_n, Any),
+        ("puncture_force_n", &fit.puncture_force_n, Any),
+        ("puncture_depth_m", &fit.puncture_depth_m, Any),
+        ("puncture_drop_to_n", &fit.puncture_drop_to_n, Positive),
+        ("relaxation", &fit.relaxation, Any),
+        ("cutting_force_n", &fit.cutting_force_n, Positive),
+        ("cp_n_per_m", &fit.cp_n_per_m, Positive),
+        ("cn_n_per_m", &fit.cn_n_per_m, Negative),
+        ("bp_ns_per_m2", &fit.bp_ns_per_m2, Positive),
+        ("bn_ns_per_m2", &fit.bn_ns_per_m2, Positive),
+        ("dp_n_per_m", &fit.dp_n_per_m, Positive),
+        ("dn_n_per_m", &fit.dn_n_per_m, Negative),
+        ("half_band_mps", &half_band, Derived),
+        ("contact_force_n", &contact, Derived),
     ];
     let mut written: Vec<(&str, f64)> = Vec::new();
-    for (key, estimated, estimate, sign) in keys {
+    for (key, estimated, sign) in keys {
+        let estimate = estimated.written();
         // A sign the model cannot take is written as the limit, nothing
         // found as its prior; each said (in the file and, by `run`, on
         // stderr).
@@ -684,16 +595,6 @@ enum Sign {
     Negative,
     Derived,
 }
-
-/// What a key `to_toml` writes from no estimate has for one.
-const NOT_ESTIMATED: Estimate = Estimate {
-    value: None,
-    sd: None,
-    residual_sd: None,
-    bound: None,
-    model_uses: None,
-    note: None,
-};
 
 /// How `to_toml` marks a value written as other than estimated.
 const NOTE: &str = "# note:";

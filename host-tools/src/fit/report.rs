@@ -41,6 +41,26 @@ impl Estimate {
         }
     }
 
+    /// A value chosen rather than estimated (the model's own, or one set
+    /// from another estimate): no value of its own, the model's given.
+    pub fn chosen(model_uses: f64) -> Self {
+        Self {
+            model_uses: Some(model_uses),
+            ..Self::default()
+        }
+    }
+
+    /// The number the model takes for it: the estimate, else the value
+    /// the model uses where the data give none, else the bound the data
+    /// give (what was seen held).
+    pub fn written(&self) -> Option<f64> {
+        let bound = match self.bound {
+            Some(Bound::Lower(b) | Bound::Upper(b)) => b,
+            None => None,
+        };
+        self.value.or(self.model_uses).or(bound)
+    }
+
     /// Only a note (no value: not identified, unless the caller sets it).
     pub fn noting(note: impl Into<String>) -> Self {
         Self {
