@@ -112,7 +112,7 @@ fn print_self_test(link: &mut Link, port: &str) -> Result<()> {
                     };
                     crate::out!("{verdict} {}", c.line)?;
                 }
-                let failed = checks.iter().filter(|c| c.ok == Some(false)).count();
+                let failed = crate::selftest::failed(&checks);
                 if failed > 0 {
                     bail!("{port}: {failed} self-test checks failed");
                 }

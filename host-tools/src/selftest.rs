@@ -92,9 +92,15 @@ pub fn checks(t: &SelfTest) -> Vec<Check> {
     out
 }
 
+/// How many of `checks` failed.
+pub fn failed(checks: &[Check]) -> usize {
+    checks.iter().filter(|c| c.ok == Some(false)).count()
+}
+
 /// The checklist as one line (for `needle decode`).
 pub fn summary(t: &SelfTest) -> String {
-    let failed = checks(t).iter().filter(|c| c.ok == Some(false)).count();
+    let checks = checks(t);
+    let failed = failed(&checks);
     format!(
         "selftest {}: {}",
         if failed == 0 {
@@ -102,7 +108,7 @@ pub fn summary(t: &SelfTest) -> String {
         } else {
             format!("{failed} checks failed")
         },
-        checks(t)
+        checks
             .iter()
             .map(|c| c.line.as_str())
             .collect::<Vec<_>>()
