@@ -65,7 +65,7 @@ const F411_CLOCK_HZ: f64 = 100e6;
 
 pub fn run(args: &BenchArgs) -> Result<()> {
     firmware::ensure_qemu()?;
-    let dir = firmware::target_directory(&firmware::repo_root())?.join("bench");
+    let dir = firmware::target_directory()?.join("bench");
     std::fs::create_dir_all(&dir)?;
     let replay_path = dir.join("liver1.replay");
     let (trial, _) = sim::insertion(&LIVER1, &Plan::PAPER);

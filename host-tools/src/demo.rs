@@ -49,7 +49,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
     let dir = match &args.out {
         Some(dir) => dir.clone(),
-        None => firmware::target_directory(&firmware::repo_root())?.join("demo"),
+        None => firmware::target_directory()?.join("demo"),
     };
     crate::input::create_out_dir(&dir)?;
     let (trial, truth) = sim::insertion(&tissue, &plan);

@@ -103,8 +103,18 @@ pub fn build_nucleo_f411re() -> Result<PathBuf> {
 /// The workspace's target directory as cargo resolves it
 /// (`CARGO_TARGET_DIR`, `build.target-dir` in a cargo config, or
 /// `target/`): the image is looked for where cargo put it, never in a
-/// `target/` an earlier build left behind.
-pub fn target_directory(root: &Path) -> Result<PathBuf> {
+/// `target/` an earlier build left behind. Asked once a run: `demo` and
+/// `bench` build several images and write beside them.
+pub fn target_directory() -> Result<PathBuf> {
+    static FOUND: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    if let Some(dir) = FOUND.get() {
+        return Ok(dir.clone());
+    }
+    let dir = ask_cargo_for_target_directory(&repo_root())?;
+    Ok(FOUND.get_or_init(|| dir).clone())
+}
+
+fn ask_cargo_for_target_directory(root: &Path) -> Result<PathBuf> {
     #[derive(serde::Deserialize)]
     struct Metadata {
         target_directory: PathBuf,
@@ -136,7 +146,7 @@ pub fn target_directory(root: &Path) -> Result<PathBuf> {
 fn build_image(target: &str, features: &[&str], subdir: Option<&str>) -> Result<PathBuf> {
     let root = repo_root();
     ensure_target(&root, target)?;
-    let base = target_directory(&root)?;
+    let base = target_directory()?;
     let target_dir = subdir.map_or_else(|| base.clone(), |d| base.join(d));
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut command = Command::new(cargo);
