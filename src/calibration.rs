@@ -199,9 +199,9 @@ impl Encoder {
     }
 }
 
-/// The smallest load-cell gain a command or the settings may set, in magnitude: 0.01 µN
-/// a count (Q16.16), far finer than any cell on a 24-bit converter; a
-/// gain near zero would read every load as none.
+/// The smallest load-cell gain a command or the settings may set, in
+/// magnitude: 0.01 µN a count (Q16.16), far finer than any cell on a
+/// 24-bit converter; a gain near zero would read every load as none.
 pub const MIN_GAIN_Q16: u32 = 656;
 
 #[cfg(test)]

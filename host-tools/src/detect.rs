@@ -418,8 +418,13 @@ pub struct TrialResult {
 impl Detection {
     /// The evaluation of `kind`, if there is one.
     pub fn kind(&self, kind: &str) -> Option<&KindScore> {
-        self.evaluation.as_ref()?.iter().find(|k| k.kind == kind)
+        score_of(self.evaluation.as_deref()?, kind)
     }
+}
+
+/// The score of `kind` among `scores`.
+pub fn score_of<'a>(scores: &'a [KindScore], kind: &str) -> Option<&'a KindScore> {
+    scores.iter().find(|k| k.kind == kind)
 }
 
 /// Detect over a dataset; with truth.json, also score.

@@ -4,10 +4,11 @@
 //! device's detectors over them and prints one table row per cell: misses,
 //! false alarms and latency per event kind.
 
-use crate::detect::KindScore;
-use crate::sim::{effects, Dataset, Sensor};
 use anyhow::{bail, Context, Result};
 use needle_holder::config::DeviceConfig;
+
+use crate::detect::{score_of, KindScore};
+use crate::sim::{effects, Dataset, Sensor};
 
 #[derive(Debug, clap::Args)]
 pub struct EvaluateArgs {
@@ -87,9 +88,7 @@ pub fn cell(
 /// The figures of one kind in a cell's evaluation (all zero if the kind
 /// was neither true nor found).
 pub fn kind(cell: &Cell, name: &str) -> KindScore {
-    cell.evaluation
-        .iter()
-        .find(|k| k.kind == name)
+    score_of(&cell.evaluation, name)
         .cloned()
         .unwrap_or_default()
 }
