@@ -75,7 +75,7 @@ fn static_estimate(
     let clamped: Vec<f64> = fits
         .iter()
         .filter_map(|t| pick(t))
-        .filter(|e| e.1 && !(e.0.abs() < FAR_BELOW * bound.abs()))
+        .filter(|e| e.1 && (bound.is_nan() || e.0.abs() >= FAR_BELOW * bound.abs()))
         .map(|e| e.0)
         .collect();
     if !clamped.is_empty() {
