@@ -157,6 +157,16 @@ pub fn velocity_between(trial: &Trial, back_s: f64, ahead_s: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The median of `f` (0 for none).
+fn median(f: &[f64]) -> f64 {
+    let mut sorted = f.to_vec();
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let mid = sorted.len() / 2;
+    *sorted.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
 /// Robust noise estimate: MAD of first differences / √2.
 fn noise(f: &[f64]) -> f64 {
     let mut d: Vec<f64> = f.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
@@ -348,6 +358,8 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         bail!("too few samples on the loading curve before the puncture");
     }
     let j0 = ip - rise;
+    // What the load cell reads with nothing on the needle: before the rise.
+    let zero_n = median(&f[..j0]);
     // General quadratic through the rise; its root below the data is x_s1.
     let mut quad = Lsq::<3>::default();
     for j in j0..=ip {
@@ -501,7 +513,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let friction = if inward {
         both_ways(&track, &advancing, contact_x_m, x_s2)?
     } else {
-        one_way(&track, &advancing, contact_x_m, x_s2, noise_n)?
+        one_way(&track, &advancing, contact_x_m, x_s2, noise_n, zero_n)?
     };
     let OneTrialFriction {
         relaxed_x_m,
@@ -774,16 +786,19 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
 
 /// Where a withdrawing needle was let go with a snap (`out` in time
 /// order): the last sample still pulling by ten noise sd, followed at once
-/// by five or more within three noise sd of zero. A pull that only
+/// by five or more within three noise sd of the trial's zero (`zero_n`,
+/// what the load cell read before contact: a real rig's tare leaves an
+/// offset of a few mN, and five samples judged against zero instead
+/// missed a snap one time in a few at 12 mN noise). A pull that only
 /// friction makes fades with the length in tissue and has no snap; one
 /// that also carries what the friction line does not (a relaxing branch's
 /// offset) would move the line's zero, and with it the let-go point,
 /// millimetres away.
-fn snapped_free(out: &[Xvf], noise_n: f64) -> Option<f64> {
-    let (quiet_n, pull_n) = (3.0 * noise_n, -10.0 * noise_n);
+fn snapped_free(out: &[Xvf], noise_n: f64, zero_n: f64) -> Option<f64> {
+    let (quiet_n, pull_n) = (3.0 * noise_n, zero_n - 10.0 * noise_n);
     let last_pull = out.iter().rposition(|s| s.2 < pull_n)?;
     let after = out.get(last_pull + 1..last_pull + 6)?;
-    let free = after.iter().all(|s| s.2.abs() <= quiet_n);
+    let free = after.iter().all(|s| (s.2 - zero_n).abs() <= quiet_n);
     let (pull, first_free) = (out.get(last_pull)?, after.first()?);
     free.then_some(0.5 * (pull.0 + first_free.0))
 }
@@ -823,6 +838,7 @@ fn one_way(
     contact_x_m: f64,
     x_s2: f64,
     noise_n: f64,
+    zero_n: f64,
 ) -> Result<OneTrialFriction> {
     let out: Vec<Xvf> = track.iter().copied().filter(|s| s.1 < 0.0).collect();
     let depth = x_s2 - contact_x_m;
@@ -839,7 +855,7 @@ fn one_way(
         (outside + c.map_or(f64::INFINITY, |c| fit.sse(&c)), c)
     };
     let mut let_go = None;
-    let snapped = snapped_free(&out, noise_n);
+    let snapped = snapped_free(&out, noise_n, zero_n);
     let let_go_snapped = snapped.is_some() && out.len() >= MIN_STROKE_SAMPLES;
     if out.len() >= MIN_STROKE_SAMPLES {
         let (mut best, mut best_x) = (f64::INFINITY, contact_x_m);
