@@ -1138,6 +1138,10 @@ pub fn vary(tissue: &TissueParams, spread: f64, rng: &mut impl Rng) -> TissuePar
     ] {
         *v *= fric;
     }
+    // Where the punctured surface rests (x_s3) is each insertion's own as
+    // well: real withdrawals let go 1.5–9 mm apart. Drawn last, so the
+    // draws before it are those of a simulation without it.
+    p.relaxation = (p.relaxation * factor(spread)).clamp(0.05, 0.95);
     p
 }
 
