@@ -205,6 +205,23 @@ fn the_fitted_toml_is_a_valid_library_entry_close_to_the_truth() {
     let p = loaded[0].params;
     assert!((p.a2_n_per_m2 - 5200.0).abs() < 520.0);
     assert!(needle_holder::config::DeviceConfig::for_tissue(&p).is_ok());
+    // The file loads as the very tissue the fit made, value for value
+    // (written with `{:?}`, an f64 reads back to its own bits).
+    assert_eq!(p, fit.tissue().unwrap());
+    // With one trial the spreads are left out, said on the line before
+    // where their keys would stand.
+    let one = {
+        let dir = tempfile::tempdir().unwrap();
+        simulate_dataset(dir.path(), "t", &LIVER1, &[], 1, 6, &SENSOR).unwrap();
+        fit_dataset(dir.path()).unwrap()
+    };
+    let toml = host_tools::fit::to_toml(&one);
+    assert!(
+        toml.contains("# note: puncture_force_sd_n is left out: one trial has no spread\n"),
+        "{toml}"
+    );
+    assert!(!toml.contains("puncture_force_sd_n ="), "{toml}");
+    assert_eq!(one.tissue().unwrap().puncture_force_sd_n, None);
 }
 
 #[test]

@@ -6,6 +6,7 @@ pub mod jumps;
 pub(crate) mod lsq;
 pub mod predict;
 pub mod report;
+pub mod tissue;
 pub mod trial;
 
 use std::path::{Path, PathBuf};
@@ -17,6 +18,7 @@ use serde_json::Value;
 use self::report::{mean_sd, AtSpeeds, Bound, DwellSummary, LawFit, LayerSummary};
 pub use self::report::{Estimate, FitReport};
 use self::report::{PunctureMargins, StiffnessLaws, TrialGeometry};
+pub use self::tissue::FittedTissue;
 pub use self::trial::{fit_trial, TrialFit, RELAXATION_PRIOR};
 use crate::trial::Trial;
 
@@ -438,173 +440,11 @@ fn rational_mean_holds(all: &[&TrialFit]) -> bool {
     den > 0.0 && ((depth_m / den) - force_n).abs() <= 0.1 * force_n.abs()
 }
 
-/// The tissue in `fit --toml`'s text, as `--params` would load it; an
-/// error naming the key when the fitted values are no tissue the device
-/// can run (beyond its fixed point, say).
-pub fn fitted_tissue(toml: &str) -> Result<TissueParams> {
-    let tissues = crate::tissue::parse(toml, Path::new("fitted"))
-        .context("the parameters fitted from these trials are no tissue the device can run")?;
-    Ok(tissues.first().context("needle fit gave no tissue")?.params)
-}
-
-impl FitReport {
-    /// The tissue these estimates make, as `needle fit --toml` writes it
-    /// and the device's loader reads it; an error naming the key when it
-    /// is no tissue the device can run (beyond its fixed point, say).
-    pub fn tissue(&self) -> Result<TissueParams> {
-        fitted_tissue(&to_toml(self))
-    }
-}
-
-/// The estimates as a tissue-library entry (keys of `TissueParams`).
+/// The estimates as a tissue-library entry (keys of `TissueParams`), as
+/// `needle fit --toml` writes it.
 pub fn to_toml(fit: &FitReport) -> String {
-    let mut out = String::from("# Written by `needle fit`.\n[fitted]\n");
-    out += &format!("source = \"needle fit over {} trials\"\n", fit.trials);
-    out += &format!("stiffness_law = \"{}\"\n", fit.stiffness_fit.better);
-    // The data cannot resolve the band: the library's usual value.
-    let half_band = Estimate::chosen(5e-6);
-    // A touch, and a structure's rise and fall (twice and 1.6 times it),
-    // must stand as far above this recording's noise as liver's 50 mN
-    // does above the 5–10 mN it was tuned for.
-    let contact = Estimate::chosen(fit.noise_n.value.map_or(0.05, |sd| (5.0 * sd).max(0.05)));
-    // Each key with its estimate and the side of zero the model takes.
-    use Sign::{Any, Derived, Negative, Positive};
-    let keys = [
-        ("a1_n_per_m", &fit.a1_n_per_m, Positive),
-        ("a2_n_per_m2", &fit.a2_n_per_m2, Positive),
-        ("rational_a_per_n", &fit.rational_a_per_n, Any),
-        ("rational_b_m_per_n", &fit.rational_b_m_per_n, Any),
-        ("puncture_force_n", &fit.puncture_force_n, Any),
-        ("puncture_depth_m", &fit.puncture_depth_m, Any),
-        ("puncture_drop_to_n", &fit.puncture_drop_to_n, Positive),
-        ("relaxation", &fit.relaxation, Any),
-        ("cutting_force_n", &fit.cutting_force_n, Positive),
-        ("cp_n_per_m", &fit.cp_n_per_m, Positive),
-        ("cn_n_per_m", &fit.cn_n_per_m, Negative),
-        ("bp_ns_per_m2", &fit.bp_ns_per_m2, Positive),
-        ("bn_ns_per_m2", &fit.bn_ns_per_m2, Positive),
-        ("dp_n_per_m", &fit.dp_n_per_m, Positive),
-        ("dn_n_per_m", &fit.dn_n_per_m, Negative),
-        ("half_band_mps", &half_band, Derived),
-        ("contact_force_n", &contact, Derived),
-    ];
-    let mut written: Vec<(&str, f64)> = Vec::new();
-    for (key, estimated, sign) in keys {
-        let estimate = estimated.written();
-        // A sign the model cannot take is written as the limit, nothing
-        // found as its prior; each said (in the file and, by `run`, on
-        // stderr).
-        let value = match (estimate, sign) {
-            (None, _) => prior(key, &written),
-            (Some(v), Positive) => v.max(0.0),
-            (Some(v), Negative) => v.min(0.0),
-            (Some(v), Any | Derived) => v,
-        };
-        let identified = estimated.value.is_some();
-        match estimate {
-            Some(raw) if raw != value => {
-                out += &format!(
-                    "{NOTE} {key} was fitted as {raw:?}; the model takes no value past {value:?}\n"
-                )
-            }
-            // A bound, the model's choice, or nothing at all.
-            None if !matches!(sign, Derived) => {
-                out += &format!(
-                    "{NOTE} {key} is not identified by the data; written as its prior {value:?}\n"
-                )
-            }
-            _ if !identified && !matches!(sign, Derived) => {
-                out +=
-                    &format!("{NOTE} {key} is not identified by the data; written as {value:?}\n")
-            }
-            _ => {}
-        }
-        out += &format!("{key} = {value:?}\n");
-        written.push((key, value));
-    }
-    out + &spreads(fit) + &relaxation_at_rest(fit)
+    fit.fitted().to_toml()
 }
-
-/// The relaxation at rest the device models (`relax_gain_1`,
-/// `relax_tau_1_s`): one Prony branch, the trials' mean gain and time
-/// constant over their longest rest in the tissue, when the force falls
-/// there by more than three noise sd on average. One branch: a 5 s rest
-/// at 12 mN of noise does not tell two apart.
-fn relaxation_at_rest(fit: &FitReport) -> String {
-    let Some((dwell, Some(gain), Some(tau_s), Some(fall_n))) = fit
-        .dwell_relaxation
-        .as_ref()
-        .map(|d| (d, d.gain.value, d.tau_s.value, d.fall_n.value))
-    else {
-        return format!("{NOTE} relax_gain_1 and relax_tau_1_s are left out: no trial rests in the tissue for {} s or more\n", trial::DWELL_MIN_S);
-    };
-    // Worth modelling when the fall left out would cost the residual more
-    // than the noise (over a noise sd), and it is the tissue's, not chance:
-    // three standard errors from the trials' spread (one trial: its own
-    // two 0.1 s levels' noise).
-    let noise_n = fit.noise_n.value.unwrap_or(0.0);
-    let trials = (dwell.trials as f64).max(1.0);
-    let error_n = match dwell.fall_n.sd {
-        Some(sd) => sd / trials.sqrt(),
-        None => noise_n * 0.45,
-    };
-    if fall_n <= noise_n.max(3.0 * error_n) || gain <= 0.0 {
-        return format!("{NOTE} relax_gain_1 and relax_tau_1_s are left out: at rest the force fell {fall_n:.4} N on average (± {error_n:.4} N), not more than the noise ({noise_n:.4} N) and three standard errors\n");
-    }
-    let tau_s = tau_s.clamp(0.001, 1000.0);
-    format!(
-        "relax_gain_1 = {:?}\nrelax_tau_1_s = {tau_s:?}\n",
-        gain.min(1.0)
-    )
-}
-
-/// The spreads between trials the puncture detector takes its margins
-/// from (the keys may be left out: one trial has none).
-fn spreads(fit: &FitReport) -> String {
-    let mut out = String::new();
-    for (key, of) in [
-        ("puncture_force_sd_n", &fit.puncture_force_n),
-        ("puncture_drop_sd_n", &fit.puncture_drop_n),
-    ] {
-        match of.sd {
-            Some(sd) => out += &format!("{key} = {sd:?}\n"),
-            None => out += &format!("{NOTE} {key} is left out: one trial has no spread\n"),
-        }
-    }
-    out
-}
-
-/// What a value the data do not give is written as: never 0 where 0 means
-/// another tissue (no static band holds nothing at rest, which a needle
-/// standing in tissue and holding a force shows it does). The static band
-/// is taken symmetric (the paper's D_p 30.4, D_n −29.3 N/m), so an
-/// unidentified side is the other side mirrored; anything else is the
-/// paper's liver value (book, *The paper's numbers*: b_p 904, b_n 458 N·s/m², cutting 0.94 N,
-/// C_p = C_n ≈ 0 in liver).
-fn prior(key: &str, written: &[(&str, f64)]) -> f64 {
-    let other = |k: &str| written.iter().find(|(w, _)| *w == k).map(|(_, v)| *v);
-    match key {
-        "dn_n_per_m" => other("dp_n_per_m").map_or(-29.3, |dp| -dp),
-        "dp_n_per_m" => 30.4,
-        "bp_ns_per_m2" => 904.0,
-        "bn_ns_per_m2" => 458.0,
-        "cutting_force_n" => 0.94,
-        _ => 0.0,
-    }
-}
-
-/// The side of zero a tissue parameter must be on; `Derived` for one not
-/// estimated at all (a library value, or one set from the noise).
-#[derive(Clone, Copy)]
-enum Sign {
-    Any,
-    Positive,
-    Negative,
-    Derived,
-}
-
-/// How `to_toml` marks a value written as other than estimated.
-const NOTE: &str = "# note:";
 
 pub fn run(args: &FitArgs) -> Result<()> {
     let outputs = [
@@ -618,10 +458,11 @@ pub fn run(args: &FitArgs) -> Result<()> {
         .collect();
     crate::input::check_outputs(&outputs, &crate::input::dataset_inputs(&args.dir, None))?;
     let fit = fit_dataset(&args.dir)?;
-    let toml = to_toml(&fit);
+    let fitted = fit.fitted();
     if let Some(path) = &args.toml {
         // Never a file its own loader refuses; said before any output.
-        fitted_tissue(&toml).with_context(|| format!("{}: not written", path.display()))?;
+        fit.tissue()
+            .with_context(|| format!("{}: not written", path.display()))?;
     }
     let text = serde_json::to_string_pretty(&fit)?;
     match &args.json {
@@ -629,20 +470,21 @@ pub fn run(args: &FitArgs) -> Result<()> {
             .with_context(|| format!("{}: cannot write", path.display()))?,
         None => crate::stdout::write(&(text + "\n"))?,
     }
-    for note in toml.lines().filter(|l| l.starts_with(NOTE)) {
-        crate::note!("needle fit: {}", note.trim_start_matches("# "));
+    for (_, note) in &fitted.notes {
+        crate::note!("needle fit: note: {note}");
     }
     if let Some(path) = &args.toml {
-        std::fs::write(path, &toml).with_context(|| format!("{}: cannot write", path.display()))?;
+        std::fs::write(path, fitted.to_toml())
+            .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     if let Some(path) = &args.plot {
-        plot_first_trial(&args.dir, &fit, &toml, path)?;
+        plot_first_trial(&args.dir, &fit, path)?;
     }
     Ok(())
 }
 
 /// The first fitted trial with the fitted model over it.
-fn plot_first_trial(dir: &Path, fit: &FitReport, toml: &str, path: &Path) -> Result<()> {
+fn plot_first_trial(dir: &Path, fit: &FitReport, path: &Path) -> Result<()> {
     use crate::plot::{force_vs_position, Marker, Series};
     let first = &fit
         .per_trial
@@ -651,7 +493,7 @@ fn plot_first_trial(dir: &Path, fit: &FitReport, toml: &str, path: &Path) -> Res
         .file;
     let trial = crate::trial::read_for_analysis(&dir.join(first), None)?.trial;
     let geometry = fit_trial(&trial)?;
-    let params = fitted_tissue(toml)?;
+    let params = fit.tissue()?;
     // As the diagnosis draws it: the force settles the samples the
     // encoder cannot place (beside a jump, at a rest's edges).
     let velocity = predict::NeedleVelocity {
