@@ -36,7 +36,7 @@ fn verdict(case: &apart::Case) -> Result<Verdict, String> {
     apart::write_dataset(dir.path(), &trials).unwrap();
     let (_, data) = load(dir.path(), None).map_err(|e| format!("{e:#}"))?;
     let left_out = TRIALS - data.len();
-    let out = diagnose(&data, Nominal::Fitted);
+    let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
     let v = &out["verdict"];
     let first = v["effect"].as_str().unwrap().to_owned();
     let known =

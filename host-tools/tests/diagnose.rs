@@ -37,7 +37,7 @@ fn diagnosis(effect_list: &str, form: Form, seed: u64) -> Value {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), effect_list, form, seed);
     let (_, data) = load(dir.path(), None).unwrap();
-    diagnose(&data, Nominal::Fitted)
+    serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap()
 }
 
 fn num(v: &Value) -> f64 {
@@ -130,7 +130,7 @@ fn tissue_motions_fitted_displacement_does_nearly_as_well_as_the_true_one() {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), "tissue_motion", Form::Standard, 7);
     let (_, data) = load(dir.path(), None).unwrap();
-    let out = diagnose(&data, Nominal::Fitted);
+    let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
     let fitted = num(&out["verdict"]["heldout_rms_after_n"]);
     let [effects::Effect::TissueMotion {
         amplitude_m,
@@ -240,7 +240,7 @@ fn spread_alone_is_none(seed: u64) {
     .write(dir.path())
     .unwrap();
     let (_, data) = load(dir.path(), None).unwrap();
-    let out = diagnose(&data, Nominal::Fitted);
+    let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
     let v = &out["verdict"];
     assert_eq!(v["effect"], "none", "seed {seed}: {v}");
     assert_eq!(v["effects"], serde_json::json!([]), "seed {seed}: {v}");

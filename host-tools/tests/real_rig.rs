@@ -88,7 +88,7 @@ impl Skin {
         let dir = tempfile::tempdir().unwrap();
         self.write(dir.path());
         let (_, data) = load(dir.path(), None).unwrap();
-        diagnose(&data, Nominal::Fitted)
+        serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap()
     }
 }
 
@@ -258,7 +258,7 @@ fn diagnose_runs_on_them_and_never_says_none_over_a_gap() {
     simulate(dir.path(), "viscoelasticity=5");
     let (_, data) = load(dir.path(), None).unwrap();
     assert_eq!(data.len(), 10);
-    let out = diagnose(&data, Nominal::Fitted);
+    let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
     let v = &out["verdict"];
     assert!(
         v["effect"] != "none" || v["explained"].as_bool().unwrap(),
@@ -561,7 +561,7 @@ fn relaxation_over_a_held_dwell_and_a_dragged_tent_is_named_leaving_under_5_perc
         }
         .write(dir.path());
         let (_, data) = load(dir.path(), None).unwrap();
-        let out = diagnose(&data, Nominal::Fitted);
+        let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
         let v = &out["verdict"];
         assert_eq!(
             v["effects"][0]["effect"], "viscoelasticity",

@@ -18,18 +18,22 @@
 
 pub mod candidates;
 pub mod crossval;
+mod diagnosis;
 mod figure;
 mod motion;
 pub mod prepare;
 mod report;
 
+pub use diagnosis::{
+    Baseline, ByPhase, CandidateScore, Diagnosis, PhaseShare, Place, ResidualTests, Step, Verdict,
+};
 pub use motion::TissueShift;
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::model::params::TissueParams;
-use serde_json::{json, Value};
+use serde_json::Value;
 
 use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram, PerTrial};
@@ -940,8 +944,8 @@ fn gap_taken(before_n: f64, after_n: f64, noise_n: f64) -> f64 {
     1.0 - excess(after_n) / excess(before_n).max(f64::MIN_POSITIVE)
 }
 
-/// The whole diagnosis as JSON (the keys of the issue).
-pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Value {
+/// The whole diagnosis.
+pub fn diagnose(data: &[Prepared], nominal: Nominal) -> Diagnosis {
     diagnose_with_progress(data, nominal, &mut |_| {})
 }
 
@@ -951,7 +955,7 @@ pub fn diagnose_with_progress(
     data: &[Prepared],
     nominal: Nominal,
     progress: &mut dyn FnMut(&str),
-) -> Value {
+) -> Diagnosis {
     progress("scoring the baseline and every candidate on withheld trials");
     let (data, baseline) = fitted_and_baseline(data.to_vec());
     let data = &data;
@@ -1058,67 +1062,71 @@ pub fn diagnose_with_progress(
     // Each step's share of the gap, in mean squares above the noise.
     let gap_ms = (baseline.rms().powi(2) - noise * noise).max(1e-24);
     let mut before_rms = baseline.rms();
-    let waterfall: Vec<Value> = steps
+    let waterfall: Vec<Step> = steps
         .iter()
         .filter(|_| credible)
         .map(|(ci, s)| {
             let share = (before_rms.powi(2) - s.rms().powi(2)) / gap_ms;
             before_rms = s.rms();
-            json!({
-                "effect": CANDIDATES[*ci].effect,
-                "heldout_rms_after_n": s.rms(),
-                "share_of_gap": share,
-            })
+            Step {
+                effect: CANDIDATES[*ci].effect,
+                heldout_rms_after_n: s.rms(),
+                share_of_gap: share,
+            }
         })
         .collect();
     let verdict_shrink = after
         .as_ref()
         .map_or(0.0, |a| 1.0 - a.rms() / baseline.rms());
-    json!({
-        "trials": data.len(),
-        "noise_floor_n": noise,
-        "baseline": {
-            "heldout_rms_n": baseline.rms(),
-            "corrections": NOMINAL_CORRECTIONS.iter().zip(&baseline.theta)
-                .map(|(k, v)| ((*k).to_owned(), json!(v)))
-                .collect::<serde_json::Map<_, _>>(),
-            "by_phase": by_phase(&baseline),
-        },
-        "where": where_(data),
-        "residual_tests": residual_tests(data),
-        "candidates": ranked.iter().map(|(ci, s, shrink, t)| {
+    let candidates = ranked
+        .iter()
+        .map(|(ci, s, shrink, t)| {
             let c = &CANDIDATES[*ci];
-            let mut params = serde_json::Map::new();
+            let mut params = std::collections::BTreeMap::new();
             if c.grid.len() > 1 {
-                for (name, v) in (c.grid_params)(c.grid_name, s.grid_value) {
-                    params.insert(name.into(), json!(v));
-                }
+                params.extend((c.grid_params)(c.grid_name, s.grid_value));
             }
-            for (name, v) in c.linear.iter().zip(&s.theta[NOMINAL_CORRECTIONS.len()..]) {
-                params.insert((*name).into(), json!(v));
+            let linear = &s.theta[NOMINAL_CORRECTIONS.len()..];
+            params.extend(c.linear.iter().copied().zip(linear.iter().copied()));
+            CandidateScore {
+                effect: c.effect,
+                grid_value: s.grid_value,
+                heldout_rms_n: s.rms(),
+                shrink: *shrink,
+                paired_t: *t,
+                significant: significant(*shrink, *t),
+                by_phase: by_phase(s),
+                params,
             }
-            json!({
-                "effect": c.effect,
-                "grid_value": s.grid_value,
-                "heldout_rms_n": s.rms(),
-                "shrink": shrink,
-                "paired_t": t,
-                "significant": significant(*shrink, *t),
-                "by_phase": by_phase(s),
-                "params": params,
-            })
-        }).collect::<Vec<_>>(),
-        "verdict": {
-            "effect": effect,
-            "shrink": verdict_shrink,
-            "second": second_name,
-            "effects": waterfall,
-            "heldout_rms_after_n": left.rms(),
-            "explained": !gap_open,
-            "closest": closest,
-            "left_by_phase": by_phase(left),
+        })
+        .collect();
+    Diagnosis {
+        trials: data.len(),
+        noise_floor_n: noise,
+        baseline: Baseline {
+            heldout_rms_n: baseline.rms(),
+            corrections: NOMINAL_CORRECTIONS
+                .iter()
+                .copied()
+                .zip(baseline.theta.iter().copied())
+                .collect(),
+            by_phase: by_phase(&baseline),
         },
-    })
+        where_residual: where_(data),
+        residual_tests: residual_tests(data),
+        candidates,
+        verdict: Verdict {
+            effect,
+            shrink: verdict_shrink,
+            second: second_name,
+            effects: waterfall,
+            heldout_rms_after_n: left.rms(),
+            explained: !gap_open,
+            closest,
+            left_by_phase: by_phase(left),
+        },
+        skipped: None,
+    }
 }
 
 /// Of `contenders` (candidate, grid value; best first), the one that
@@ -1204,23 +1212,21 @@ fn backfitted_first<'c>(
 
 /// The first trial withheld: the nominal plus the verdict's effect(s),
 /// fitted (with the nominal corrections) on all the other trials.
-fn withheld_overlay(data: &[Prepared], out: &Value) -> (Vec<f64>, String) {
-    let v = &out["verdict"];
-    let named: Vec<&str> = [&v["effect"], &v["second"]]
-        .iter()
-        .filter_map(|e| e.as_str())
+fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> (Vec<f64>, String) {
+    let v = &out.verdict;
+    let named: Vec<&str> = [v.effect, v.second]
+        .into_iter()
         .filter(|e| *e != "none")
         .collect();
     let set: Vec<(&Candidate, f64)> = named
         .iter()
         .filter_map(|name| {
             let c = CANDIDATES.iter().find(|c| c.effect == *name)?;
-            let grid = out["candidates"]
-                .as_array()?
+            let grid = out
+                .candidates
                 .iter()
-                .find(|e| e["effect"] == *name)
-                .and_then(|e| e["grid_value"].as_f64())
-                .unwrap_or(c.grid[0]);
+                .find(|e| e.effect == *name)
+                .map_or(c.grid[0], |e| e.grid_value);
             Some((c, grid))
         })
         .collect();
@@ -1250,18 +1256,20 @@ fn withheld_overlay(data: &[Prepared], out: &Value) -> (Vec<f64>, String) {
     (augmented, label)
 }
 
-fn by_phase(s: &Scored) -> Value {
+fn by_phase(s: &Scored) -> ByPhase {
     let total: f64 = s.by_phase.iter().map(|p| p.0).sum();
-    let mut m = serde_json::Map::new();
-    for (k, name) in PHASES.iter().enumerate() {
-        if s.by_phase[k].1 > 0 {
-            m.insert(
-                (*name).into(),
-                json!({ "rms_n": s.phase_rms(k), "share": s.by_phase[k].0 / total.max(1e-300) }),
-            );
-        }
-    }
-    Value::Object(m)
+    PHASES
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| s.by_phase[*k].1 > 0)
+        .map(|(k, name)| {
+            let share = PhaseShare {
+                rms_n: s.phase_rms(k),
+                share: s.by_phase[k].0 / total.max(1e-300),
+            };
+            (*name, share)
+        })
+        .collect()
 }
 
 /// Noise floor: robust sample-to-sample noise of the force, averaged.
@@ -1271,7 +1279,7 @@ fn noise_floor(data: &[Prepared]) -> f64 {
 
 /// Depth bins of the residual: phase, position range, share of the squared
 /// residual; best (largest share) first.
-fn where_(data: &[Prepared]) -> Value {
+fn where_(data: &[Prepared]) -> Vec<Place> {
     const BIN_M: f64 = 0.005;
     let mut bins: std::collections::BTreeMap<(usize, i64), f64> = Default::default();
     let mut total = 0.0;
@@ -1288,20 +1296,18 @@ fn where_(data: &[Prepared]) -> Value {
     list.sort_by(|a, b| b.1.total_cmp(&a.1));
     list.iter()
         .take(10)
-        .map(|((ph, bin), e)| {
-            json!({
-                "phase": PHASES[*ph],
-                "share": e / total.max(1e-300),
-                "x_from_m": *bin as f64 * BIN_M,
-                "x_to_m": (*bin + 1) as f64 * BIN_M,
-            })
+        .map(|((ph, bin), e)| Place {
+            phase: PHASES[*ph],
+            share: e / total.max(1e-300),
+            x_from_m: *bin as f64 * BIN_M,
+            x_to_m: (*bin + 1) as f64 * BIN_M,
         })
         .collect()
 }
 
 /// Whiteness (lag-1 autocorrelation of the residual) and its correlation
 /// with velocity, acceleration, depth past the surface and time, in tissue.
-fn residual_tests(data: &[Prepared]) -> Value {
+fn residual_tests(data: &[Prepared]) -> ResidualTests {
     let mut r = Vec::new();
     let mut sig: [Vec<f64>; 4] = Default::default();
     let mut lag = (0.0, 0.0);
@@ -1333,14 +1339,14 @@ fn residual_tests(data: &[Prepared]) -> Value {
         sab / (saa * sbb).sqrt().max(1e-300)
     };
     let n = r.len() as f64;
-    json!({
-        "lag1_autocorrelation": lag.0 / lag.1.max(1e-300),
-        "white_bound": 2.0 / n.max(1.0).sqrt(),
-        "corr_velocity": corr(&r, &sig[0]),
-        "corr_acceleration": corr(&r, &sig[1]),
-        "corr_depth": corr(&r, &sig[2]),
-        "corr_time": corr(&r, &sig[3]),
-    })
+    ResidualTests {
+        lag1_autocorrelation: lag.0 / lag.1.max(1e-300),
+        white_bound: 2.0 / n.max(1.0).sqrt(),
+        corr_velocity: corr(&r, &sig[0]),
+        corr_acceleration: corr(&r, &sig[1]),
+        corr_depth: corr(&r, &sig[2]),
+        corr_time: corr(&r, &sig[3]),
+    }
 }
 
 /// The trials with the device's own model (`model_n`, from `needle decode
@@ -1426,7 +1432,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         (false, None) => Nominal::Fitted,
     };
     let mut out = diagnose_with_progress(&data, nominal, &mut progress);
-    out["skipped"] = Value::from(skipped);
+    out.skipped = Some(skipped);
     progress("done");
     crate::note!("{}", report::headline(&out));
     if let Some(path) = &args.residuals {

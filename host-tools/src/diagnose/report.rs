@@ -3,31 +3,19 @@
 
 use std::path::Path;
 
+use super::Diagnosis;
 use anyhow::{Context, Result};
-use serde_json::Value;
 
 /// The diagnosis in one line: what `needle diagnose` prints on stderr and
 /// the report's headline.
-pub fn headline(out: &Value) -> String {
-    let num = |v: &Value| v.as_f64().unwrap_or(0.0);
-    let v = &out["verdict"];
-    let closest: Vec<&str> = v["closest"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_str)
-        .collect();
-    let named = match v["effect"].as_str().unwrap_or("none") {
-        "unexplained" if !closest.is_empty() => {
-            format!("unexplained (closest: {})", closest.join(" + "))
+pub fn headline(out: &Diagnosis) -> String {
+    let v = &out.verdict;
+    let named = match v.effect {
+        super::UNEXPLAINED if !v.closest.is_empty() => {
+            format!("unexplained (closest: {})", v.closest.join(" + "))
         }
         effect => {
-            let steps: Vec<&str> = v["effects"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(|e| e["effect"].as_str())
-                .collect();
+            let steps: Vec<&str> = v.effects.iter().map(|e| e.effect).collect();
             if steps.len() > 1 {
                 format!("{} (in turn)", steps.join(" → "))
             } else {
@@ -37,12 +25,12 @@ pub fn headline(out: &Value) -> String {
     };
     format!(
         "{} trials; noise floor {:.4} N; held-out RMS {:.4} N → {:.4} N with {named}, shrink {:.0} %{}",
-        out["trials"],
-        num(&out["noise_floor_n"]),
-        num(&out["baseline"]["heldout_rms_n"]),
-        num(&v["heldout_rms_after_n"]),
-        100.0 * num(&v["shrink"]),
-        if v["explained"].as_bool() == Some(false) {
+        out.trials,
+        out.noise_floor_n,
+        out.baseline.heldout_rms_n,
+        v.heldout_rms_after_n,
+        100.0 * v.shrink,
+        if !v.explained {
             "; the gap left is more than 1.5 noise floors: not explained"
         } else {
             ""
@@ -51,20 +39,16 @@ pub fn headline(out: &Value) -> String {
 }
 
 /// Write the page to `path`, showing the figure already drawn at `svg`.
-pub fn write(path: &Path, svg: &Path, out: &Value) -> Result<()> {
+pub fn write(path: &Path, svg: &Path, out: &Diagnosis) -> Result<()> {
     let mut rows = String::new();
-    for c in out["candidates"].as_array().into_iter().flatten() {
+    for c in &out.candidates {
         rows += &format!(
             "<tr><td>{}</td><td>{:.4}</td><td>{:.1} %</td><td>{:.1}</td><td>{}</td></tr>\n",
-            c["effect"].as_str().unwrap_or("?"),
-            c["heldout_rms_n"].as_f64().unwrap_or(0.0),
-            100.0 * c["shrink"].as_f64().unwrap_or(0.0),
-            c["paired_t"].as_f64().unwrap_or(0.0),
-            if c["significant"].as_bool().unwrap_or(false) {
-                "yes"
-            } else {
-                "no"
-            },
+            c.effect,
+            c.heldout_rms_n,
+            100.0 * c.shrink,
+            c.paired_t,
+            if c.significant { "yes" } else { "no" },
         );
     }
     let html = format!(
@@ -85,16 +69,12 @@ pub fn write(path: &Path, svg: &Path, out: &Value) -> Result<()> {
 /// effect, the noise floor as a line and the level below which the gap
 /// counts as explained ([`super::EXPLAINED_FACTOR`] noise floors) as
 /// another; every bar and line labelled with its name and value.
-fn waterfall_svg(out: &Value) -> String {
-    let num = |v: &Value| v.as_f64().unwrap_or(0.0);
-    let mut bars = vec![("nominal".to_owned(), num(&out["baseline"]["heldout_rms_n"]))];
-    for e in out["verdict"]["effects"].as_array().into_iter().flatten() {
-        bars.push((
-            format!("+ {}", e["effect"].as_str().unwrap_or("?")),
-            num(&e["heldout_rms_after_n"]),
-        ));
+fn waterfall_svg(out: &Diagnosis) -> String {
+    let mut bars = vec![("nominal".to_owned(), out.baseline.heldout_rms_n)];
+    for e in &out.verdict.effects {
+        bars.push((format!("+ {}", e.effect), e.heldout_rms_after_n));
     }
-    let noise = num(&out["noise_floor_n"]);
+    let noise = out.noise_floor_n;
     let explained = super::EXPLAINED_FACTOR * noise;
     let top = bars.iter().map(|b| b.1).fold(explained, f64::max).max(1e-9) * 1.15;
     let (w, h, left, bottom, bar_w) = (140.0 * bars.len() as f64 + 120.0, 300.0, 70.0, 250.0, 90.0);
