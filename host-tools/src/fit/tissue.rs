@@ -6,7 +6,7 @@
 
 use anyhow::{anyhow, Result};
 use needle_holder::config::TissueModel;
-use needle_holder::model::params::{StiffnessLaw, TissueParams};
+use needle_holder::model::params::{StiffnessLaw, TissueParams, NUMBER_KEYS};
 
 use super::report::{Estimate, FitReport};
 use super::trial;
@@ -34,26 +34,17 @@ enum Sign {
     Derived,
 }
 
-/// The number keys a fit writes, in the order it writes them.
-const WRITTEN: [&str; 17] = [
-    "a1_n_per_m",
-    "a2_n_per_m2",
-    "rational_a_per_n",
-    "rational_b_m_per_n",
-    "puncture_force_n",
-    "puncture_depth_m",
-    "puncture_drop_to_n",
-    "relaxation",
-    "cutting_force_n",
-    "cp_n_per_m",
-    "cn_n_per_m",
-    "bp_ns_per_m2",
-    "bn_ns_per_m2",
-    "dp_n_per_m",
-    "dn_n_per_m",
-    "half_band_mps",
-    "contact_force_n",
-];
+/// The number keys every tissue has, in the order a fit writes them: the
+/// library's, but for the six that may be left out.
+const WRITTEN: [&str; NUMBER_KEYS.len() - 6] = {
+    let mut keys = [""; NUMBER_KEYS.len() - 6];
+    let mut k = 0;
+    while k < keys.len() {
+        keys[k] = NUMBER_KEYS[k];
+        k += 1;
+    }
+    keys
+};
 
 impl FitReport {
     /// The tissue these estimates make, checked as the device checks a
