@@ -47,9 +47,11 @@ pub fn value_of(v: &Value) -> Option<f64> {
 }
 
 /// A clamped stop that held less than this share of what another trial
-/// held in full is a sliding force misjudged, not the spread of tissue:
-/// two trials' bands half a band apart are over two standard deviations
-/// of the 15–30 % spread of friction real tissue shows.
+/// held in full is taken for a sliding force misjudged, not the spread of
+/// tissue: at the 15 % spread of friction real tissue shows at least, two
+/// trials' bands half a band apart are over two standard deviations of
+/// their difference (at 30 %, about one: there the guard keeps more than
+/// it drops).
 const FAR_BELOW: f64 = 0.5;
 
 /// Static friction over trials: identified where any trial reached the
@@ -77,7 +79,14 @@ fn static_estimate(
     let clamped: Vec<f64> = fits
         .iter()
         .filter_map(|t| pick(t))
-        .filter(|e| e.1 && (bound.is_nan() || e.0.abs() >= FAR_BELOW * bound.abs()))
+        .filter(|e| {
+            let far_below = if positive {
+                e.0 < FAR_BELOW * bound
+            } else {
+                e.0 > FAR_BELOW * bound
+            };
+            e.1 && (bound.is_nan() || !far_below)
+        })
         .map(|e| e.0)
         .collect();
     if !clamped.is_empty() {

@@ -58,8 +58,9 @@ pub struct TrialFit {
     /// x_s3, even before x_s1); `None` when the strokes' grid over ρ
     /// placed x_s3 there.
     pub let_go_x_m: Option<f64>,
-    /// `let_go_x_m` is where the measured force snapped back to zero
-    /// (`snapped_free`), not where the friction line reaches it.
+    /// `let_go_x_m` is where the measured force snapped back to the
+    /// trial's zero (`snapped_free`), not where the friction line reaches
+    /// it.
     pub let_go_snapped: bool,
     /// Relaxation of the force during the longest rest inside the tissue.
     pub dwell: Option<DwellRelaxation>,

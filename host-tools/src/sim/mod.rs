@@ -1095,8 +1095,9 @@ pub fn check_noise_n(flag: &str, noise_n: f64) -> Result<()> {
 }
 
 /// Most a trial's cutting force is of its puncture force under
-/// [`vary`]: the paper's 0.94 N of 2.30 N is 0.41, and its spread
-/// (±0.36 of ±0.83 N) reaches about 0.6 two standard deviations out.
+/// [`vary`] (or the tissue's own share, if more): the paper's 0.94 N of
+/// 2.30 N is 0.41, and its spread (±0.36 of ±0.83 N) reaches about 0.6
+/// two standard deviations out.
 pub const MOST_CUTTING_SHARE: f64 = 0.6;
 
 /// `tissue` as one insertion meets it, varied by `spread` ([`Rig::spread`]).
@@ -1126,8 +1127,10 @@ pub fn vary(tissue: &TissueParams, spread: f64, rng: &mut impl Rng) -> TissuePar
     // A puncture is a fall (the paper's definition): the cutting force
     // that follows it stays below the force at which the capsule failed.
     // Drawn independently, a soft capsule and a hard cut left a trial of
-    // the tissue with no puncture to see, which no rig records as one.
-    p.cutting_force_n = (p.cutting_force_n * cut).min(MOST_CUTTING_SHARE * p.puncture_force_n);
+    // the tissue with no puncture to see, which no rig records as one. A
+    // tissue that cuts harder than that (liver 2) keeps its own share.
+    let share = MOST_CUTTING_SHARE.max(tissue.cutting_force_n / tissue.puncture_force_n);
+    p.cutting_force_n = (p.cutting_force_n * cut).min(share * p.puncture_force_n);
     for v in [
         &mut p.cp_n_per_m,
         &mut p.cn_n_per_m,
@@ -1141,7 +1144,7 @@ pub fn vary(tissue: &TissueParams, spread: f64, rng: &mut impl Rng) -> TissuePar
     // Where the punctured surface rests (x_s3) is each insertion's own as
     // well: real withdrawals let go 1.5–9 mm apart. Drawn last, so the
     // draws before it are those of a simulation without it.
-    p.relaxation = (p.relaxation * factor(spread)).clamp(0.05, 0.95);
+    p.relaxation = (p.relaxation * factor(spread)).clamp(0.0, 1.0);
     p
 }
 
