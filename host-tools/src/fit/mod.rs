@@ -468,10 +468,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
     crate::input::check_outputs(&outputs, &crate::input::dataset_inputs(&args.dir, None))?;
     let fit = fit_dataset(&args.dir)?;
     let fitted = fit.fitted();
-    if let Some(path) = &args.toml {
-        // Never a file its own loader refuses; said before any output.
-        fit.tissue()
-            .with_context(|| format!("{}: not written", path.display()))?;
+    // Never a file its own loader refuses; said before any output.
+    let checked = fitted.checked();
+    if let (Some(path), Err(e)) = (&args.toml, &checked) {
+        bail!("{}: not written: {e:#}", path.display());
     }
     let text = serde_json::to_string_pretty(&fit)?;
     match &args.json {
@@ -487,13 +487,13 @@ pub fn run(args: &FitArgs) -> Result<()> {
             .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     if let Some(path) = &args.plot {
-        plot_first_trial(&args.dir, &fit, path)?;
+        plot_first_trial(&args.dir, &fit, checked?, path)?;
     }
     Ok(())
 }
 
 /// The first fitted trial with the fitted model over it.
-fn plot_first_trial(dir: &Path, fit: &FitReport, path: &Path) -> Result<()> {
+fn plot_first_trial(dir: &Path, fit: &FitReport, params: TissueParams, path: &Path) -> Result<()> {
     use crate::plot::{force_vs_position, Marker, Series};
     let first = &fit
         .per_trial
@@ -502,7 +502,6 @@ fn plot_first_trial(dir: &Path, fit: &FitReport, path: &Path) -> Result<()> {
         .file;
     let trial = crate::trial::read_for_analysis(&dir.join(first), None)?.trial;
     let geometry = fit_trial(&trial)?;
-    let params = fit.tissue()?;
     // As the diagnosis draws it: the force settles the samples the
     // encoder cannot place (beside a jump, at a rest's edges).
     let velocity = predict::NeedleVelocity {

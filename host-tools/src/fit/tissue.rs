@@ -51,11 +51,7 @@ impl FitReport {
     /// tissue it is sent: an error naming the key when it is no tissue
     /// the device can run (beyond its fixed point, say).
     pub fn tissue(&self) -> Result<TissueParams> {
-        let fitted = self.fitted();
-        TissueModel::validated(&fitted.params).map_err(|e| {
-            anyhow!("the parameters fitted from these trials are no tissue the device can run: {e}")
-        })?;
-        Ok(fitted.params)
+        self.fitted().checked()
     }
 
     /// The tissue these estimates make, with its notes; unchecked
@@ -252,6 +248,14 @@ fn prior(key: &str, keys_before: &[&str], written_before: &[f64]) -> f64 {
 pub const NOTE: &str = "# note:";
 
 impl FittedTissue {
+    /// The parameters, checked as the device checks a tissue it is sent.
+    pub fn checked(&self) -> Result<TissueParams> {
+        TissueModel::validated(&self.params).map_err(|e| {
+            anyhow!("the parameters fitted from these trials are no tissue the device can run: {e}")
+        })?;
+        Ok(self.params)
+    }
+
     /// As a tissue-library entry, `[fitted]`, each note on the line before
     /// its key (keys of `TissueParams`; what `--params` loads).
     pub fn to_toml(&self) -> String {
