@@ -158,25 +158,19 @@ pub fn velocity_between(trial: &Trial, back_s: f64, ahead_s: f64) -> Vec<f64> {
         .collect()
 }
 
-/// The median of `f` (0 for none).
-fn median(f: &[f64]) -> f64 {
-    let mut sorted = f.to_vec();
-    if sorted.is_empty() {
+/// The median of `values` (0 for none), reordering them.
+fn median(mut values: Vec<f64>) -> f64 {
+    if values.is_empty() {
         return 0.0;
     }
-    let mid = sorted.len() / 2;
-    *sorted.select_nth_unstable_by(mid, f64::total_cmp).1
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Robust noise estimate: MAD of first differences / √2.
 fn noise(f: &[f64]) -> f64 {
-    let mut d: Vec<f64> = f.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-    if d.is_empty() {
-        return 0.0;
-    }
-    let mid = d.len() / 2;
-    let (_, median, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
-    1.4826 * *median / std::f64::consts::SQRT_2
+    let d: Vec<f64> = f.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    1.4826 * median(d) / std::f64::consts::SQRT_2
 }
 
 /// The capsule puncture: the first sharp fall (below 60 % of the running
@@ -360,7 +354,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     }
     let j0 = ip - rise;
     // What the load cell reads with nothing on the needle: before the rise.
-    let zero_n = median(&f[..j0]);
+    let zero_n = median(f[..j0].to_vec());
     // General quadratic through the rise; its root below the data is x_s1.
     let mut quad = Lsq::<3>::default();
     for j in j0..=ip {
@@ -789,8 +783,7 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
 /// order): the last sample still pulling by ten noise sd, followed at once
 /// by five or more within three noise sd of the trial's zero (`zero_n`,
 /// what the load cell read before contact: a real rig's tare leaves an
-/// offset of a few mN, and five samples judged against zero instead
-/// missed a snap one time in a few at 12 mN noise). A pull that only
+/// offset of a few mN, a sizeable part of three noise sd). A pull that only
 /// friction makes fades with the length in tissue and has no snap; one
 /// that also carries what the friction line does not (a relaxing branch's
 /// offset) would move the line's zero, and with it the let-go point,

@@ -1126,8 +1126,8 @@ pub fn vary(tissue: &TissueParams, spread: f64, rng: &mut impl Rng) -> TissuePar
     p.puncture_drop_to_n *= stiff;
     // A puncture is a fall (the paper's definition): the cutting force
     // that follows it stays below the force at which the capsule failed.
-    // Drawn independently, a soft capsule and a hard cut left a trial of
-    // the tissue with no puncture to see, which no rig records as one. A
+    // Drawn independently, a soft capsule and a hard cut would make a
+    // trial with no puncture to see, which no rig records as one. A
     // tissue that cuts harder than that (liver 2) keeps its own share.
     let share = MOST_CUTTING_SHARE.max(tissue.cutting_force_n / tissue.puncture_force_n);
     p.cutting_force_n = (p.cutting_force_n * cut).min(share * p.puncture_force_n);
