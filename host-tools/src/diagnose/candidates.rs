@@ -75,7 +75,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         effect: "presliding_hysteresis",
         grid_name: "x_c_m",
         grid: &[0.0001, 0.0003, 0.001, 0.003],
-        linear: &["lag_gain"],
+        linear: &["lag_gain", "bristle_gain"],
         columns: friction_lag,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
@@ -392,26 +392,34 @@ fn rate_friction(p: &Prepared, q: f64) -> Vec<Vec<f64>> {
 }
 
 /// Friction following the nominal Karnopp value with a lag over x_c of
-/// travel, minus the nominal friction.
+/// travel, minus the nominal friction, in the two shapes the literature
+/// gives presliding: Dahl's (the lag closes in proportion to itself, an
+/// exponential approach over x_c) and the elasto-plastic bristle's (a
+/// spring of stiffness F/x_c until it slips: a straight ramp that ends
+/// at the Karnopp value). They differ most where the friction reverses,
+/// which is where presliding shows.
 fn friction_lag(p: &Prepared, x_c: f64) -> Vec<Vec<f64>> {
-    let mut lagged = 0.0;
-    let col = (0..p.trial.len())
-        .map(|i| {
-            let target = p.friction_n[i];
-            if p.length_m[i] <= 0.0 {
-                lagged = 0.0;
-                return 0.0;
-            }
-            let dx = if i > 0 {
-                (p.trial.x_m[i] - p.trial.x_m[i - 1]).abs()
-            } else {
-                0.0
-            };
-            lagged += (target - lagged) * (dx / x_c).min(1.0);
-            lagged - target
-        })
-        .collect();
-    vec![col]
+    let n = p.trial.len();
+    let (mut dahl, mut bristle) = (vec![0.0; n], vec![0.0; n]);
+    let (mut lag_dahl, mut lag_bristle) = (0.0_f64, 0.0_f64);
+    for i in 0..n {
+        let target = p.friction_n[i];
+        if p.length_m[i] <= 0.0 {
+            (lag_dahl, lag_bristle) = (0.0, 0.0);
+            continue;
+        }
+        let dx = if i > 0 {
+            (p.trial.x_m[i] - p.trial.x_m[i - 1]).abs()
+        } else {
+            0.0
+        };
+        lag_dahl += (target - lag_dahl) * (dx / x_c).min(1.0);
+        let most = target.abs().max(lag_bristle.abs()) * dx / x_c;
+        lag_bristle += (target - lag_bristle).clamp(-most, most);
+        dahl[i] = lag_dahl - target;
+        bristle[i] = lag_bristle - target;
+    }
+    vec![dahl, bristle]
 }
 
 /// Walls and membranes where the detector found them, each a local
