@@ -173,17 +173,17 @@ impl Prepared {
 }
 
 /// Prepare a trial against `params`, with its geometry as `needle fit`'s
-/// code found it, its relaxed surface at `params.relaxation`, and the
+/// code found it and its relaxed surface as [`relaxed_surfaces`] placed
+/// it (`geometry.relaxed_x_m`), and the
 /// needle's velocity ([`needle_velocity`](crate::fit::predict::needle_velocity) of the measured positions, less
 /// the tissue's own where the trial is in the tissue's frame).
 pub fn prepare(
     file: String,
     trial: Trial,
-    mut geometry: TrialFit,
+    geometry: TrialFit,
     params: &TissueParams,
     velocity: NeedleVelocity,
 ) -> Prepared {
-    geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
     let parts = predict_parts_at(params, &geometry, &trial, velocity.clone());
     let n = trial.len();
     let mut nominal_n = parts.total_n();
@@ -283,6 +283,47 @@ pub fn fit_relaxation(
     // every trial: the grid is most of a backfit round's cost).
     let coarse = best_on(0.0, 1.0, 20);
     best_on((coarse - 0.05).max(0.0), (coarse + 0.05).min(1.0), 20)
+}
+
+/// Each trial's relaxed surface x_s3: the tissue's ρ (`shared`, from
+/// [`fit_relaxation`]) moved towards the trial's own as far as the
+/// trial's strokes place it better than the trials differ — a
+/// random-effects estimate. Real tissue relaxes differently from one
+/// insertion to the next (withdrawals let go 1.5–9 mm apart), and with
+/// friction at rest far from zero each trial's own x_s3 shows at every
+/// stroke; but an unmodelled effect moves a trial's own ρ too, and a
+/// per-trial ρ taken at face value would hide it there. So: τ², the
+/// spread of the trials' own ρ beyond what their standard errors explain
+/// (`TrialFit::relaxation_sd`, wide where the friction law misses), is
+/// var(ρ_own) − mean(sd²), none when the trials agree as well as their
+/// errors allow or an effect moves them all alike; each trial's ρ is
+/// shared + τ²/(τ² + sd²)·(ρ_own − shared). Trials whose own ρ is not
+/// identified keep the shared one; with fewer than three identified, all
+/// do.
+pub fn relaxed_surfaces(geometries: &mut [&mut TrialFit], shared: f64) {
+    let own: Vec<(f64, f64)> = geometries
+        .iter()
+        .filter(|g| g.relaxation_identified)
+        .filter_map(|g| Some((g.relaxation, g.relaxation_sd?)))
+        .collect();
+    let k = own.len();
+    let tau2 = if k >= 3 {
+        let mean = own.iter().map(|o| o.0).sum::<f64>() / k as f64;
+        let var = own.iter().map(|o| (o.0 - mean).powi(2)).sum::<f64>() / (k - 1) as f64;
+        let noise = own.iter().map(|o| o.1 * o.1).sum::<f64>() / k as f64;
+        (var - noise).max(0.0)
+    } else {
+        0.0
+    };
+    for g in geometries.iter_mut() {
+        let rho = match (g.relaxation_identified, g.relaxation_sd) {
+            (true, Some(sd)) if tau2 > 0.0 => {
+                shared + tau2 / (tau2 + sd * sd) * (g.relaxation - shared)
+            }
+            _ => shared,
+        };
+        g.relaxed_x_m = relaxed_surface(g, rho.clamp(0.0, 1.0));
+    }
 }
 
 /// x_s3 for relaxation `rho`.

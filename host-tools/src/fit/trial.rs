@@ -32,6 +32,11 @@ pub struct TrialFit {
     /// x_s3.
     pub relaxed_x_m: f64,
     pub relaxation: f64,
+    /// The standard error of `relaxation` where the trial's own strokes
+    /// place it (the paper's oscillation: ρ's profile over the friction
+    /// fit, one residual variance up from its least); `None` where they
+    /// do not (one way out, or held at the prior).
+    pub relaxation_sd: Option<f64>,
     pub cp_n_per_m: f64,
     pub bp_ns_per_m2: f64,
     pub cn_n_per_m: f64,
@@ -513,6 +518,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let OneTrialFriction {
         relaxed_x_m,
         rho: best_rho,
+        rho_sd,
         cp,
         bp,
         cn,
@@ -588,6 +594,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         rational,
         relaxed_x_m,
         relaxation: best_rho,
+        relaxation_sd: rho_sd,
         cp_n_per_m: cp,
         bp_ns_per_m2: bp,
         cn_n_per_m: cn,
@@ -612,6 +619,7 @@ const MIN_STROKE_SAMPLES: usize = 20;
 struct OneTrialFriction {
     relaxed_x_m: f64,
     rho: f64,
+    rho_sd: Option<f64>,
     identified: bool,
     let_go_x_m: Option<f64>,
     let_go_snapped: bool,
@@ -649,20 +657,27 @@ fn both_ways(
         let sse = outside + cp.map_or(0.0, |c| pos.sse(&c)) + cn.map_or(0.0, |c| neg.sse(&c));
         (sse, cp, cn)
     };
-    let (mut best, mut best_rho) = (f64::INFINITY, 0.0);
-    for k in 0..=200 {
-        let rho = k as f64 / 200.0;
-        let (sse, cp, cn) = fit_at(contact_x_m + rho * (x_s2 - contact_x_m));
-        if cp.is_some() && cn.is_some() && sse < best {
-            (best, best_rho) = (sse, rho);
-        }
-    }
-    if !best.is_finite() {
+    let profile: Vec<(f64, f64)> = (0..=200)
+        .map(|k| k as f64 / 200.0)
+        .filter_map(|rho| {
+            let (sse, cp, cn) = fit_at(contact_x_m + rho * (x_s2 - contact_x_m));
+            (cp.is_some() && cn.is_some()).then_some((rho, sse))
+        })
+        .collect();
+    let Some(&(best_rho, best)) = profile.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         bail!("no strokes both ways inside the tissue to fit friction on");
-    }
+    };
     let relaxed_x_m = contact_x_m + best_rho * (x_s2 - contact_x_m);
     let (_, cp, cn) = fit_at(relaxed_x_m);
     let ([cp, bp], [cn, bn]) = (cp.unwrap_or_default(), cn.unwrap_or_default());
+    let residual: Vec<f64> = track
+        .iter()
+        .map(|&(x, v, f)| {
+            let (c, b) = if v > 0.0 { (cp, bp) } else { (cn, bn) };
+            f - (c + b * v) * (x - relaxed_x_m).max(0.0)
+        })
+        .collect();
+    let rho_sd = profile_sd(&profile, best, effective_samples(&residual));
     let cutting: Vec<f64> = advancing
         .iter()
         .map(|&(xi, vi, fi)| fi - (cp + bp * vi) * (xi - relaxed_x_m).max(0.0))
@@ -675,6 +690,7 @@ fn both_ways(
     Ok(OneTrialFriction {
         relaxed_x_m,
         rho: best_rho,
+        rho_sd,
         identified: true,
         // The grid over ρ is where the withdrawing needle let go.
         let_go_x_m: None,
@@ -687,6 +703,47 @@ fn both_ways(
         insertion: None,
         withdrawal: None,
     })
+}
+
+/// How many independent samples a residual series is worth: n·(1 − r)/(1 +
+/// r), r its lag-1 autocorrelation (an AR(1) reading; none below zero). A
+/// model that fits leaves white noise, n; one that misses leaves a smooth
+/// residual, and its least squares places a parameter far less well than
+/// the count of samples says.
+fn effective_samples(residual: &[f64]) -> usize {
+    let power: f64 = residual.iter().map(|r| r * r).sum();
+    let lagged: f64 = residual.windows(2).map(|w| w[0] * w[1]).sum();
+    if power <= 0.0 {
+        return residual.len();
+    }
+    let r = (lagged / power).clamp(0.0, 0.99);
+    (residual.len() as f64 * (1.0 - r) / (1.0 + r)).round() as usize
+}
+
+/// The standard error of a parameter from its least-squares profile
+/// `(value, sse)`, in order: half the width of where the sum of squares
+/// lies within one residual variance of its least (Δχ² = 1) — the
+/// variance from the least itself (an unmodelled effect widens it, as it
+/// should) over the samples less the friction's four coefficients,
+/// `samples` the independent ones ([`effective_samples`]) — and at least
+/// half a grid step. A profile flat over the whole grid gives
+/// half the grid: the samples do not place it.
+fn profile_sd(profile: &[(f64, f64)], least: f64, samples: usize) -> Option<f64> {
+    // One sample's variance is least / n; a correlated residual's sum of
+    // squares rises n / n_eff times slower than independent noise's for
+    // the same evidence, so Δχ² = 1 is a rise of least / n_eff.
+    let variance = least / samples.checked_sub(5)?.max(1) as f64;
+    let mut within = profile
+        .iter()
+        .filter(|(_, sse)| *sse <= least + variance)
+        .map(|(v, _)| *v);
+    let lo = within.next()?;
+    let hi = within.next_back().unwrap_or(lo);
+    let step = match profile {
+        [a, b, ..] => b.0 - a.0,
+        _ => 0.0,
+    };
+    Some((0.5 * (hi - lo)).max(0.5 * step))
 }
 
 /// The friction fit's sums over one direction's samples beyond any x_s3,
@@ -899,6 +956,7 @@ fn one_way(
     Ok(OneTrialFriction {
         relaxed_x_m,
         rho,
+        rho_sd: None,
         identified,
         let_go_x_m: let_go,
         let_go_snapped,
