@@ -9,8 +9,9 @@
 //!    correlation with velocity, acceleration, depth, time).
 //! 3. Which: every candidate of [`candidates::CANDIDATES`], fitted on the
 //!    training trials of each fold and scored on the withheld ones, each
-//!    trial with its own stiffness, cutting, friction scale and let-go
-//!    ([`SPREAD`]).
+//!    trial with its own stiffness, cutting, friction scale, held levels,
+//!    let-go and stick ([`SPREAD`]) and its own relaxed surface
+//!    ([`prepare::relaxed_surfaces`]).
 //! 4. Verdict: the best candidate if it shrinks the held-out RMS by at
 //!    least [`MIN_SHRINK`] with a paired t over withheld trials of at least
 //!    [`MIN_T`] and takes [`MIN_EFFECT_FLOORS`] noise floors; then, in

@@ -197,7 +197,9 @@ pub fn moved_model(
     geometry.contact_x_m = relative.x_m[crossing] - d_threshold;
     geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
     // The tissue's ρ, not the trial's own: read in the lab frame, the
-    // motion bends a trial's own.
+    // motion bends a trial's own. (Once the motion is named, the nominal
+    // found again in the tissue's frame has each trial's own again, by
+    // `relaxed_surfaces`, read in that frame.)
     geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
     let model = predict_parts_at(params, &geometry, &relative, v_rel).total_n();
     (model, relative.x_m, geometry.contact_x_m)

@@ -229,14 +229,15 @@ pub fn prepare(
     }
 }
 
-/// ρ, the capsule's relaxation (x_s3 = x_s1 + ρ·(x_s2 − x_s1) on every
-/// trial), that fits all trials best under `params`. `needle fit` finds
-/// x_s3 per trial together with that trial's own friction coefficients,
-/// which trade off against it (0.8 mm off on some trials, 20 mN of
-/// residual at every stroke). Per trial under the shared coefficients it
-/// is determined better, but then an unmodelled effect bends it trial by
-/// trial to hide itself; one ρ for the tissue, as the paper has it, is
-/// both well determined and hard for an effect to hide in.
+/// ρ, the capsule's relaxation (x_s3 = x_s1 + ρ·(x_s2 − x_s1)), that
+/// fits all trials best under `params`: the tissue's, from which
+/// [`relaxed_surfaces`] moves each trial towards its own. `needle fit`
+/// finds x_s3 per trial together with that trial's own friction
+/// coefficients, which trade off against it where friction at rest is
+/// near zero (0.8 mm off on some trials); per trial under the shared
+/// coefficients an unmodelled effect bends it trial by trial to hide
+/// itself. One ρ for the tissue, as the paper has it, is well determined
+/// and hard for an effect to hide in.
 pub fn fit_relaxation(
     trials: &[(&Trial, &TrialFit, &NeedleVelocity)],
     params: &TissueParams,
@@ -297,9 +298,11 @@ pub fn fit_relaxation(
 /// (`TrialFit::relaxation_sd`, wide where the friction law misses), is
 /// var(ρ_own) − mean(sd²), none when the trials agree as well as their
 /// errors allow or an effect moves them all alike; each trial's ρ is
-/// shared + τ²/(τ² + sd²)·(ρ_own − shared). Trials whose own ρ is not
-/// identified keep the shared one; with fewer than three identified, all
-/// do.
+/// shared + τ²/(τ² + sd²)·(ρ_own − shared): the trial's own where its
+/// error is far below the spread, the tissue's where it is far above.
+/// Trials without an error on their own ρ (`TrialFit::relaxation_sd`:
+/// insert–dwell–withdraw's, withdrawn one way) keep the shared one; with
+/// fewer than three that have one, all do.
 pub fn relaxed_surfaces(geometries: &mut [&mut TrialFit], shared: f64) {
     let own: Vec<(f64, f64)> = geometries
         .iter()

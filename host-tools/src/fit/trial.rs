@@ -32,10 +32,12 @@ pub struct TrialFit {
     /// x_s3.
     pub relaxed_x_m: f64,
     pub relaxation: f64,
-    /// The standard error of `relaxation` where the trial's own strokes
-    /// place it (the paper's oscillation: ρ's profile over the friction
-    /// fit, one residual variance up from its least); `None` where they
-    /// do not (one way out, or held at the prior).
+    /// The standard error of `relaxation` where the trial's strokes both
+    /// ways place it (the paper's oscillation: ρ's profile over the
+    /// friction fit, one residual variance up from its least); `None` for
+    /// a trial withdrawn one way only (insert–dwell–withdraw: its let-go,
+    /// when inside the tissue, gives ρ but no error) or whose profile
+    /// says nothing.
     pub relaxation_sd: Option<f64>,
     pub cp_n_per_m: f64,
     pub bp_ns_per_m2: f64,
@@ -677,7 +679,7 @@ fn both_ways(
             f - (c + b * v) * (x - relaxed_x_m).max(0.0)
         })
         .collect();
-    let rho_sd = profile_sd(&profile, best, effective_samples(&residual));
+    let rho_sd = profile_sd(&profile, best, residual.len(), effective_samples(&residual));
     let cutting: Vec<f64> = advancing
         .iter()
         .map(|&(xi, vi, fi)| fi - (cp + bp * vi) * (xi - relaxed_x_m).max(0.0))
@@ -722,27 +724,32 @@ fn effective_samples(residual: &[f64]) -> usize {
 
 /// The standard error of a parameter from its least-squares profile
 /// `(value, sse)`, in order: half the width of where the sum of squares
-/// lies within one residual variance of its least (Δχ² = 1) — the
-/// variance from the least itself (an unmodelled effect widens it, as it
-/// should) over the samples less the friction's four coefficients,
-/// `samples` the independent ones ([`effective_samples`]) — and at least
-/// half a grid step. A profile flat over the whole grid gives
-/// half the grid: the samples do not place it.
-fn profile_sd(profile: &[(f64, f64)], least: f64, samples: usize) -> Option<f64> {
-    // One sample's variance is least / n; a correlated residual's sum of
-    // squares rises n / n_eff times slower than independent noise's for
-    // the same evidence, so Δχ² = 1 is a rise of least / n_eff.
-    let variance = least / samples.checked_sub(5)?.max(1) as f64;
+/// lies within one residual variance of its least (Δχ² = 1), and at
+/// least half a grid step. The variance is the least's over the samples
+/// less the four friction coefficients and ρ (an unmodelled effect
+/// widens it, as it should), times `samples / independent`
+/// ([`effective_samples`]): a correlated residual's sum of squares rises
+/// that much slower for the same evidence. A profile flat over the whole
+/// grid gives half the grid: the samples do not place it; fewer than two
+/// points, or no independent sample, say nothing.
+fn profile_sd(
+    profile: &[(f64, f64)],
+    least: f64,
+    samples: usize,
+    independent: usize,
+) -> Option<f64> {
+    if profile.len() < 2 || independent == 0 {
+        return None;
+    }
+    let variance =
+        least / samples.checked_sub(5)?.max(1) as f64 * samples as f64 / independent as f64;
     let mut within = profile
         .iter()
         .filter(|(_, sse)| *sse <= least + variance)
         .map(|(v, _)| *v);
     let lo = within.next()?;
     let hi = within.next_back().unwrap_or(lo);
-    let step = match profile {
-        [a, b, ..] => b.0 - a.0,
-        _ => 0.0,
-    };
+    let step = profile[1].0 - profile[0].0;
     Some((0.5 * (hi - lo)).max(0.5 * step))
 }
 
