@@ -17,6 +17,7 @@
 //!   expects: slow down as the capsule nears giving way, so the stop after
 //!   the puncture comes within a short overshoot.
 
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 use crate::insertion::{EventKind, Halt, HaltReason, Phase, Sample};
@@ -25,7 +26,7 @@ use crate::model::phase::PhaseState;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// A set of assist modes, one bit each.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct AssistModes(pub u8);
 
 impl AssistModes {

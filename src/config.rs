@@ -9,6 +9,7 @@ use crate::model::relax::Relaxation;
 use crate::model::stiffness::Stiffness;
 use crate::model::ModelConfig;
 use crate::units::MicroNewtons;
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Configuration of the whole per-sample pipeline.
@@ -65,7 +66,7 @@ const MAX_DRIVE_NM_PER_S: i64 = 100_000_000;
 /// compile time for the on-device library, on the host for an upload — so
 /// the device itself never converts a float; an uploaded one is checked
 /// on the device by [`Self::check`], in integers.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct TissueModel {
     /// The force model.
     pub model: ModelConfig,

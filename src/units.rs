@@ -13,6 +13,7 @@
 //! The `*_f64` accessors exist for host tools and tests; the firmware never
 //! calls them in the per-sample path.
 
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Saturate an `i64` intermediate into the `i32` range.
@@ -34,7 +35,7 @@ pub const fn saturate_i32(v: i64) -> i32 {
 macro_rules! quantity {
     ($(#[$doc:meta])* $name:ident, $per_si:expr, $si_fn:ident, $from_si:ident) => {
         $(#[$doc])*
-        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, MaxSize)]
         #[cfg_attr(target_os = "none", derive(defmt::Format))]
         pub struct $name(pub i32);
 

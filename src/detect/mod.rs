@@ -10,6 +10,7 @@
 //! Every event carries a confidence figure: 500 ‰ when the evidence just
 //! meets its threshold, rising linearly to 1000 ‰ at twice the threshold.
 
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 pub mod contact;
@@ -80,7 +81,7 @@ const fn puncture_min_peak_n(p: &TissueParams) -> f64 {
 }
 
 /// Detector thresholds, derived from a tissue's parameters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct DetectConfig {
     /// Force above which the tip is taken to touch the surface.
     pub contact_force: MicroNewtons,

@@ -23,10 +23,11 @@
 use super::fixed::{affine_times, PerLength2Q48, PerLengthQ26};
 use super::params::TissueParams;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Karnopp coefficients in fixed point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct Friction {
     /// C_p, µN/nm Q26.
     pub cp: PerLengthQ26,

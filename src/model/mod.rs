@@ -12,6 +12,7 @@
 //! The `f64` twin in [`reference`](mod@reference) is the test oracle; the fixed-point
 //! error against it is bounded by the property tests in `tests/model.rs`.
 
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 pub mod fixed;
@@ -31,7 +32,7 @@ use crate::insertion::Phase;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// The model's parameters in fixed point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct ModelConfig {
     /// Capsule stiffness.
     pub stiffness: Stiffness,

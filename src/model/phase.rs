@@ -21,10 +21,11 @@
 use super::fixed::FractionQ16;
 use crate::insertion::{EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Phase machine configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct PhaseConfig {
     /// Surface relaxation ρ.
     pub relaxation: FractionQ16,

@@ -32,6 +32,7 @@
 //! | `r_k` | µN, `i32` | 1 µN | ±2147 N, saturating |
 
 use micromath::F32Ext;
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 use super::fixed::FractionQ16;
@@ -49,7 +50,7 @@ pub const BRANCHES: usize = 2;
 pub const MOST_TAU_MS: u32 = 1_000_000;
 
 /// One branch: its gain and time constant.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct Branch {
     /// Share of the held force this branch relaxes away, 0..=1.
     pub gain: FractionQ16,
@@ -59,7 +60,7 @@ pub struct Branch {
 
 /// The tissue at rest: whether the needle holds the force it was applied
 /// with, and the relaxation spectrum of that force (all gains zero: none).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct Relaxation {
     /// The branches, in any order.
     pub branches: [Branch; BRANCHES],

@@ -14,6 +14,7 @@
 //! [`CommandError::Stale`], so a captured command replayed later does
 //! nothing.
 
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 use super::wire::{encoded_bound, DecodeError};
@@ -23,7 +24,7 @@ use crate::config::TissueModel;
 use crate::units::{MicroNewtons, Nanometres};
 
 /// What the host can ask.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize)]
 pub enum Command {
     /// Make the load cell's present reading its zero (the mean of the last
     /// quarter second or so). Refused with the needle in tissue, or with
@@ -61,7 +62,7 @@ pub enum Command {
 }
 
 /// A command as it goes on the wire.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize)]
 pub struct CommandFrame {
     /// Sequence number (see the module's docs).
     pub seq: u32,
@@ -161,12 +162,10 @@ pub struct Reply {
     pub result: Result<(), CommandError>,
 }
 
-/// Largest command frame before COBS, CRC included: an upload (a
-/// tissue's fixed-point model and thresholds, at most 5 bytes a field and
-/// 10 for the rational law's two `i64`; its relaxation, two branches of
-/// two `u32` and a flag), the tag, the sequence number.
-pub const MAX_RAW_COMMAND: usize =
-    5 + 1 + 1 + 1 + 2 * 10 + 7 * 5 + 5 + 3 * 5 + 10 * 5 + 5 + 2 + (2 * 2 * 5 + 1);
+/// Largest command frame before COBS, CRC included: the largest command
+/// frame postcard can write (an upload: a tissue's fixed-point model and
+/// thresholds), from the types themselves, and the CRC-16.
+pub const MAX_RAW_COMMAND: usize = CommandFrame::POSTCARD_MAX_SIZE + 2;
 /// Largest command frame on the wire.
 pub const MAX_ENCODED_COMMAND: usize = encoded_bound(MAX_RAW_COMMAND);
 
