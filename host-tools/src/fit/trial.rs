@@ -36,8 +36,9 @@ pub struct TrialFit {
     /// ways place it (the paper's oscillation: ρ's profile over the
     /// friction fit, one residual variance up from its least); `None` for
     /// a trial withdrawn one way only (insert–dwell–withdraw: its let-go,
-    /// when inside the tissue, gives ρ but no error) or whose profile
-    /// says nothing.
+    /// when inside the tissue, gives ρ but no error), where the friction
+    /// law does not fit the strokes (an effect it lacks bends ρ), or
+    /// whose profile says nothing.
     pub relaxation_sd: Option<f64>,
     pub cp_n_per_m: f64,
     pub bp_ns_per_m2: f64,
@@ -513,7 +514,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let inward = track.iter().filter(|s| s.1 > 0.0).count() >= MIN_STROKE_SAMPLES;
     let dwell = dwell_relaxation(trial, &v, ip);
     let friction = if inward {
-        both_ways(&track, &advancing, contact_x_m, x_s2)?
+        both_ways(&track, &advancing, contact_x_m, x_s2, noise_n)?
     } else {
         one_way(&track, &advancing, contact_x_m, x_s2, noise_n, zero_n)?
     };
@@ -646,6 +647,7 @@ fn both_ways(
     advancing: &[Xvf],
     contact_x_m: f64,
     x_s2: f64,
+    noise_n: f64,
 ) -> Result<OneTrialFriction> {
     let inward = Beyond::new(track.iter().filter(|s| s.1 > 0.0));
     let outward = Beyond::new(track.iter().filter(|s| s.1 <= 0.0));
@@ -679,7 +681,16 @@ fn both_ways(
             f - (c + b * v) * (x - relaxed_x_m).max(0.0)
         })
         .collect();
-    let rho_sd = profile_sd(&profile, best, residual.len(), effective_samples(&residual));
+    // Only a friction law that fits this trial's strokes places its ρ: a
+    // residual whose bulk is beyond 1.5 noise floors (the diagnosis's
+    // "explained") is an effect the law lacks, which bends ρ to take it.
+    // The bulk, by the median: the few samples where a stroke turns or
+    // stops, whose velocity this fit reads roughly, are no such effect.
+    let bulk_sd_n = median(residual.iter().map(|r| r.abs()).collect()) / 0.6745;
+    let fits = bulk_sd_n <= 1.5 * noise_n;
+    let rho_sd = fits
+        .then(|| profile_sd(&profile, best, residual.len(), effective_samples(&residual)))
+        .flatten();
     let cutting: Vec<f64> = advancing
         .iter()
         .map(|&(xi, vi, fi)| fi - (cp + bp * vi) * (xi - relaxed_x_m).max(0.0))
