@@ -301,8 +301,9 @@ pub fn fit_relaxation(
 /// shared + τ²/(τ² + sd²)·(ρ_own − shared): the trial's own where its
 /// error is far below the spread, the tissue's where it is far above.
 /// Trials without an error on their own ρ (`TrialFit::relaxation_sd`:
-/// insert–dwell–withdraw's, withdrawn one way) keep the shared one; with
-/// fewer than three that have one, all do.
+/// insert–dwell–withdraw's, withdrawn one way, and any whose friction law
+/// misses its strokes) keep the shared one; with fewer than three that
+/// have one, all do.
 pub fn relaxed_surfaces(geometries: &mut [&mut TrialFit], shared: f64) {
     let own: Vec<(f64, f64)> = geometries
         .iter()

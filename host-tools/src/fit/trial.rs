@@ -682,8 +682,9 @@ fn both_ways(
         })
         .collect();
     // Only a friction law that fits this trial's strokes places its ρ: a
-    // residual whose bulk is beyond 1.5 noise floors (the diagnosis's
-    // "explained") is an effect the law lacks, which bends ρ to take it.
+    // residual whose bulk is beyond 1.5 noise floors (the diagnosis's bar
+    // for "explained", `diagnose::EXPLAINED_FACTOR`; fit does not depend
+    // on diagnose) is an effect the law lacks, which bends ρ to take it.
     // The bulk, by the median: the few samples where a stroke turns or
     // stops, whose velocity this fit reads roughly, are no such effect.
     let bulk_sd_n = median(residual.iter().map(|r| r.abs()).collect()) / 0.6745;
