@@ -201,28 +201,38 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
 /// static band D_p·l: which of the two binds turns on the trial's own
 /// cutting force, friction and relaxed surface, so the level is each
 /// trial's own. What an effect must explain there is how the force
-/// changes at rest, and the level of the later dwells (friction alone,
-/// linear in the trial's friction scale).
+/// changes at rest. (The later rests at the band have
+/// [`held_at_the_band`].)
 fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
-    let n = p.trial.len();
-    let mut held = vec![0.0; n];
-    let Some(start) = p.phase.iter().position(|&ph| ph == DWELL) else {
+    let mut held = vec![0.0; p.trial.len()];
+    let Some(first) = first_dwell(p) else {
         return held;
     };
-    let in_dwell = p.phase[start..]
-        .iter()
-        .take_while(|&&ph| ph == DWELL)
-        .count();
     // Only where the nominal holds: a dwell's first samples can still be
     // sliding by the encoder (a stage easing to a stop), and there the
     // trial's own friction and cutting answer.
     let at_rest = |i: usize| p.velocity.v_mps[i].abs() < p.params.half_band_mps;
-    for (i, h) in held.iter_mut().enumerate().skip(start).take(in_dwell) {
+    for (i, h) in held
+        .iter_mut()
+        .enumerate()
+        .skip(first.start)
+        .take(first.len())
+    {
         if at_rest(i) {
             *h = p.friction_n[i] + p.cutting[i] * p.params.cutting_force_n;
         }
     }
     held
+}
+
+/// The samples of a trial's first dwell, if it has one.
+fn first_dwell(p: &Prepared) -> Option<std::ops::Range<usize>> {
+    let start = p.phase.iter().position(|&ph| ph == DWELL)?;
+    let len = p.phase[start..]
+        .iter()
+        .take_while(|&&ph| ph == DWELL)
+        .count();
+    Some(start..start + len)
 }
 
 /// The force the nominal holds at its static band (D_p·l or D_n·l) in the
@@ -232,17 +242,11 @@ fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
 /// within it — so the level of such a rest is each trial's own, as the
 /// first dwell's is. (The first dwell has [`held_in_first_dwell`].)
 fn held_at_the_band(p: &Prepared) -> Vec<f64> {
-    let n = p.trial.len();
-    let mut held = vec![0.0; n];
-    let Some(first) = p.phase.iter().position(|&ph| ph == DWELL) else {
+    let mut held = vec![0.0; p.trial.len()];
+    let Some(first) = first_dwell(p) else {
         return held;
     };
-    let after_first = first
-        + p.phase[first..]
-            .iter()
-            .take_while(|&&ph| ph == DWELL)
-            .count();
-    for (i, h) in held.iter_mut().enumerate().skip(after_first) {
+    for (i, h) in held.iter_mut().enumerate().skip(first.end) {
         let at_rest = p.velocity.v_mps[i].abs() < p.params.half_band_mps;
         // The band binds where the nominal holds neither side's sliding
         // force: its friction is then no combination of the sliding basis.
@@ -744,7 +748,7 @@ struct Refit {
 /// them, and each kept trial prepared against it.
 fn nominal_again(
     data: &[Prepared],
-    refits: Vec<Refit>,
+    mut refits: Vec<Refit>,
     refit_params: bool,
 ) -> Result<Vec<Prepared>> {
     let mut params = if refit_params {
@@ -762,7 +766,6 @@ fn nominal_again(
         .map(|r| (&r.seen, &r.geometry, &r.velocity))
         .collect();
     params.relaxation = prepare::fit_relaxation(&triples, &params);
-    let mut refits = refits;
     prepare::relaxed_surfaces(
         &mut refits
             .iter_mut()

@@ -674,12 +674,13 @@ fn both_ways(
     let relaxed_x_m = contact_x_m + best_rho * (x_s2 - contact_x_m);
     let (_, cp, cn) = fit_at(relaxed_x_m);
     let ([cp, bp], [cn, bn]) = (cp.unwrap_or_default(), cn.unwrap_or_default());
+    let friction_n = |x: f64, v: f64| {
+        let (c, b) = if v > 0.0 { (cp, bp) } else { (cn, bn) };
+        (c + b * v) * (x - relaxed_x_m).max(0.0)
+    };
     let residual: Vec<f64> = track
         .iter()
-        .map(|&(x, v, f)| {
-            let (c, b) = if v > 0.0 { (cp, bp) } else { (cn, bn) };
-            f - (c + b * v) * (x - relaxed_x_m).max(0.0)
-        })
+        .map(|&(x, v, f)| f - friction_n(x, v))
         .collect();
     // Only a friction law that fits this trial's strokes places its ρ: a
     // residual whose bulk is beyond 1.5 noise floors (the diagnosis's bar
@@ -692,9 +693,10 @@ fn both_ways(
     let rho_sd = fits
         .then(|| profile_sd(&profile, best, residual.len(), effective_samples(&residual)))
         .flatten();
+    // Advancing samples move inward: the inserting coefficients.
     let cutting: Vec<f64> = advancing
         .iter()
-        .map(|&(xi, vi, fi)| fi - (cp + bp * vi) * (xi - relaxed_x_m).max(0.0))
+        .map(|&(xi, vi, fi)| fi - friction_n(xi, vi))
         .collect();
     let cutting_force_n = if cutting.is_empty() {
         0.0
