@@ -12,6 +12,12 @@ use std::f64::consts::TAU;
 use super::motion::{harmonics_along, moved_model, TissueShift};
 use super::prepare::{Prepared, LOADING};
 
+/// A candidate's columns for one trial, one vector per linear parameter.
+pub type Columns = Vec<Vec<f64>>;
+
+/// A candidate's columns for one trial at every value of a grid.
+pub type OnGrid = fn(&Prepared, &[f64]) -> Vec<Columns>;
+
 /// One candidate effect.
 pub struct Candidate {
     pub effect: &'static str,
@@ -21,12 +27,25 @@ pub struct Candidate {
     /// Names of the linear parameters, one per column.
     pub linear: &'static [&'static str],
     /// Columns (one vector per linear parameter) for a trial at a grid value.
-    pub columns: fn(&Prepared, f64) -> Vec<Vec<f64>>,
+    pub columns: fn(&Prepared, f64) -> Columns,
+    /// The columns at every grid value at once, where grid values share
+    /// work ([`Self::columns_on_grid`]); `columns` at each one if `None`.
+    pub on_grid: Option<OnGrid>,
     /// The named parameters a grid value stands for.
     pub grid_params: fn(&'static str, f64) -> Vec<(&'static str, f64)>,
     /// How its fit is taken out of the data before the nominal is fitted
     /// again.
     pub backfit: Backfit,
+}
+
+impl Candidate {
+    /// [`Self::columns`] for a trial at every value of the grid.
+    pub fn columns_on_grid(&self, p: &Prepared) -> Vec<Columns> {
+        match self.on_grid {
+            Some(on_grid) => on_grid(p, self.grid),
+            None => self.grid.iter().map(|&g| (self.columns)(p, g)).collect(),
+        }
+    }
 }
 
 /// What backfitting under a named effect takes out of the data.
@@ -59,6 +78,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         ],
         linear: &["capsule_gain", "gain"],
         columns: relaxation,
+        on_grid: Some(relaxation_on_grid),
         grid_params: spectrum_params,
         backfit: Backfit::Force,
     },
@@ -68,6 +88,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[-0.75, -0.5, -0.25, 0.5],
         linear: &["b_extra_ns_per_m2", "b_correction_ns_per_m2"],
         columns: rate_friction,
+        on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
     },
@@ -77,6 +98,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.0001, 0.0003, 0.001, 0.003],
         linear: &["lag_gain", "bristle_gain"],
         columns: friction_lag,
+        on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
     },
@@ -86,6 +108,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[1.0, 1.5, 2.0, 3.0],
         linear: &["wall_gain"],
         columns: walls,
+        on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
     },
@@ -95,6 +118,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.0],
         linear: &["cutting_per_m_n_per_m", "cutting_correction_n"],
         columns: depth_cutting,
+        on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
     },
@@ -104,6 +128,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.0, 0.003, 0.01, 0.03],
         linear: &["mass_kg", "mass_smooth_kg"],
         columns: inertia,
+        on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
     },
@@ -113,6 +138,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[0.0, 10.0, 30.0, 100.0],
         linear: &["rate_n_per_s"],
         columns: drift,
+        on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
     },
@@ -130,6 +156,7 @@ pub const CANDIDATES: [Candidate; 8] = [
             "loading_offset_n",
         ],
         columns: tissue_motion,
+        on_grid: None,
         grid_params: motion_params,
         backfit: Backfit::TissueFrame,
     },
@@ -155,8 +182,8 @@ fn spectrum_at(g: f64) -> (f64, f64) {
 }
 
 /// Grid values from here on are relaxation of the tissue's force
-/// ([`qlv`]); below, a relaxing branch driven by the needle's motion
-/// ([`maxwell`]).
+/// ([`qlv_branch`]); below, a relaxing branch driven by the needle's motion
+/// ([`maxwell_branch`]).
 const QLV_FROM: f64 = 20.0;
 
 fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
@@ -172,19 +199,32 @@ fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
 /// Viscoelasticity in either of its two readings: a branch the needle's
 /// motion loads (k·m, the Maxwell element beside the nominal's springs;
 /// gains in N/m), or relaxation of the force the tissue exerts (Fung's
-/// quasi-linear viscoelasticity on each trial's fitted force, [`qlv`]:
+/// quasi-linear viscoelasticity on each trial's fitted force, [`qlv_branch`]:
 /// the capsule's as it loads, a held force from the stop, the dragged
 /// tissue's; gains the fraction that relaxes away). Either with one gain
 /// for the capsule and one for the rest ([`capsule_and_shaft`]). Real
 /// tissue relaxes 34–41 % of a held force in 5 s at rest, which no
 /// motion-driven branch can do: the needle stands still.
 fn relaxation(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
-    let col = if g >= QLV_FROM {
-        qlv(p, g - QLV_FROM)
-    } else {
-        maxwell(p, g)
-    };
-    capsule_and_shaft(p, &col)
+    relaxation_on_grid(p, &[g]).pop().unwrap_or_default()
+}
+
+/// [`relaxation`] at each of `grid`'s values, every relaxing branch
+/// computed once: the grid's spectra share their branches' time constants
+/// (half a decade apart about each centre), so its 40 spectra need 70
+/// branches, not 320.
+fn relaxation_on_grid(p: &Prepared, grid: &[f64]) -> Vec<Columns> {
+    let mut branches = Branches::new(p);
+    grid.iter()
+        .map(|&g| {
+            let col = if g >= QLV_FROM {
+                branches.spectrum(Branch::Qlv, g - QLV_FROM)
+            } else {
+                branches.spectrum(Branch::Maxwell, g)
+            };
+            capsule_and_shaft(p, &col)
+        })
+        .collect()
 }
 
 /// A column split in two, the capsule's part (loading) and the rest: the
@@ -206,8 +246,9 @@ fn capsule_and_shaft(p: &Prepared, col: &[f64]) -> Vec<Vec<f64>> {
 /// acting on the tissue's force F as the baseline fitted it on the trial
 /// ([`Prepared::fitted_n`]): σ = F − γ·(F − h), h_k the part of F's
 /// history not yet relaxed (dh_k/dt = dF/dt − h_k/τ_k), so the column is
-/// −(F − h) and γ its coefficient. Exact over each step for F linear in
-/// it, so jittered clocks and gaps cost nothing.
+/// −(F − h) and γ its coefficient; one branch's F − h here, summed over
+/// the spectrum by [`Branches::spectrum`]. Exact over each step for F
+/// linear in it, so jittered clocks and gaps cost nothing.
 ///
 /// A needle sliding through tissue meets fresh tissue at its tip and
 /// along its shaft all the time: what it shears has had no time to relax,
@@ -218,39 +259,106 @@ fn capsule_and_shaft(p: &Prepared, col: &[f64]) -> Vec<Vec<f64>> {
 /// from its whole history — a steady insertion's force would be relaxed
 /// already when the needle stops, and the force held at rest would rise
 /// back, where tissue is seen to fall 34–41 % in 5 s.
-fn qlv(p: &Prepared, g: f64) -> Vec<f64> {
-    let (tau_s, decades) = spectrum_at(g);
-    let branches = (2.0 * decades) as i32;
-    let steps = qlv_steps(p);
-    let mut col = vec![0.0; p.trial.len()];
-    for b in -branches / 2..=branches / 2 {
-        let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
-        let mut decay = Decay::new(tau);
-        let mut h = 0.0;
-        for (c, step) in col.iter_mut().zip(&steps) {
-            match *step {
-                // Out of the tissue there is no tissue force, and nothing
-                // of its history is left to relax.
-                QlvStep::Out => h = 0.0,
-                QlvStep::Sliding { f_n } => h = f_n,
-                QlvStep::Held {
-                    f_n,
-                    dt_s,
-                    rate_n_per_s,
-                } => {
-                    if dt_s > 0.0 {
-                        let decay = decay.over(dt_s);
-                        h = h * decay + rate_n_per_s * tau * (1.0 - decay);
-                    }
-                    *c -= (f_n - h) / f64::from(branches + 1);
+fn qlv_branch(steps: &[QlvStep], tau: f64) -> Vec<f64> {
+    let mut decay = Decay::new(tau);
+    let mut h = 0.0;
+    steps
+        .iter()
+        .map(|step| match *step {
+            // Out of the tissue there is no tissue force, and nothing
+            // of its history is left to relax.
+            QlvStep::Out => {
+                h = 0.0;
+                0.0
+            }
+            QlvStep::Sliding { f_n } => {
+                h = f_n;
+                0.0
+            }
+            QlvStep::Held {
+                f_n,
+                dt_s,
+                rate_n_per_s,
+            } => {
+                if dt_s > 0.0 {
+                    let decay = decay.over(dt_s);
+                    h = h * decay + rate_n_per_s * tau * (1.0 - decay);
+                }
+                f_n - h
+            }
+        })
+        .collect()
+}
+
+/// The two relaxing families of [`relaxation`].
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+enum Branch {
+    /// [`maxwell_branch`]: driven by the needle's motion.
+    Maxwell,
+    /// [`qlv_branch`]: the tissue's force relaxing.
+    Qlv,
+}
+
+/// A trial's relaxing branches, each computed on first use and kept for
+/// every spectrum that has it.
+struct Branches<'p> {
+    p: &'p Prepared,
+    maxwell_steps: Option<Vec<Option<(f64, f64)>>>,
+    qlv_steps: Option<Vec<QlvStep>>,
+    /// By family, spectrum centre (its bits) and offset in half decades.
+    done: std::collections::HashMap<(Branch, u64, i32), Vec<f64>>,
+}
+
+impl<'p> Branches<'p> {
+    fn new(p: &'p Prepared) -> Self {
+        Self {
+            p,
+            maxwell_steps: None,
+            qlv_steps: None,
+            done: Default::default(),
+        }
+    }
+
+    /// The spectrum at grid value `g` of `family`: its branches spread
+    /// evenly in log τ over its width (half a decade apart), summed with
+    /// equal stiffness — for QLV as the column −(F − h) of its gain.
+    fn spectrum(&mut self, family: Branch, g: f64) -> Vec<f64> {
+        let (tau_s, decades) = spectrum_at(g);
+        let branches = (2.0 * decades) as i32;
+        let mut col = vec![0.0; self.p.trial.len()];
+        for b in -branches / 2..=branches / 2 {
+            let branch = self.branch(family, tau_s, b);
+            for (c, m) in col.iter_mut().zip(branch) {
+                match family {
+                    Branch::Maxwell => *c += m / f64::from(branches + 1),
+                    Branch::Qlv => *c -= m / f64::from(branches + 1),
                 }
             }
         }
+        col
     }
-    col
+
+    fn branch(&mut self, family: Branch, tau_s: f64, b: i32) -> &[f64] {
+        let p = self.p;
+        let (maxwell_steps, qlv_steps) = (&mut self.maxwell_steps, &mut self.qlv_steps);
+        self.done
+            .entry((family, tau_s.to_bits(), b))
+            .or_insert_with(|| {
+                let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
+                match family {
+                    Branch::Maxwell => maxwell_branch(
+                        maxwell_steps.get_or_insert_with(|| maxwell_steps_of(p)),
+                        tau,
+                    ),
+                    Branch::Qlv => {
+                        qlv_branch(qlv_steps.get_or_insert_with(|| qlv_steps_of(p)), tau)
+                    }
+                }
+            })
+    }
 }
 
-/// One sample as every branch of [`qlv`] reads it, worked out once for
+/// One sample as every branch of [`qlv_branch`] reads it, worked out once for
 /// all of them (the branches were a quarter of a diagnosis's time).
 #[derive(Clone, Copy)]
 enum QlvStep {
@@ -268,7 +376,7 @@ enum QlvStep {
     },
 }
 
-fn qlv_steps(p: &Prepared) -> Vec<QlvStep> {
+fn qlv_steps_of(p: &Prepared) -> Vec<QlvStep> {
     let f = |i: usize| if p.in_tissue(i) { p.fitted_n[i] } else { 0.0 };
     let sliding = |i: usize| {
         p.phase[i] != LOADING
@@ -333,25 +441,15 @@ impl Decay {
     }
 }
 
-/// Maxwell branches spread evenly in log τ over the spectrum's width
-/// (half a decade apart), each state dm/dt = v − m/τ_k in tissue, summed
-/// with equal stiffness. Each step is integrated exactly for a velocity
+/// One Maxwell branch's state, dm/dt = v − m/τ in tissue (the spectrum's
+/// branches summed by [`Branches::spectrum`]). Each step is integrated exactly for a velocity
 /// held over it, so a rig's jittered clock and its gaps cost nothing.
-fn maxwell(p: &Prepared, g: f64) -> Vec<f64> {
-    let (tau_s, decades) = spectrum_at(g);
-    let branches = (2.0 * decades) as i32;
-    // What every branch reads: the step into each sample in tissue (None
-    // out of it, and for the first) and the velocity over it.
-    let t = &p.trial.t_s;
-    let steps: Vec<Option<(f64, f64)>> = (0..p.trial.len())
-        .map(|i| (p.in_tissue(i) && i > 0).then(|| (t[i] - t[i - 1], p.velocity.v_mps[i])))
-        .collect();
-    let mut col = vec![0.0; p.trial.len()];
-    for b in -branches / 2..=branches / 2 {
-        let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
-        let mut decay = Decay::new(tau);
-        let mut m = 0.0;
-        for (c, step) in col.iter_mut().zip(&steps) {
+fn maxwell_branch(steps: &[Option<(f64, f64)>], tau: f64) -> Vec<f64> {
+    let mut decay = Decay::new(tau);
+    let mut m = 0.0;
+    steps
+        .iter()
+        .map(|step| {
             m = match *step {
                 Some((dt_s, v_mps)) => {
                     let decay = decay.over(dt_s);
@@ -359,10 +457,19 @@ fn maxwell(p: &Prepared, g: f64) -> Vec<f64> {
                 }
                 None => 0.0,
             };
-            *c += m / f64::from(branches + 1);
-        }
-    }
-    col
+            m
+        })
+        .collect()
+}
+
+/// What every branch of [`maxwell_branch`] reads: the step into each
+/// sample in tissue (None out of it, and for the first) and the velocity
+/// over it.
+fn maxwell_steps_of(p: &Prepared) -> Vec<Option<(f64, f64)>> {
+    let t = &p.trial.t_s;
+    (0..p.trial.len())
+        .map(|i| (p.in_tissue(i) && i > 0).then(|| (t[i] - t[i - 1], p.velocity.v_mps[i])))
+        .collect()
 }
 
 /// Sliding damping l·v·(|v|/v_ref)^q beside l·v itself. At rest the

@@ -390,49 +390,40 @@ impl Supports {
     }
 }
 
-/// `base` (the sums of the `fixed` columns) with the columns of
-/// `extra(trial)` appended: only their products with every column and
-/// the residual are summed here.
+/// A trial's `base` (the sums of its `fixed` columns) with the `extra`
+/// columns appended: only their products with every column and the
+/// residual are summed here.
 fn extended(
-    data: &[Prepared],
-    fixed: &[Vec<Vec<f64>>],
-    fixed_supports: &[Supports],
-    base: &[[Gram; PHASES.len()]],
-    extra: impl Fn(&Prepared) -> Vec<Vec<f64>>,
-) -> Vec<[Gram; PHASES.len()]> {
-    data.iter()
-        .zip(fixed)
-        .zip(fixed_supports)
-        .zip(base)
-        .map(|(((p, fixed), supports), base)| {
-            let extra = extra(p);
-            let mut g: [Gram; PHASES.len()] =
-                std::array::from_fn(|ph| base[ph].with_columns(extra.len()));
-            let nf = fixed.len();
-            for (ph, r, fixed_within) in &supports.runs {
-                let (gp, r) = (&mut g[*ph], r.clone());
-                let n = gp.n;
-                let within: Vec<_> = extra.iter().map(|c| support(c, &r)).collect();
-                for (e, ce) in extra.iter().enumerate() {
-                    let se = &within[e];
-                    if se.is_empty() {
-                        continue;
-                    }
-                    let row = nf + e;
-                    for (f, cf) in fixed.iter().enumerate() {
-                        let v = dot_over(ce, se, cf, &fixed_within[f]);
-                        gp.ata[row * n + f] += v;
-                        gp.ata[f * n + row] += v;
-                    }
-                    for (e2, c2) in extra.iter().enumerate() {
-                        gp.ata[row * n + nf + e2] += dot_over(ce, se, c2, &within[e2]);
-                    }
-                    gp.aty[row] += dot_over(ce, se, &p.residual_n, &r);
-                }
+    p: &Prepared,
+    fixed: &[Vec<f64>],
+    supports: &Supports,
+    base: &[Gram; PHASES.len()],
+    extra: &[Vec<f64>],
+) -> [Gram; PHASES.len()] {
+    let mut g: [Gram; PHASES.len()] = std::array::from_fn(|ph| base[ph].with_columns(extra.len()));
+    let nf = fixed.len();
+    for (ph, r, fixed_within) in &supports.runs {
+        let (gp, r) = (&mut g[*ph], r.clone());
+        let n = gp.n;
+        let within: Vec<_> = extra.iter().map(|c| support(c, &r)).collect();
+        for (e, ce) in extra.iter().enumerate() {
+            let se = &within[e];
+            if se.is_empty() {
+                continue;
             }
-            g
-        })
-        .collect()
+            let row = nf + e;
+            for (f, cf) in fixed.iter().enumerate() {
+                let v = dot_over(ce, se, cf, &fixed_within[f]);
+                gp.ata[row * n + f] += v;
+                gp.ata[f * n + row] += v;
+            }
+            for (e2, c2) in extra.iter().enumerate() {
+                gp.ata[row * n + nf + e2] += dot_over(ce, se, c2, &within[e2]);
+            }
+            gp.aty[row] += dot_over(ce, se, &p.residual_n, &r);
+        }
+    }
+    g
 }
 
 fn total(gs: &[Gram; PHASES.len()]) -> Gram {
@@ -489,10 +480,18 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     let base = grams(data, &fixed_cols, &supports);
     let per_grid: Vec<Vec<[Gram; PHASES.len()]>> = match cand {
         None => vec![base],
-        Some(c) => grid
-            .iter()
-            .map(|&g| extended(data, &fixed_cols, &supports, &base, |p| (c.columns)(p, g)))
-            .collect(),
+        // Trial by trial, every grid value's columns at once: a
+        // candidate's grid values can share their work.
+        Some(c) => {
+            let mut per_grid: Vec<Vec<_>> = grid.iter().map(|_| Vec::new()).collect();
+            for (j, p) in data.iter().enumerate() {
+                for (gi, extra) in c.columns_on_grid(p).iter().enumerate() {
+                    let g = extended(p, &fixed_cols[j], &supports[j], &base[j], extra);
+                    per_grid[gi].push(g);
+                }
+            }
+            per_grid
+        }
     };
     let k = folds(data.len());
     let per = PerTrial {
@@ -809,8 +808,48 @@ fn scored_with_backfit<'c>(
     nominal: Nominal,
     rounds: usize,
 ) -> Backfitted<'c> {
+    backfitting(data, set, nominal).more(rounds).state
+}
+
+/// A backfit under way: what its rounds so far left, and whether more
+/// rounds may change it. The leading contenders get one round each and
+/// the winner goes on from its own ([`best_backfitted`]).
+struct Backfitting<'c> {
+    state: Backfitted<'c>,
+    refit_params: bool,
+    rounds_done: usize,
+    settled: bool,
+}
+
+impl<'c> Backfitting<'c> {
+    fn settled(state: Backfitted<'c>) -> Self {
+        Self {
+            state,
+            refit_params: false,
+            rounds_done: 0,
+            settled: true,
+        }
+    }
+
+    /// Rounds of [`backfit`] up to the `upto`-th in all.
+    fn more(mut self, upto: usize) -> Self {
+        if !self.settled && self.rounds_done < upto {
+            let rounds = self.rounds_done..upto;
+            self.rounds_done = upto;
+            (self.state, self.settled) = backfit_rounds(self.state, self.refit_params, rounds);
+        }
+        self
+    }
+}
+
+/// [`scored_with_backfit`] before its rounds.
+fn backfitting<'c>(
+    data: &[Prepared],
+    set: &[(&'c Candidate, f64)],
+    nominal: Nominal,
+) -> Backfitting<'c> {
     if nominal == Nominal::Device {
-        return (score(data, set, None), data.to_vec(), set.to_vec());
+        return Backfitting::settled((score(data, set, None), data.to_vec(), set.to_vec()));
     }
     let refit_params = nominal == Nominal::Fitted;
     let (moving, forces): (Vec<_>, Vec<_>) = set
@@ -826,25 +865,30 @@ fn scored_with_backfit<'c>(
         // columns: the better of the two on the withheld trials stands.
         Some((scored, moved)) if forces.is_empty() => {
             let columns = as_columns();
-            return if scored.rms() <= columns.0.rms() {
+            return Backfitting::settled(if scored.rms() <= columns.0.rms() {
                 (scored, moved, forces)
             } else {
                 columns
-            };
+            });
         }
         Some((_, moved)) => {
             let columns = as_columns();
             let in_frame = score(&moved, &forces, None);
             if in_frame.rms() > columns.0.rms() {
-                return columns;
+                return Backfitting::settled(columns);
             }
             (in_frame, moved)
         }
         // A moved trial no longer fits: the motion stays as columns.
-        None if !moving.is_empty() => return as_columns(),
+        None if !moving.is_empty() => return Backfitting::settled(as_columns()),
         None => (score(data, set, None), data.to_vec()),
     };
-    backfit_rounds((scored, current, forces), refit_params, rounds)
+    Backfitting {
+        state: (scored, current, forces),
+        refit_params,
+        rounds_done: 0,
+        settled: false,
+    }
 }
 
 /// Up to `rounds` more rounds of [`backfit`] from `state`, each kept only
@@ -854,15 +898,16 @@ fn scored_with_backfit<'c>(
 /// [`REGRID_ROUNDS`] under the nominal found again: chosen against a
 /// nominal that took up part of it (a relaxing branch's withdrawal offset
 /// as a longer friction length), it would keep that nominal where it was.
-/// Later rounds move the nominal by little and keep it.
+/// Later rounds move the nominal by little and keep it. True once no
+/// further round would change what it returns.
 fn backfit_rounds<'c>(
     (mut scored, mut current, mut forces): Backfitted<'c>,
     refit_params: bool,
-    rounds: usize,
-) -> Backfitted<'c> {
-    for round in 0..rounds {
+    rounds: std::ops::Range<usize>,
+) -> (Backfitted<'c>, bool) {
+    for round in rounds {
         let Ok(again) = backfit(&current, &forces, &scored.fold_theta, refit_params) else {
-            break;
+            return ((scored, current, forces), true);
         };
         let regrid = round < REGRID_ROUNDS && !forces.is_empty();
         let next = match forces.split_last() {
@@ -872,7 +917,7 @@ fn backfit_rounds<'c>(
         // A round that makes the withheld trials worse is not kept: the
         // refitted nominal took up what the effect should have.
         if next.rms() > scored.rms() {
-            break;
+            return ((scored, current, forces), true);
         }
         if let Some(last) = forces.last_mut().filter(|_| regrid) {
             last.1 = next.grid_value;
@@ -881,10 +926,10 @@ fn backfit_rounds<'c>(
         let done = change < BACKFIT_TOL * scored.rms();
         (scored, current) = (next, again);
         if done {
-            break;
+            return ((scored, current, forces), true);
         }
     }
-    (scored, current, forces)
+    ((scored, current, forces), false)
 }
 
 /// The nominal found again in the tissue's frame: the tissue's
@@ -1185,7 +1230,7 @@ pub fn diagnose_with_progress(
 /// alone, an effect is judged against a nominal that took up part of it,
 /// and a rival can look better beside that nominal than the effect
 /// itself. The [`BACKFIT_TRIED`] leading ones get one round each, the
-/// winner its whole backfit from the start (the nominal's own rules for
+/// winner the rest of its backfit from there (the nominal's own rules for
 /// what is backfitted, a device's model never, hold for it as for one).
 fn best_backfitted<'c>(
     data: &[Prepared],
@@ -1205,7 +1250,7 @@ fn best_backfitted<'c>(
             scored_with_backfit(data, &with(*ci, *g), nominal, BACKFIT_ROUNDS),
         ));
     }
-    let (ci, g) = contenders
+    let (ci, winner) = contenders
         .iter()
         .take(BACKFIT_TRIED)
         .map(|&(ci, g)| {
@@ -1213,15 +1258,10 @@ fn best_backfitted<'c>(
                 "backfitting the nominal under {}",
                 CANDIDATES[ci].effect
             ));
-            let (scored, ..) = scored_with_backfit(data, &with(ci, g), nominal, 1);
-            (ci, g, scored.rms())
+            (ci, backfitting(data, &with(ci, g), nominal).more(1))
         })
-        .min_by(|a, b| a.2.total_cmp(&b.2))
-        .map(|(ci, g, _)| (ci, g))?;
-    Some((
-        ci,
-        scored_with_backfit(data, &with(ci, g), nominal, BACKFIT_ROUNDS),
-    ))
+        .min_by(|a, b| a.1.state.0.rms().total_cmp(&b.1.state.0.rms()))?;
+    Some((ci, winner.more(BACKFIT_ROUNDS).state))
 }
 
 /// Most effects the waterfall names.
