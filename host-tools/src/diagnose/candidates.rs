@@ -15,8 +15,10 @@ use super::prepare::{Prepared, LOADING};
 /// A candidate's columns for one trial, one vector per linear parameter.
 pub type Columns = Vec<Vec<f64>>;
 
-/// A candidate's columns for one trial at every value of a grid.
-pub type OnGrid = fn(&Prepared, &[f64]) -> Vec<Columns>;
+/// A candidate's columns for one trial at every value of a grid, each
+/// given to the callback with its index in the grid as it is made, in an
+/// order of the candidate's choosing.
+pub type OnGrid = fn(&Prepared, &[f64], &mut dyn FnMut(usize, Columns));
 
 /// One candidate effect.
 pub struct Candidate {
@@ -39,11 +41,16 @@ pub struct Candidate {
 }
 
 impl Candidate {
-    /// [`Self::columns`] for a trial at every value of the grid.
-    pub fn columns_on_grid(&self, p: &Prepared) -> Vec<Columns> {
+    /// [`Self::columns`] for a trial at every value of the grid, given to
+    /// `each` with the value's index as they are made.
+    pub fn columns_on_grid(&self, p: &Prepared, each: &mut dyn FnMut(usize, Columns)) {
         match self.on_grid {
-            Some(on_grid) => on_grid(p, self.grid),
-            None => self.grid.iter().map(|&g| (self.columns)(p, g)).collect(),
+            Some(on_grid) => on_grid(p, self.grid, each),
+            None => {
+                for (gi, &g) in self.grid.iter().enumerate() {
+                    each(gi, (self.columns)(p, g));
+                }
+            }
         }
     }
 }
@@ -206,25 +213,37 @@ fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
 /// tissue relaxes 34–41 % of a held force in 5 s at rest, which no
 /// motion-driven branch can do: the needle stands still.
 fn relaxation(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
-    relaxation_on_grid(p, &[g]).pop().unwrap_or_default()
+    let mut cols = Vec::new();
+    relaxation_on_grid(p, &[g], &mut |_, c| cols = c);
+    cols
 }
 
 /// [`relaxation`] at each of `grid`'s values, every relaxing branch
-/// computed once: the grid's spectra share their branches' time constants
-/// (half a decade apart about each centre), so its 40 spectra need 70
-/// branches, not 320.
-fn relaxation_on_grid(p: &Prepared, grid: &[f64]) -> Vec<Columns> {
+/// computed once: the spectra about one centre share their branches
+/// (half a decade apart about it), so the grid's 40 spectra need 70
+/// branches, not 320. They are made centre by centre, and only one
+/// centre's branches are kept (a trial of 70 000 samples would hold
+/// 39 MB of branches otherwise).
+fn relaxation_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize, Columns)) {
+    let family_of = |g: f64| {
+        if g >= QLV_FROM {
+            (Branch::Qlv, g - QLV_FROM)
+        } else {
+            (Branch::Maxwell, g)
+        }
+    };
+    let centre = |gi: &usize| {
+        let (family, g) = family_of(grid[*gi]);
+        (family, spectrum_at(g).0.to_bits())
+    };
+    let mut order: Vec<usize> = (0..grid.len()).collect();
+    order.sort_by_key(centre);
     let mut branches = Branches::new(p);
-    grid.iter()
-        .map(|&g| {
-            let col = if g >= QLV_FROM {
-                branches.spectrum(Branch::Qlv, g - QLV_FROM)
-            } else {
-                branches.spectrum(Branch::Maxwell, g)
-            };
-            capsule_and_shaft(p, &col)
-        })
-        .collect()
+    for gi in order {
+        let (family, g) = family_of(grid[gi]);
+        let col = branches.spectrum(family, g);
+        each(gi, capsule_and_shaft(p, &col));
+    }
 }
 
 /// A column split in two, the capsule's part (loading) and the rest: the
@@ -291,7 +310,7 @@ fn qlv_branch(steps: &[QlvStep], tau: f64) -> Vec<f64> {
 }
 
 /// The two relaxing families of [`relaxation`].
-#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 enum Branch {
     /// [`maxwell_branch`]: driven by the needle's motion.
     Maxwell,
@@ -299,14 +318,16 @@ enum Branch {
     Qlv,
 }
 
-/// A trial's relaxing branches, each computed on first use and kept for
-/// every spectrum that has it.
+/// A trial's relaxing branches about one spectrum centre, each computed
+/// on first use and kept for every spectrum about that centre.
 struct Branches<'p> {
     p: &'p Prepared,
     maxwell_steps: Option<Vec<Option<(f64, f64)>>>,
     qlv_steps: Option<Vec<QlvStep>>,
-    /// By family, spectrum centre (its bits) and offset in half decades.
-    done: std::collections::HashMap<(Branch, u64, i32), Vec<f64>>,
+    /// The family and centre (its bits) of the branches kept.
+    centre: Option<(Branch, u64)>,
+    /// By offset from the centre in half decades.
+    done: std::collections::HashMap<i32, Vec<f64>>,
 }
 
 impl<'p> Branches<'p> {
@@ -315,6 +336,7 @@ impl<'p> Branches<'p> {
             p,
             maxwell_steps: None,
             qlv_steps: None,
+            centre: None,
             done: Default::default(),
         }
     }
@@ -340,21 +362,21 @@ impl<'p> Branches<'p> {
 
     fn branch(&mut self, family: Branch, tau_s: f64, b: i32) -> &[f64] {
         let p = self.p;
+        if self.centre != Some((family, tau_s.to_bits())) {
+            self.centre = Some((family, tau_s.to_bits()));
+            self.done.clear();
+        }
         let (maxwell_steps, qlv_steps) = (&mut self.maxwell_steps, &mut self.qlv_steps);
-        self.done
-            .entry((family, tau_s.to_bits(), b))
-            .or_insert_with(|| {
-                let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
-                match family {
-                    Branch::Maxwell => maxwell_branch(
-                        maxwell_steps.get_or_insert_with(|| maxwell_steps_of(p)),
-                        tau,
-                    ),
-                    Branch::Qlv => {
-                        qlv_branch(qlv_steps.get_or_insert_with(|| qlv_steps_of(p)), tau)
-                    }
-                }
-            })
+        self.done.entry(b).or_insert_with(|| {
+            let tau = tau_s * 10f64.powf(0.5 * f64::from(b));
+            match family {
+                Branch::Maxwell => maxwell_branch(
+                    maxwell_steps.get_or_insert_with(|| maxwell_steps_of(p)),
+                    tau,
+                ),
+                Branch::Qlv => qlv_branch(qlv_steps.get_or_insert_with(|| qlv_steps_of(p)), tau),
+            }
+        })
     }
 }
 

@@ -485,10 +485,10 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         Some(c) => {
             let mut per_grid: Vec<Vec<_>> = grid.iter().map(|_| Vec::new()).collect();
             for (j, p) in data.iter().enumerate() {
-                for (gi, extra) in c.columns_on_grid(p).iter().enumerate() {
-                    let g = extended(p, &fixed_cols[j], &supports[j], &base[j], extra);
+                c.columns_on_grid(p, &mut |gi, extra| {
+                    let g = extended(p, &fixed_cols[j], &supports[j], &base[j], &extra);
                     per_grid[gi].push(g);
-                }
+                });
             }
             per_grid
         }
