@@ -26,7 +26,18 @@ use crate::model::phase::PhaseState;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// A set of assist modes, one bit each.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    MaxSize,
+    postcard_schema::Schema,
+)]
 pub struct AssistModes(pub u8);
 
 impl AssistModes {
@@ -87,7 +98,7 @@ pub const fn target_depth_is_valid(depth: Nanometres) -> bool {
 }
 
 /// Assist configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct AssistConfig {
     /// Modes in force.
     pub modes: AssistModes,

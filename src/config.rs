@@ -13,7 +13,7 @@ use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Configuration of the whole per-sample pipeline.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct DeviceConfig {
     /// Load-cell calibration.
     pub load_cell: LoadCell,
@@ -66,7 +66,9 @@ const MAX_DRIVE_NM_PER_S: i64 = 100_000_000;
 /// compile time for the on-device library, on the host for an upload — so
 /// the device itself never converts a float; an uploaded one is checked
 /// on the device by [`Self::check`], in integers.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
+)]
 pub struct TissueModel {
     /// The force model.
     pub model: ModelConfig,
@@ -335,7 +337,7 @@ impl DeviceConfig {
 }
 
 /// Where the device's tissue model came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub enum TissueSource {
     /// The on-device library, by position.
     Library(u8),

@@ -152,10 +152,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         if faults.is_empty() && device.halt.set_low().is_err() {
             device.faults = device.faults.union(Faults::HALT_OUTPUT);
         }
-        device.send(&Frame::Header(Header {
-            protocol_version: PROTOCOL_VERSION,
-            sample_rate_hz: config.velocity.sample_rate_hz,
-        }));
+        device.send(&Frame::Header(Header::new(config.velocity.sample_rate_hz)));
         device.send_config();
         device.send_snapshot();
         device.raise(faults);

@@ -4,7 +4,9 @@ use serde::{Deserialize, Serialize};
 
 /// A set of faults, one bit each. Latched: once raised a bit stays set until
 /// reset, and any set bit keeps the halt line asserted.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Faults(pub u16);
 

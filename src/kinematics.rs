@@ -20,6 +20,7 @@
 //! configuration ([`VelocityConfig`]), the history is state.
 
 use heapless::Deque;
+use postcard_schema::schema::{DataModelType, NamedType, NamedValue};
 use serde::{Deserialize, Serialize};
 
 use crate::units::{saturate_i32, Nanometres, NanometresPerSecond};
@@ -28,7 +29,7 @@ use crate::units::{saturate_i32, Nanometres, NanometresPerSecond};
 pub const MAX_VELOCITY_WINDOW: usize = 32;
 
 /// Unwraps the wrapping encoder count into an `i32` count.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct EncoderTracker {
     last_raw: Option<u16>,
     total_counts: i32,
@@ -67,7 +68,7 @@ impl EncoderTracker {
 }
 
 /// Velocity estimator configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct VelocityConfig {
     /// Sample rate, Hz.
     pub sample_rate_hz: u16,
@@ -85,6 +86,21 @@ impl VelocityConfig {
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct VelocityState {
     history: Deque<i32, { MAX_VELOCITY_WINDOW + 1 }>,
+}
+
+/// Written out: postcard-schema knows heapless's `Vec` but not its
+/// `Deque`, which serde writes as the same sequence.
+impl postcard_schema::Schema for VelocityState {
+    const SCHEMA: &'static NamedType = &NamedType {
+        name: "VelocityState",
+        ty: &DataModelType::Struct(&[&NamedValue {
+            name: "history",
+            ty: &NamedType {
+                name: "heapless::Deque<i32, N>",
+                ty: &DataModelType::Seq(i32::SCHEMA),
+            },
+        }]),
+    };
 }
 
 impl VelocityState {

@@ -23,7 +23,7 @@ pub struct RawSample {
 }
 
 /// Per-sample state of the pipeline.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct PipelineState {
     index: u32,
     encoder: EncoderTracker,

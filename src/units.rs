@@ -35,7 +35,7 @@ pub const fn saturate_i32(v: i64) -> i32 {
 macro_rules! quantity {
     ($(#[$doc:meta])* $name:ident, $per_si:expr, $si_fn:ident, $from_si:ident) => {
         $(#[$doc])*
-        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, MaxSize)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, MaxSize, postcard_schema::Schema)]
         #[cfg_attr(target_os = "none", derive(defmt::Format))]
         pub struct $name(pub i32);
 

@@ -775,6 +775,14 @@ pub fn command_error(e: &CommandError) -> String {
 pub fn describe(frame: &Message, rate_hz: Option<u16>) -> String {
     let t = |index: u32| time_of(index, rate_hz);
     match frame {
+        // The schema key from protocol 6 on (read as zeros before).
+        Message::Header(h) if h.protocol_version >= 6 => {
+            let key: String = h.schema_key.iter().map(|b| format!("{b:02x}")).collect();
+            format!(
+                "header  protocol {}, schema {key}, {} Hz",
+                h.protocol_version, h.sample_rate_hz
+            )
+        }
         Message::Header(h) => {
             format!("header  protocol {}, {} Hz", h.protocol_version, h.sample_rate_hz)
         }

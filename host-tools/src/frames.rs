@@ -1,9 +1,10 @@
 //! Frame stream decoding on the host: split at `0x00`, check and decode
 //! each frame (COBS, CRC, exactly one frame), turn batches back into
 //! samples with the core's [`Reconstructor`], track sample-index gaps,
-//! and refuse protocol versions other than 2, 3, 4 and this build's (5).
+//! and refuse protocol versions other than 2 to 5 and this build's (6),
+//! and a stream of this build's version but another schema.
 //!
-//! All four are read: a frame passes the CRC of exactly one of them
+//! All five are read: a frame passes the CRC of exactly one of them
 //! (versions 3 on cover an implied version byte, see
 //! `needle_holder::protocol::wire`), so a capture of any decodes.
 //!
@@ -51,26 +52,28 @@ mod v2 {
     }
 }
 
-/// Frames of protocol versions 3 and 4: this build's, but for fields a
+/// Frames of protocol versions 3 to 5: this build's, but for fields a
 /// later version appended as the last of a frame — version 4 the tissue's
 /// relaxation to the configuration and the pipeline's state, version 5
-/// the board's counters to the status. An older body with the defaults
-/// appended (no relaxation, nothing counted) is this version's body, so
-/// old captures decode with this build's types and the core's
-/// reconstruction.
+/// the board's counters to the status, version 6 the schema's key to the
+/// header. An older body with the defaults appended (no relaxation,
+/// nothing counted, a key of zeros, which no check reads) is this
+/// version's body, so old captures decode with this build's types and
+/// the core's reconstruction.
 mod older {
     use needle_holder::model::relax::{RelaxState, Relaxation};
     use needle_holder::protocol::wire;
     use needle_holder::protocol::{BoardCounters, MAX_ENCODED_FRAME};
 
-    /// The postcard tags of `Frame::Config`, `Frame::Snapshot` and
-    /// `Frame::Status`.
+    /// The postcard tags of `Frame::Header`, `Frame::Config`,
+    /// `Frame::Snapshot` and `Frame::Status`.
+    const HEADER: u8 = 0;
     const CONFIG: u8 = 1;
     const SNAPSHOT: u8 = 3;
     const STATUS: u8 = 5;
 
     /// The versions read this way, newest first.
-    pub const VERSIONS: [u16; 2] = [4, 3];
+    pub const VERSIONS: [u16; 3] = [5, 4, 3];
 
     /// The version whose framing `chunk` passes, and its body as this
     /// version's.
@@ -91,6 +94,7 @@ mod older {
             Some(&CONFIG) if version < 4 => postcard::to_allocvec(&Relaxation::default()),
             Some(&SNAPSHOT) if version < 4 => postcard::to_allocvec(&RelaxState::default()),
             Some(&STATUS) if version < 5 => postcard::to_allocvec(&BoardCounters::default()),
+            Some(&HEADER) if version < 6 => postcard::to_allocvec(&[0u8; 8]),
             _ => Ok(Vec::new()),
         };
         body.extend(tail.ok()?);
@@ -167,10 +171,23 @@ pub struct VersionMismatch {
     pub found: u16,
     /// The version whose framing the frame passed.
     pub framed_as: u16,
+    /// The schema key of a header of this build's version that is not
+    /// this build's ([`protocol::SCHEMA_KEY`]).
+    pub schema_key: Option<[u8; 8]>,
 }
 
 impl std::fmt::Display for VersionMismatch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if let Some(key) = self.schema_key {
+            return write!(
+                f,
+                "the device's frames are of schema {} and this needle's of schema {}, both under protocol version {} ({}): one of the two was built with a frame or command type changed and no new PROTOCOL_VERSION — build both from one checkout",
+                hex(&key),
+                hex(&protocol::SCHEMA_KEY),
+                self.found,
+                protocol::SCHEMA_PATH
+            );
+        }
         let readable = self.found == 2
             || older::VERSIONS.contains(&self.found)
             || self.found == PROTOCOL_VERSION;
@@ -183,7 +200,7 @@ impl std::fmt::Display for VersionMismatch {
         } else {
             write!(
                 f,
-                "the device speaks protocol version {}, this needle reads versions 2, 3, 4 and {}: rebuild one to match the other",
+                "the device speaks protocol version {}, this needle reads versions 2 to 5 and {}: rebuild one to match the other",
                 self.found, PROTOCOL_VERSION
             )
         }
@@ -198,6 +215,10 @@ const NEWER_IN_A_ROW: u32 = 3;
 const NEWER_VERSIONS: u16 = 16;
 
 impl std::error::Error for VersionMismatch {}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
 
 /// Incremental decoder: feed bytes as they arrive.
 #[derive(Debug, Default)]
@@ -328,6 +349,7 @@ impl StreamDecoder {
                     return Err(VersionMismatch {
                         found: v,
                         framed_as: v,
+                        schema_key: None,
                     });
                 }
             }
@@ -427,6 +449,7 @@ impl StreamDecoder {
         let message = match frame {
             Frame::Header(h) => {
                 check_version(h.protocol_version, version)?;
+                check_schema(&h, version)?;
                 // The device (re)started: indices begin again.
                 self.went_back(0, on_item);
                 self.next_index = None;
@@ -501,6 +524,7 @@ impl StreamDecoder {
                 Message::Header(Header {
                     protocol_version: h.protocol_version,
                     sample_rate_hz: h.sample_rate_hz,
+                    schema_key: [0; 8],
                 })
             }
             v2::Frame::Status(s) => {
@@ -537,6 +561,22 @@ fn check_version(found: u16, expected: u16) -> Result<(), VersionMismatch> {
         Err(VersionMismatch {
             found,
             framed_as: expected,
+            schema_key: None,
+        })
+    }
+}
+
+/// A header of this build's version carries this build's schema: a build
+/// that changed a type on the wire without a new version is refused,
+/// not decoded into garbage.
+fn check_schema(h: &Header, version: u16) -> Result<(), VersionMismatch> {
+    if version != PROTOCOL_VERSION || h.schema_key == protocol::SCHEMA_KEY {
+        Ok(())
+    } else {
+        Err(VersionMismatch {
+            found: h.protocol_version,
+            framed_as: version,
+            schema_key: Some(h.schema_key),
         })
     }
 }
@@ -792,7 +832,8 @@ mod tests {
             items[0],
             Item::Frame(Message::Header(Header {
                 protocol_version: 2,
-                sample_rate_hz: 500
+                sample_rate_hz: 500,
+                ..
             }))
         ));
     }
@@ -813,33 +854,30 @@ mod tests {
     #[test]
     fn a_newer_devices_stream_is_named_as_one_not_as_noise() {
         // Every frame fails this build's CRC; three in a row pass version
-        // 6's. Two do not yet decide it.
+        // 7's. Two do not yet decide it.
         let frame = Frame::Header(Header {
-            protocol_version: 6,
-            sample_rate_hz: 500,
+            protocol_version: 7,
+            ..Header::new(500)
         });
-        let two: Vec<u8> = (0..2).flat_map(|_| bytes_of_version(&frame, 6)).collect();
+        let two: Vec<u8> = (0..2).flat_map(|_| bytes_of_version(&frame, 7)).collect();
         assert!(decode_all(&two).is_ok());
         // This build's own frame between them: not three in a row.
         let own = FrameEncoder::default()
-            .encode(&Frame::Header(Header {
-                protocol_version: PROTOCOL_VERSION,
-                sample_rate_hz: 500,
-            }))
+            .encode(&Frame::Header(Header::new(500)))
             .to_vec();
-        let broken: Vec<u8> = [two.clone(), own, bytes_of_version(&frame, 6)].concat();
+        let broken: Vec<u8> = [two.clone(), own, bytes_of_version(&frame, 7)].concat();
         assert!(decode_all(&broken).is_ok());
-        let three: Vec<u8> = (0..3).flat_map(|_| bytes_of_version(&frame, 6)).collect();
+        let three: Vec<u8> = (0..3).flat_map(|_| bytes_of_version(&frame, 7)).collect();
         let err = decode_all(&three).unwrap_err();
-        assert_eq!((err.found, err.framed_as), (6, 6));
+        assert_eq!((err.found, err.framed_as), (7, 7));
         assert!(
-            err.to_string().contains("speaks protocol version 6"),
+            err.to_string().contains("speaks protocol version 7"),
             "{err}"
         );
     }
 
     #[test]
-    fn version_3_and_4_captures_still_decode_to_the_same_samples() {
+    fn version_3_to_5_captures_still_decode_to_the_same_samples() {
         for version in older::VERSIONS {
             let (old, expected) = older_capture(version);
             let (items, stats) = decode_all(&old).unwrap();
@@ -856,7 +894,7 @@ mod tests {
         }
     }
 
-    /// What a device of protocol `version` (3 or 4) sent for a whole
+    /// What a device of protocol `version` (3 to 5) sent for a whole
     /// insertion (contact, puncture, a 2 s dwell, withdrawal), and the
     /// samples in it: this build's frames less what later versions
     /// appended — version 5 the board's counters at the end of a status,
@@ -907,7 +945,8 @@ mod tests {
             let tail = match &parsed {
                 Frame::Config(c) if version < 4 => len(postcard::to_stdvec(&c.config.relaxation)),
                 Frame::Snapshot(s) if version < 4 => len(postcard::to_stdvec(s.state.relax())),
-                Frame::Status(s) => len(postcard::to_stdvec(&s.board)),
+                Frame::Status(s) if version < 5 => len(postcard::to_stdvec(&s.board)),
+                Frame::Header(h) if version < 6 => len(postcard::to_stdvec(&h.schema_key)),
                 _ => 0,
             };
             let mut raw = body[..body.len() - tail].to_vec();
@@ -938,17 +977,33 @@ mod tests {
     }
 
     #[test]
+    fn a_stream_of_this_version_but_another_schema_is_refused_by_its_key() {
+        let mut other = Header::new(500);
+        other.schema_key[0] ^= 1;
+        let err = decode_all(FrameEncoder::default().encode(&Frame::Header(other))).unwrap_err();
+        assert_eq!(err.schema_key, Some(other.schema_key));
+        let text = err.to_string();
+        assert!(text.contains(&hex(&other.schema_key)), "{text}");
+        assert!(text.contains(&hex(&protocol::SCHEMA_KEY)), "{text}");
+        assert!(text.contains(protocol::SCHEMA_PATH), "{text}");
+        // This build's own key passes.
+        assert!(
+            decode_all(FrameEncoder::default().encode(&Frame::Header(Header::new(500)))).is_ok()
+        );
+    }
+
+    #[test]
     fn another_protocol_version_is_refused() {
         let header = |v| {
             Frame::Header(Header {
                 protocol_version: v,
-                sample_rate_hz: 500,
+                ..Header::new(500)
             })
         };
         let err = decode_all(FrameEncoder::default().encode(&header(9))).unwrap_err();
         assert_eq!(err.found, 9);
         assert!(
-            err.to_string().contains("reads versions 2, 3, 4 and"),
+            err.to_string().contains("reads versions 2 to 5 and"),
             "{err}"
         );
         // A version this needle reads, named in another's frame.

@@ -443,6 +443,27 @@ fn a_csv_that_cannot_be_written_is_named() {
     assert!(err.contains("/dev/full"), "{err}");
 }
 
+#[test]
+fn a_capture_of_another_schema_under_this_version_is_refused_naming_both_keys() {
+    // A device built with a frame type changed and no new version: its
+    // header carries another schema key, and its frames would decode
+    // into garbage.
+    use needle_holder::protocol::{Frame, FrameEncoder, Header, SCHEMA_KEY};
+    let mut other = Header::new(500);
+    other.schema_key = [0xab; 8];
+    let mut bytes = FrameEncoder::default()
+        .encode(&Frame::Header(other))
+        .to_vec();
+    bytes.extend(twin_capture(1.0));
+    let dir = tempfile::tempdir().unwrap();
+    let cap = dir.path().join("other.bin");
+    std::fs::write(&cap, bytes).unwrap();
+    let err = refused(&["decode", cap.to_str().unwrap()]);
+    let ours: String = SCHEMA_KEY.iter().map(|b| format!("{b:02x}")).collect();
+    assert!(err.contains("abababababababab"), "{err}");
+    assert!(err.contains(&ours), "{err}");
+}
+
 /// A capture of the host twin on a simulated liver insertion at 500 Hz.
 fn twin_capture(seconds: f64) -> Vec<u8> {
     use host_tools::sim::{self, Plan};
@@ -967,12 +988,9 @@ fn decode_takes_the_streams_rate_over_rate_hz_and_never_writes_to_its_stdout() {
     assert!(err.contains("--csv names standard output"), "{err}");
     // Issue 29 row 11: a header of 65 535 Hz before a 500 Hz device's
     // configuration and status compressed the times without a word.
-    use needle_holder::protocol::{Frame, FrameEncoder, Header, PROTOCOL_VERSION};
+    use needle_holder::protocol::{Frame, FrameEncoder, Header};
     let mut lying = FrameEncoder::default()
-        .encode(&Frame::Header(Header {
-            protocol_version: PROTOCOL_VERSION,
-            sample_rate_hz: 65_535,
-        }))
+        .encode(&Frame::Header(Header::new(65_535)))
         .to_vec();
     lying.extend(twin_capture(1.0));
     std::fs::write(&cap, lying).unwrap();

@@ -24,7 +24,9 @@ pub const CONTACT_CONFIRM_SAMPLES: u16 = 3;
 pub const NO_CONTACT_FAULT_SAMPLES: u16 = 32;
 
 /// Contact detector state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 pub struct ContactState {
     touching_samples: u16,
     unexplained_samples: u16,

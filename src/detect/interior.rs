@@ -38,7 +38,7 @@ pub const SHARP_SAMPLES: usize = 3;
 pub const STRUCTURE_RISE_SAMPLES: u32 = 10;
 
 /// A fall waiting for the encoder to move on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 struct Pending {
     event: Event,
     /// Position at the fall.
@@ -48,7 +48,9 @@ struct Pending {
 }
 
 /// Interior detector state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 pub struct InteriorState {
     baseline: MicroNewtons,
     baseline_index: u32,

@@ -81,7 +81,9 @@ const fn puncture_min_peak_n(p: &TissueParams) -> f64 {
 }
 
 /// Detector thresholds, derived from a tissue's parameters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
+)]
 pub struct DetectConfig {
     /// Force above which the tip is taken to touch the surface.
     pub contact_force: MicroNewtons,
@@ -175,7 +177,9 @@ impl DetectConfig {
 }
 
 /// Detector state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 pub struct DetectState {
     /// Positions of the last two samples, newest first.
     previous_x: [Nanometres; 2],

@@ -25,7 +25,9 @@ use crate::units::{MicroNewtons, Nanometres};
 use serde::{Deserialize, Serialize};
 
 /// Puncture detector state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 pub struct PunctureState {
     /// The highest force while loading, leaking away by the confirming
     /// fall per fall window ([`fall_window_samples`]) once the force is below it:

@@ -27,7 +27,9 @@ use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Karnopp coefficients in fixed point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
+)]
 pub struct Friction {
     /// C_p, µN/nm Q26.
     pub cp: PerLengthQ26,
@@ -46,7 +48,9 @@ pub struct Friction {
 }
 
 /// Friction state: the last sliding force.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 pub struct FrictionState {
     last_sliding: MicroNewtons,
 }

@@ -32,7 +32,9 @@ use crate::insertion::Phase;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// The model's parameters in fixed point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
+)]
 pub struct ModelConfig {
     /// Capsule stiffness.
     pub stiffness: Stiffness,
@@ -45,7 +47,9 @@ pub struct ModelConfig {
 }
 
 /// Model state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 pub struct ModelState {
     /// Karnopp memory.
     pub friction: FrictionState,

@@ -25,7 +25,9 @@ use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Phase machine configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
+)]
 pub struct PhaseConfig {
     /// Surface relaxation ρ.
     pub relaxation: FractionQ16,
@@ -37,7 +39,7 @@ pub struct PhaseConfig {
 }
 
 /// Phase and the surface positions found so far.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct PhaseState {
     /// Current phase.
     pub phase: Phase,

@@ -50,7 +50,18 @@ pub const BRANCHES: usize = 2;
 pub const MOST_TAU_MS: u32 = 1_000_000;
 
 /// One branch: its gain and time constant.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    MaxSize,
+    postcard_schema::Schema,
+)]
 pub struct Branch {
     /// Share of the held force this branch relaxes away, 0..=1.
     pub gain: FractionQ16,
@@ -60,7 +71,18 @@ pub struct Branch {
 
 /// The tissue at rest: whether the needle holds the force it was applied
 /// with, and the relaxation spectrum of that force (all gains zero: none).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    MaxSize,
+    postcard_schema::Schema,
+)]
 pub struct Relaxation {
     /// The branches, in any order.
     pub branches: [Branch; BRANCHES],
@@ -75,7 +97,9 @@ pub struct Relaxation {
 
 /// Relaxation state: each branch's unrelaxed force and its decay factor
 /// for the rate it was computed at.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 pub struct RelaxState {
     /// The force the needle was held with since it came to rest in the
     /// tissue (while the first samples are averaged, their running mean);

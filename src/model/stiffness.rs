@@ -8,7 +8,9 @@ use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Stiffness law in fixed point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
+)]
 pub enum Stiffness {
     /// f = a1·d + a2·d², computed as (a1 + a2·d)·d.
     Polynomial {

@@ -105,7 +105,7 @@ pub struct BatchWriter {
 }
 
 /// A batch as it goes on the wire.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct Batch<'a> {
     /// Index of the batch's first sample.
     pub first_index: u32,

@@ -24,7 +24,9 @@ use crate::config::TissueModel;
 use crate::units::{MicroNewtons, Nanometres};
 
 /// What the host can ask.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
+)]
 pub enum Command {
     /// Make the load cell's present reading its zero (the mean of the last
     /// quarter second or so). Refused with the needle in tissue, or with
@@ -62,7 +64,9 @@ pub enum Command {
 }
 
 /// A command as it goes on the wire.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
+)]
 pub struct CommandFrame {
     /// Sequence number (see the module's docs).
     pub seq: u32,
@@ -74,7 +78,7 @@ pub struct CommandFrame {
 pub type ReplyText = heapless::String<48>;
 
 /// Why the device refused a command.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub enum CommandError {
     /// The frame was not one: bad COBS, bad CRC (corrupted, truncated, or
     /// another protocol version), or longer than any command.
@@ -153,7 +157,7 @@ pub fn text(s: &str) -> ReplyText {
 }
 
 /// The device's answer to one command frame.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct Reply {
     /// The command's sequence number; 0 when the frame was too damaged to
     /// read one.

@@ -52,13 +52,7 @@ fn frames() -> std::vec::Vec<(&'static str, Frame<'static>)> {
         },
     };
     std::vec![
-        (
-            "header",
-            Frame::Header(Header {
-                protocol_version: PROTOCOL_VERSION,
-                sample_rate_hz: 500,
-            }),
-        ),
+        ("header", Frame::Header(Header::new(500)),),
         (
             "config",
             Frame::Config(ConfigFrame {
@@ -236,28 +230,28 @@ fn commands() -> std::vec::Vec<(&'static str, Command)> {
 
 /// (kind, encoded length, CRC-32 of the encoded bytes).
 const PINNED: &[(&str, usize, u32)] = &[
-    ("header", 8, 0xb0e5208a),
-    ("config", 109, 0x93453499),
-    ("batch", 25, 0x76c84921),
-    ("snapshot", 130, 0x8e0efa5a),
-    ("event", 18, 0x5fd4667d),
-    ("status", 17, 0xb2ea2c12),
-    ("halt", 16, 0x66689832),
-    ("reply", 33, 0xe6713a2d),
-    ("selftest", 25, 0x82474087),
-    ("event_kinds", 50, 0xe2a01edf),
-    ("halt_reasons", 63, 0x879cfb51),
-    ("command_errors", 89, 0xf6882253),
-    ("stored_settings", 540, 0x21a4ce3b),
-    ("tare", 6, 0xd14cecb3),
-    ("select_tissue", 7, 0xf12f2b13),
-    ("upload_tissue", 80, 0xa9951103),
-    ("set_assist", 11, 0xa0e386d2),
-    ("rearm", 6, 0xc8f9e20d),
-    ("stream", 7, 0x6847171d),
-    ("read_config", 6, 0xc3fb2af9),
-    ("set_load_cell_gain", 9, 0x0fff7a8a),
-    ("self_test", 6, 0xf2f75035),
+    ("header", 16, 0xe245dac4),
+    ("config", 109, 0x12f256cf),
+    ("batch", 25, 0xf810f43d),
+    ("snapshot", 130, 0xb016cc12),
+    ("event", 18, 0x485a6c30),
+    ("status", 17, 0x4a72b65f),
+    ("halt", 16, 0x4860d0e9),
+    ("reply", 33, 0x807a0150),
+    ("selftest", 25, 0x0c9ffd9b),
+    ("event_kinds", 50, 0x68df45db),
+    ("halt_reasons", 63, 0x3eaef218),
+    ("command_errors", 89, 0x3c0a800d),
+    ("stored_settings", 540, 0xcaab7633),
+    ("tare", 6, 0x4774606c),
+    ("select_tissue", 7, 0x80abfee7),
+    ("upload_tissue", 80, 0xbcea2f93),
+    ("set_assist", 11, 0xec06c323),
+    ("rearm", 6, 0x5ec16ed2),
+    ("stream", 7, 0x19c3c2e9),
+    ("read_config", 6, 0x55c3a626),
+    ("set_load_cell_gain", 9, 0xff63ce85),
+    ("self_test", 6, 0x64cfdcea),
 ];
 
 /// A kind added to [`Frame`] or [`Command`], or a variant to an enum they
@@ -376,4 +370,42 @@ fn every_frame_and_command_kind_has_the_pinned_bytes() {
             "the bytes on the wire changed: bump PROTOCOL_VERSION, then pin:\n{table}"
         );
     }
+}
+
+/// The schema's hash, pinned with the version it belongs to: a change to
+/// any type on the wire — a field renamed, added or of another type, a
+/// variant no frame above carries — changes it, bytes or no bytes.
+const PINNED_SCHEMA: (u16, [u8; 8]) = (6, [228, 0, 11, 67, 117, 183, 95, 218]);
+
+#[test]
+fn the_schema_key_is_pinned_with_its_version() {
+    assert_eq!(
+        PINNED_SCHEMA,
+        (PROTOCOL_VERSION, SCHEMA_KEY),
+        "the schema of the frames or commands changed: bump PROTOCOL_VERSION \
+         (and SCHEMA_PATH), then pin ({PROTOCOL_VERSION}, {SCHEMA_KEY:?})"
+    );
+}
+
+#[test]
+fn the_schema_key_sees_a_field_the_bytes_may_not() {
+    use postcard_schema::key::Key;
+    use postcard_schema::schema::{DataModelType, NamedType, NamedValue};
+    // The header's schema as it is, and with one more field: the same
+    // bytes for a frame that leaves it out, another key.
+    const WITH: NamedType = NamedType {
+        name: "Header",
+        ty: &DataModelType::Struct(&[&NamedValue {
+            name: "extra",
+            ty: <u8 as postcard_schema::Schema>::SCHEMA,
+        }]),
+    };
+    struct Wider;
+    impl postcard_schema::Schema for Wider {
+        const SCHEMA: &'static NamedType = &WITH;
+    }
+    assert_ne!(
+        Key::for_path::<Header>(SCHEMA_PATH),
+        Key::for_path::<Wider>(SCHEMA_PATH)
+    );
 }

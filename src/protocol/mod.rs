@@ -2,7 +2,8 @@
 //! alike: the frames the device sends ([`Frame`]), the commands it takes
 //! ([`command`]), and how both are framed on the wire ([`wire`]).
 //!
-//! **The stream (version 5).** After boot the device sends a [`Header`],
+//! **The stream (version 6).** After boot the device sends a [`Header`]
+//! (with the [`SCHEMA_KEY`] of its frame and command types),
 //! a [`ConfigFrame`] (everything the pipeline computes with: calibration,
 //! tissue model, detectors, assist) and a [`Snapshot`] of the pipeline's
 //! state; then the samples as [`batch`]es of raw readings, which the host
@@ -40,23 +41,50 @@ use crate::faults::Faults;
 use crate::pipeline::PipelineState;
 
 /// Version of the frame format; the host refuses other versions.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
+
+/// The schema of everything on the wire, frames and commands alike: a
+/// hash of every type's name, its fields' names and their types, down to
+/// each detector's state in the snapshot (postcard-schema's
+/// [`Key`](postcard_schema::key::Key), an FNV-1a hash computed at compile
+/// time). The header carries it; a host refuses a stream whose key is not
+/// its own under the same [`PROTOCOL_VERSION`] — a build that changed a
+/// type without a new version — and a golden test pins it.
+pub const SCHEMA_KEY: [u8; 8] =
+    postcard_schema::key::Key::for_path::<(Frame<'static>, CommandFrame)>(SCHEMA_PATH).to_bytes();
+
+/// The name [`SCHEMA_KEY`] is hashed under, with the version.
+pub const SCHEMA_PATH: &str = "needle-holder/6";
 
 /// Samples between two status heartbeats.
 pub const STATUS_PERIOD_SAMPLES: u32 = 250;
 
 /// Sent once at boot: what the stream is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Header {
     /// [`PROTOCOL_VERSION`] of the sender.
     pub protocol_version: u16,
     /// Sample rate, Hz: sample index / rate = time since boot.
     pub sample_rate_hz: u16,
+    /// [`SCHEMA_KEY`] of the sender. Last: a protocol-5 header is this
+    /// one without it.
+    pub schema_key: [u8; 8],
+}
+
+impl Header {
+    /// This build's header for a stream at `sample_rate_hz`.
+    pub const fn new(sample_rate_hz: u16) -> Self {
+        Self {
+            protocol_version: PROTOCOL_VERSION,
+            sample_rate_hz,
+            schema_key: SCHEMA_KEY,
+        }
+    }
 }
 
 /// Heartbeat with counters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Status {
     /// [`PROTOCOL_VERSION`] again, so a host that missed the header can check.
@@ -83,7 +111,9 @@ pub struct Status {
 /// What a board counts below the core, since boot: zero on a board that
 /// has neither (the QEMU boards, whose converter is a replay and whose
 /// link cannot err).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct BoardCounters {
     /// Conversions whose data-ready fell but that were never read (the
@@ -98,7 +128,7 @@ pub struct BoardCounters {
 /// What the board found when asked to test itself
 /// ([`Command::SelfTest`]): what a person bringing it up would check with
 /// a probe, from the device's side.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct SelfTest {
     /// The board's own findings.
@@ -112,7 +142,9 @@ pub struct SelfTest {
 }
 
 /// What only the board can look at for a [`SelfTest`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct BoardFindings {
     /// The converter's configuration registers read back now, and as
@@ -136,7 +168,7 @@ pub struct BoardFindings {
 /// header, after every change, on request, and now and then for a host
 /// that joined late. The same configuration always gives the same bytes,
 /// and their hash seeds every batch's check ([`batch::BatchCheck::seed`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct ConfigFrame {
     /// Where the tissue model came from.
     pub tissue: TissueSource,
@@ -149,7 +181,7 @@ pub struct ConfigFrame {
 
 /// The pipeline's state before sample `next_index`: a host that lost
 /// frames, or joined late, continues from here.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize, postcard_schema::Schema)]
 pub struct Snapshot {
     /// The next sample's index.
     pub next_index: u32,
@@ -158,7 +190,7 @@ pub struct Snapshot {
 }
 
 /// Everything the device sends.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize, postcard_schema::Schema)]
 pub enum Frame<'a> {
     /// Stream header.
     Header(Header),
@@ -223,15 +255,15 @@ mod tests {
     fn golden_bytes_pin_the_wire_format() {
         let mut encoder = FrameEncoder::default();
         let bytes = encoder.encode(&batch_frame());
-        assert_eq!(PROTOCOL_VERSION, 5);
+        assert_eq!(PROTOCOL_VERSION, 6);
         // COBS code, tag 2, index 1234, 2 samples, the check, 5 raw bytes,
-        // the CRC (0x78ce, checked against a bitwise CRC-16/X.25 over the
-        // implied version byte 5 and the body), the zero.
+        // the CRC (0xa0b0, checked against a bitwise CRC-16/X.25 over the
+        // implied version byte 6 and the body), the zero.
         assert_eq!(
             bytes,
             &[
                 0x11, 0x02, 0xd2, 0x09, 0x02, 0x01, 0x02, 0x03, 0x04, 0x05, 0x80, 0x01, 0x02, 0x03,
-                0x04, 0xce, 0x78, 0x00
+                0x04, 0xb0, 0xa0, 0x00
             ][..]
         );
     }
@@ -275,10 +307,7 @@ mod tests {
             );
         }
         let frames = [
-            Frame::Header(Header {
-                protocol_version: PROTOCOL_VERSION,
-                sample_rate_hz: 500,
-            }),
+            Frame::Header(Header::new(500)),
             Frame::Config(ConfigFrame {
                 tissue: TissueSource::Library(u8::MAX),
                 stored: crate::persist::Loaded::SavedBeforeTorn,

@@ -189,7 +189,7 @@ impl postcard::ser_flavors::Flavor for WireFlavor<'_> {
 }
 
 /// Why a received frame was refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum DecodeError {
     /// Not valid COBS, or longer than any message.
