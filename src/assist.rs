@@ -98,7 +98,17 @@ pub const fn target_depth_is_valid(depth: Nanometres) -> bool {
 }
 
 /// Assist configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct AssistConfig {
     /// Modes in force.
     pub modes: AssistModes,

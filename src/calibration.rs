@@ -8,7 +8,17 @@ use serde::{Deserialize, Serialize};
 /// `gain_q16` is the gain in µN per ADC count in Q16.16 (resolution
 /// 1/65536 µN per count, range up to 32767 µN per count). The product is
 /// formed in `i64` and saturates at the [`MicroNewtons`] range.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct LoadCell {
     /// ADC counts at zero force.
     pub tare_counts: i32,
@@ -175,7 +185,17 @@ impl ZeroTracker {
 }
 
 /// Encoder scale: nanometres of needle travel per count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct Encoder {
     /// Travel per count, nm (1000 for a 1 µm linear scale).
     pub nm_per_count: i32,

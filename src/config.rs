@@ -13,7 +13,17 @@ use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Configuration of the whole per-sample pipeline.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct DeviceConfig {
     /// Load-cell calibration.
     pub load_cell: LoadCell,
@@ -337,7 +347,17 @@ impl DeviceConfig {
 }
 
 /// Where the device's tissue model came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub enum TissueSource {
     /// The on-device library, by position.
     Library(u8),

@@ -5,7 +5,16 @@ use serde::{Deserialize, Serialize};
 /// A set of faults, one bit each. Latched: once raised a bit stays set until
 /// reset, and any set bit keeps the halt line asserted.
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Faults(pub u16);

@@ -20,16 +20,26 @@
 //! configuration ([`VelocityConfig`]), the history is state.
 
 use heapless::Deque;
+use postcard::experimental::max_size::MaxSize;
 use postcard_schema::schema::{DataModelType, NamedType, NamedValue};
 use serde::{Deserialize, Serialize};
 
+use crate::protocol::wire::varint_len;
 use crate::units::{saturate_i32, Nanometres, NanometresPerSecond};
 
 /// Largest velocity window, samples.
 pub const MAX_VELOCITY_WINDOW: usize = 32;
 
 /// Unwraps the wrapping encoder count into an `i32` count.
-#[derive(Clone, Debug, Default, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Debug,
+    Default,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct EncoderTracker {
     last_raw: Option<u16>,
     total_counts: i32,
@@ -68,7 +78,17 @@ impl EncoderTracker {
 }
 
 /// Velocity estimator configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct VelocityConfig {
     /// Sample rate, Hz.
     pub sample_rate_hz: u16,
@@ -88,8 +108,9 @@ pub struct VelocityState {
     history: Deque<i32, { MAX_VELOCITY_WINDOW + 1 }>,
 }
 
-/// Written out: postcard-schema knows heapless's `Vec` but not its
-/// `Deque`, which serde writes as the same sequence.
+/// Written out, as its [`MaxSize`] below: postcard-schema knows
+/// heapless's `Vec` but not its `Deque`, which serde writes as the same
+/// sequence.
 impl postcard_schema::Schema for VelocityState {
     const SCHEMA: &'static NamedType = &NamedType {
         name: "VelocityState",
@@ -101,6 +122,13 @@ impl postcard_schema::Schema for VelocityState {
             },
         }]),
     };
+}
+
+/// A length and up to [`MAX_VELOCITY_WINDOW`] + 1 positions (postcard
+/// knows heapless 0.7's types, not this 0.8's).
+impl MaxSize for VelocityState {
+    const POSTCARD_MAX_SIZE: usize =
+        varint_len(MAX_VELOCITY_WINDOW + 1) + (MAX_VELOCITY_WINDOW + 1) * i32::POSTCARD_MAX_SIZE;
 }
 
 impl VelocityState {

@@ -52,7 +52,17 @@ pub const MIN_ROOM: usize = MAX_RECORD;
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// What the device keeps across power cycles.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct Settings {
     /// Where the tissue came from.
     pub tissue: TissueSource,
@@ -97,7 +107,17 @@ impl Settings {
 }
 
 /// What a region held.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum Loaded {
     /// This board keeps no settings (the QEMU boards): the compiled

@@ -23,7 +23,15 @@ pub struct RawSample {
 }
 
 /// Per-sample state of the pipeline.
-#[derive(Clone, Debug, Default, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Debug,
+    Default,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct PipelineState {
     index: u32,
     encoder: EncoderTracker,

@@ -25,7 +25,16 @@ pub const NO_CONTACT_FAULT_SAMPLES: u16 = 32;
 
 /// Contact detector state.
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 pub struct ContactState {
     touching_samples: u16,

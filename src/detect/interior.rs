@@ -38,7 +38,17 @@ pub const SHARP_SAMPLES: usize = 3;
 pub const STRUCTURE_RISE_SAMPLES: u32 = 10;
 
 /// A fall waiting for the encoder to move on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 struct Pending {
     event: Event,
     /// Position at the fall.
@@ -49,7 +59,16 @@ struct Pending {
 
 /// Interior detector state.
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 pub struct InteriorState {
     baseline: MicroNewtons,

@@ -178,7 +178,16 @@ impl DetectConfig {
 
 /// Detector state.
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 pub struct DetectState {
     /// Positions of the last two samples, newest first.

@@ -26,7 +26,16 @@ use serde::{Deserialize, Serialize};
 
 /// Puncture detector state.
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 pub struct PunctureState {
     /// The highest force while loading, leaking away by the confirming

@@ -49,7 +49,16 @@ pub struct Friction {
 
 /// Friction state: the last sliding force.
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 pub struct FrictionState {
     last_sliding: MicroNewtons,

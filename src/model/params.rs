@@ -8,7 +8,17 @@
 use serde::{Deserialize, Serialize};
 
 /// Which stiffness law the capsule follows before puncture.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum StiffnessLaw {
     /// f = a1·x + a2·x² (paper eq. 4).
@@ -18,7 +28,16 @@ pub enum StiffnessLaw {
 }
 
 /// One tissue's parameter set.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 #[serde(deny_unknown_fields)]
 pub struct TissueParams {
     /// Stiffness law in use.

@@ -39,7 +39,17 @@ pub struct PhaseConfig {
 }
 
 /// Phase and the surface positions found so far.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct PhaseState {
     /// Current phase.
     pub phase: Phase,

@@ -98,7 +98,16 @@ pub struct Relaxation {
 /// Relaxation state: each branch's unrelaxed force and its decay factor
 /// for the rate it was computed at.
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 pub struct RelaxState {
     /// The force the needle was held with since it came to rest in the

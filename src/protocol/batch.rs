@@ -19,7 +19,10 @@
 //! Sizes: a still needle with a quiet bridge takes 2 bytes a sample; the
 //! bench's liver insertion at its noise about 4 (the ADC noise sets it).
 
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
+
+use super::wire::varint_len;
 
 use crate::hal::AdcSample;
 use crate::pipeline::RawSample;
@@ -116,6 +119,16 @@ pub struct Batch<'a> {
     /// The coded readings.
     #[serde(borrow)]
     pub raw: &'a [u8],
+}
+
+/// Written out: its readings are a borrowed slice, of at most
+/// [`BATCH_BYTES`].
+impl MaxSize for Batch<'_> {
+    const POSTCARD_MAX_SIZE: usize = u32::POSTCARD_MAX_SIZE
+        + u8::POSTCARD_MAX_SIZE
+        + <[u8; 4]>::POSTCARD_MAX_SIZE
+        + varint_len(BATCH_BYTES)
+        + BATCH_BYTES;
 }
 
 impl BatchWriter {

@@ -17,7 +17,7 @@
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
-use super::wire::{encoded_bound, DecodeError};
+use super::wire::{encoded_bound, varint_len, DecodeError};
 use super::HaltReason;
 use crate::assist::AssistModes;
 use crate::config::TissueModel;
@@ -75,7 +75,10 @@ pub struct CommandFrame {
 }
 
 /// A short text carried in a reply (a tissue parameter's name, a problem).
-pub type ReplyText = heapless::String<48>;
+pub type ReplyText = heapless::String<REPLY_TEXT_BYTES>;
+
+/// Bytes a [`ReplyText`] holds.
+pub const REPLY_TEXT_BYTES: usize = 48;
 
 /// Why the device refused a command.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
@@ -122,6 +125,13 @@ pub enum CommandError {
     },
 }
 
+/// Written out: postcard knows heapless 0.7's `String`, not this 0.8's.
+/// The largest variant is [`CommandError::InvalidTissue`]'s two texts
+/// (a test encodes every variant at its largest).
+impl MaxSize for CommandError {
+    const POSTCARD_MAX_SIZE: usize = 1 + 2 * (varint_len(REPLY_TEXT_BYTES) + REPLY_TEXT_BYTES);
+}
+
 impl From<DecodeError> for CommandError {
     fn from(e: DecodeError) -> Self {
         match e {
@@ -157,7 +167,16 @@ pub fn text(s: &str) -> ReplyText {
 }
 
 /// The device's answer to one command frame.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct Reply {
     /// The command's sequence number; 0 when the frame was too damaged to
     /// read one.

@@ -26,6 +26,7 @@ pub mod command;
 mod golden;
 pub mod wire;
 
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 pub use self::batch::Batch;
@@ -60,7 +61,17 @@ pub const SCHEMA_PATH: &str = "needle-holder/6";
 pub const STATUS_PERIOD_SAMPLES: u32 = 250;
 
 /// Sent once at boot: what the stream is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Header {
     /// [`PROTOCOL_VERSION`] of the sender.
@@ -84,7 +95,17 @@ impl Header {
 }
 
 /// Heartbeat with counters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Status {
     /// [`PROTOCOL_VERSION`] again, so a host that missed the header can check.
@@ -112,7 +133,16 @@ pub struct Status {
 /// has neither (the QEMU boards, whose converter is a replay and whose
 /// link cannot err).
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct BoardCounters {
@@ -128,7 +158,17 @@ pub struct BoardCounters {
 /// What the board found when asked to test itself
 /// ([`Command::SelfTest`]): what a person bringing it up would check with
 /// a probe, from the device's side.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct SelfTest {
     /// The board's own findings.
@@ -143,7 +183,16 @@ pub struct SelfTest {
 
 /// What only the board can look at for a [`SelfTest`].
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
 )]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct BoardFindings {
@@ -168,7 +217,17 @@ pub struct BoardFindings {
 /// header, after every change, on request, and now and then for a host
 /// that joined late. The same configuration always gives the same bytes,
 /// and their hash seeds every batch's check ([`batch::BatchCheck::seed`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct ConfigFrame {
     /// Where the tissue model came from.
     pub tissue: TissueSource,
@@ -181,7 +240,14 @@ pub struct ConfigFrame {
 
 /// The pipeline's state before sample `next_index`: a host that lost
 /// frames, or joined late, continues from here.
-#[derive(Clone, Debug, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Debug,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub struct Snapshot {
     /// The next sample's index.
     pub next_index: u32,
@@ -190,7 +256,14 @@ pub struct Snapshot {
 }
 
 /// Everything the device sends.
-#[derive(Clone, Debug, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Debug,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 pub enum Frame<'a> {
     /// Stream header.
     Header(Header),
@@ -213,9 +286,9 @@ pub enum Frame<'a> {
     SelfTest(SelfTest),
 }
 
-/// Largest frame before COBS, CRC included: a full batch and its
-/// fields (the config and snapshot frames are smaller; a test checks).
-pub const MAX_RAW_FRAME: usize = 1 + 5 + 1 + 4 + 2 + batch::BATCH_BYTES + 2;
+/// Largest frame before COBS, CRC included: postcard's bound of the
+/// largest kind (a full batch; the snapshot's state is the next).
+pub const MAX_RAW_FRAME: usize = Frame::POSTCARD_MAX_SIZE + 2;
 
 /// Bytes one encoded frame can take on the wire.
 pub const MAX_ENCODED_FRAME: usize = wire::encoded_bound(MAX_RAW_FRAME);
@@ -375,5 +448,43 @@ mod tests {
                 std::format!("{:?}", Ok::<_, DecodeError>(frame))
             );
         }
+    }
+
+    /// The bounds written out by hand (where postcard knows no type's) are
+    /// what the largest value of each encodes to: neither short, which
+    /// would drop a frame, nor long.
+    #[test]
+    fn the_bounds_written_out_are_the_largest_values_encodings() {
+        fn len(value: &impl Serialize) -> usize {
+            let mut buf = [0u8; 1024];
+            postcard::to_slice(value, &mut buf).unwrap().len()
+        }
+        let raw = [0x80u8; batch::BATCH_BYTES];
+        let batch = Batch {
+            first_index: u32::MAX,
+            samples: u8::MAX,
+            check: [0xff; 4],
+            raw: &raw,
+        };
+        assert_eq!(len(&batch), Batch::POSTCARD_MAX_SIZE);
+        let text = command::text(&"é".repeat(60));
+        assert_eq!(text.len(), command::REPLY_TEXT_BYTES);
+        let error = CommandError::InvalidTissue {
+            field: text.clone(),
+            problem: text,
+        };
+        assert_eq!(len(&error), CommandError::POSTCARD_MAX_SIZE);
+        let mut velocity = crate::kinematics::VelocityState::default();
+        let config = crate::kinematics::VelocityConfig {
+            sample_rate_hz: 500,
+            window: u8::MAX,
+        };
+        for _ in 0..100 {
+            velocity.update(&config, Nanometres::MIN);
+        }
+        assert_eq!(
+            len(&velocity),
+            crate::kinematics::VelocityState::POSTCARD_MAX_SIZE
+        );
     }
 }

@@ -87,6 +87,19 @@ impl<const N: usize> Default for Encoder<N> {
     }
 }
 
+/// Bytes postcard's varint takes for a length or count of at most
+/// `max_n`, for the [`MaxSize`](postcard::experimental::max_size::MaxSize)
+/// written out for types postcard knows no bound of (its own is private).
+pub const fn varint_len(max_n: usize) -> usize {
+    let mut bytes = 1;
+    let mut rest = max_n >> 7;
+    while rest > 0 {
+        bytes += 1;
+        rest >>= 7;
+    }
+    bytes
+}
+
 /// Bytes a message of at most `raw` bytes (CRC included) takes on the
 /// wire: COBS adds one byte per 254 and the leading code, then the zero.
 pub const fn encoded_bound(raw: usize) -> usize {
@@ -189,7 +202,17 @@ impl postcard::ser_flavors::Flavor for WireFlavor<'_> {
 }
 
 /// Why a received frame was refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    postcard_schema::Schema,
+    postcard::experimental::max_size::MaxSize,
+)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum DecodeError {
     /// Not valid COBS, or longer than any message.
