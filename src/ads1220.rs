@@ -7,7 +7,7 @@
 //! [`embedded_hal::spi::SpiDevice`] (SPI mode 1, up to 6.6 MHz; the device
 //! owns chip select) and the data-ready pin ([`InputPin`], low while a
 //! conversion waits to be read), so it runs on any HAL and is tested on the
-//! host against `embedded-hal-mock` transactions (`tests/ads1220.rs`).
+//! host against `embedded-hal-mock` transactions (`tests/integration/ads1220.rs`).
 //!
 //! Register bits (datasheet SBAS501, §8.6):
 //! - reg 0: MUX\[7:4\], GAIN\[3:1\], PGA_BYPASS\[0\]

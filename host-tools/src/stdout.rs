@@ -10,7 +10,7 @@
 //!   failure would be reported, so there is nowhere left to say it, and a
 //!   recording or a fit must not stop because nobody reads its progress.
 //!
-//! `host-tools/tests/broken_streams.rs` runs every subcommand with each
+//! `host-tools/tests/integration/broken_streams.rs` runs every subcommand with each
 //! stream closed, full, and a broken pipe; a test there also checks that
 //! no `print!`-family macro is used anywhere else in the tools.
 

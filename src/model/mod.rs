@@ -10,7 +10,7 @@
 //! Configuration ([`ModelConfig`], built from [`params::TissueParams`] at
 //! compile time for the firmware) is apart from state ([`ModelState`]).
 //! The `f64` twin in [`reference`](mod@reference) is the test oracle; the fixed-point
-//! error against it is bounded by the property tests in `tests/model.rs`.
+//! error against it is bounded by the property tests in `tests/integration/model.rs`.
 
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};

@@ -28,7 +28,7 @@
 //! it refuses (and embedded-hal-bus's delay-less SPI device and defmt-rtt
 //! link more: a real delay here, and our own RTT logger); the
 //! firmware is proved, at link time, to have no panic path
-//! (`host-tools/tests/firmware_image.rs`). Each register write cites the
+//! (`host-tools/tests/integration/firmware_image.rs`). Each register write cites the
 //! reference manual (RM0383) where the value is not self-evident.
 //!
 //! With feature `f411-replay` the same board code runs [`replay_app`]

@@ -63,7 +63,7 @@
 //! purpose), so an effect's own draws never shift the baseline's: a case
 //! and its effect-free twin share tissue, timing and noise exactly.
 
-// Test-support module: each test binary that includes it uses only part of
+// Test-support module: the tests use only part of
 // the API, which would otherwise warn (and fail clippy -D warnings).
 #![allow(dead_code)]
 

@@ -1,8 +1,8 @@
-//! Self-check of the independent validation generator (`tests/apart`): the
+//! Self-check of the independent validation generator (`apart/`): the
 //! data it writes has the physical properties it claims, measured from
 //! the CSV columns (time, position, force), not from its parameters.
 
-mod apart;
+use crate::apart;
 
 use std::collections::BTreeMap;
 use std::sync::OnceLock;

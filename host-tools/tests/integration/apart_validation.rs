@@ -1,15 +1,15 @@
-//! The analyses on recordings written apart from them (`tests/apart`: an
+//! The analyses on recordings written apart from them (`apart/`: an
 //! independent generator from the physics literature, whose forms and
 //! parameters the diagnosis, the fit and the detectors were never tuned
 //! on). What they make of it is printed as measured — the confusion of
 //! the diagnosis, the detectors' hits and misses — and the book carries
-//! those figures (`cargo test -p host-tools --test apart_validation --
+//! those figures (`cargo test -p host-tools --test integration apart_validation:: --
 //! --nocapture`). Asserted is only what must hold on any data: every
 //! verdict is one the tool can give, the waterfall
 //! leaves less at each step, the scorer's counts add up.
 
-mod apart;
-mod common;
+use crate::apart;
+use crate::common;
 
 use host_tools::detect::detect_dataset;
 use host_tools::diagnose::candidates::CANDIDATES;

@@ -8,7 +8,7 @@ use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
 use rand::{RngCore, SeedableRng};
 
-mod common;
+use crate::common;
 use common::run as needle;
 
 #[test]

@@ -3,9 +3,9 @@
 //! CSV reader and the tissue TOML loader take any bytes without panic, and
 //! what they accept round-trips or is exactly what was sent. (The replay
 //! reader and the settings loader are fuzzed in the core's
-//! `tests/device.rs`.)
+//! `tests/integration/device.rs`.)
 
-mod library;
+use crate::library;
 
 use library::liver1_entry;
 use std::sync::OnceLock;

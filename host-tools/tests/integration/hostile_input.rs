@@ -1,12 +1,12 @@
 //! Issue 20's rows, one test each as they are fixed: bad arguments get a
 //! clear message and a non-zero exit, never silence.
 
-mod library;
+use crate::library;
 
 use library::liver1_entry;
 use std::process::Command;
 
-mod common;
+use crate::common;
 use common::run as needle;
 
 /// A fresh directory with `trials` simulated trials from `seed`.

@@ -9,7 +9,7 @@
 
 use std::sync::OnceLock;
 
-mod common;
+use crate::common;
 
 use host_tools::evaluate::{cell, kind, Cell};
 
