@@ -17,7 +17,7 @@ use crate::protocol::command::{self, CommandReader};
 use crate::protocol::{
     BoardCounters, BoardFindings, Command, CommandError, CommandFrame, ConfigFrame, Event,
     EventKind, Frame, FrameEncoder, Halt, HaltReason, Header, Phase, Reply, Sample, SelfTest,
-    Snapshot, Status, TissueSource, PROTOCOL_VERSION, STATUS_PERIOD_SAMPLES,
+    Snapshot, Status, TissueSource, PROTOCOL_VERSION, SCHEMA_KEY, STATUS_PERIOD_SAMPLES,
 };
 use crate::units::{MicroNewtons, Nanometres};
 
@@ -494,6 +494,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             streaming: self.streaming,
             next_command_seq: self.last_command.0.saturating_add(1),
             board: self.board,
+            schema_key: SCHEMA_KEY,
         };
         self.send(&Frame::Status(status));
     }

@@ -868,6 +868,7 @@ mod tests {
                 conversions_lost: 3,
                 line_errors: 7,
             },
+            schema_key: needle_holder::protocol::SCHEMA_KEY,
         };
         let said = describe(&Message::Status(status), Some(2000));
         assert!(

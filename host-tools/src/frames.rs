@@ -90,14 +90,25 @@ mod older {
     }
 
     fn as_current(version: u16, mut body: Vec<u8>) -> Option<Vec<u8>> {
-        let tail = match body.first() {
-            Some(&CONFIG) if version < 4 => postcard::to_allocvec(&Relaxation::default()),
-            Some(&SNAPSHOT) if version < 4 => postcard::to_allocvec(&RelaxState::default()),
-            Some(&STATUS) if version < 5 => postcard::to_allocvec(&BoardCounters::default()),
-            Some(&HEADER) if version < 6 => postcard::to_allocvec(&[0u8; 8]),
-            _ => Ok(Vec::new()),
-        };
-        body.extend(tail.ok()?);
+        let no_key = [0u8; 8];
+        match body.first() {
+            Some(&CONFIG) if version < 4 => {
+                body.extend(postcard::to_allocvec(&Relaxation::default()).ok()?)
+            }
+            Some(&SNAPSHOT) if version < 4 => {
+                body.extend(postcard::to_allocvec(&RelaxState::default()).ok()?)
+            }
+            Some(&STATUS) => {
+                if version < 5 {
+                    body.extend(postcard::to_allocvec(&BoardCounters::default()).ok()?);
+                }
+                if version < 6 {
+                    body.extend(no_key);
+                }
+            }
+            Some(&HEADER) if version < 6 => body.extend(no_key),
+            _ => {}
+        }
         Some(body)
     }
 }
@@ -162,8 +173,9 @@ pub struct StreamStats {
     pub restarts: u64,
 }
 
-/// The stream speaks a protocol version this needle cannot read, or
-/// contradicts itself about its version.
+/// The stream speaks a protocol version this needle cannot read,
+/// contradicts itself about its version, or is of this build's version
+/// but another schema ([`protocol::SCHEMA_KEY`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VersionMismatch {
     /// The version a header or status names (or whose framing a newer
@@ -436,7 +448,7 @@ impl StreamDecoder {
         on_item(Item::Frame(message));
     }
 
-    /// A frame of this build's protocol (or of version 3 or 4, read as one:
+    /// A frame of this build's protocol (or of version 3 to 5, read as one:
     /// `version` says which); `chunk` is its bytes as received (a config
     /// frame's seed the batch checks).
     fn accept(
@@ -449,7 +461,7 @@ impl StreamDecoder {
         let message = match frame {
             Frame::Header(h) => {
                 check_version(h.protocol_version, version)?;
-                check_schema(&h, version)?;
+                check_schema(h.protocol_version, h.schema_key, version)?;
                 // The device (re)started: indices begin again.
                 self.went_back(0, on_item);
                 self.next_index = None;
@@ -459,6 +471,7 @@ impl StreamDecoder {
             }
             Frame::Status(s) => {
                 check_version(s.protocol_version, version)?;
+                check_schema(s.protocol_version, s.schema_key, version)?;
                 if !s.streaming {
                     // Paused on request: what does not come is not lost.
                     self.next_index = None;
@@ -539,6 +552,7 @@ impl StreamDecoder {
                     streaming: true,
                     next_command_seq: 0,
                     board: Default::default(),
+                    schema_key: [0; 8],
                 })
             }
             v2::Frame::Sample(s) => {
@@ -566,17 +580,17 @@ fn check_version(found: u16, expected: u16) -> Result<(), VersionMismatch> {
     }
 }
 
-/// A header of this build's version carries this build's schema: a build
-/// that changed a type on the wire without a new version is refused,
-/// not decoded into garbage.
-fn check_schema(h: &Header, version: u16) -> Result<(), VersionMismatch> {
-    if version != PROTOCOL_VERSION || h.schema_key == protocol::SCHEMA_KEY {
+/// A header or status of this build's version carries this build's
+/// schema: a build that changed a type on the wire without a new version
+/// is refused, not decoded into garbage.
+fn check_schema(found: u16, key: [u8; 8], version: u16) -> Result<(), VersionMismatch> {
+    if version != PROTOCOL_VERSION || key == protocol::SCHEMA_KEY {
         Ok(())
     } else {
         Err(VersionMismatch {
-            found: h.protocol_version,
+            found,
             framed_as: version,
-            schema_key: Some(h.schema_key),
+            schema_key: Some(key),
         })
     }
 }
@@ -897,7 +911,8 @@ mod tests {
     /// What a device of protocol `version` (3 to 5) sent for a whole
     /// insertion (contact, puncture, a 2 s dwell, withdrawal), and the
     /// samples in it: this build's frames less what later versions
-    /// appended — version 5 the board's counters at the end of a status,
+    /// appended — version 6 the schema key at the end of the header and
+    /// of a status, version 5 the board's counters before it in a status,
     /// version 4 the relaxation at the end of the configuration and state
     /// (run with protocol 3's model at rest: no hold, no relaxation) —
     /// framed over that version byte, so its batch checks seeded from
@@ -945,7 +960,10 @@ mod tests {
             let tail = match &parsed {
                 Frame::Config(c) if version < 4 => len(postcard::to_stdvec(&c.config.relaxation)),
                 Frame::Snapshot(s) if version < 4 => len(postcard::to_stdvec(s.state.relax())),
-                Frame::Status(s) if version < 5 => len(postcard::to_stdvec(&s.board)),
+                Frame::Status(s) if version < 5 => {
+                    len(postcard::to_stdvec(&s.board)) + len(postcard::to_stdvec(&s.schema_key))
+                }
+                Frame::Status(s) if version < 6 => len(postcard::to_stdvec(&s.schema_key)),
                 Frame::Header(h) if version < 6 => len(postcard::to_stdvec(&h.schema_key)),
                 _ => 0,
             };
@@ -990,6 +1008,21 @@ mod tests {
         assert!(
             decode_all(FrameEncoder::default().encode(&Frame::Header(Header::new(500)))).is_ok()
         );
+        // A host that joined after the header reads the key in a status.
+        let status = Status {
+            protocol_version: PROTOCOL_VERSION,
+            sample_rate_hz: 500,
+            samples: 0,
+            frames_dropped: 0,
+            faults: Default::default(),
+            halt: false,
+            streaming: true,
+            next_command_seq: 0,
+            board: Default::default(),
+            schema_key: other.schema_key,
+        };
+        let err = decode_all(FrameEncoder::default().encode(&Frame::Status(status))).unwrap_err();
+        assert_eq!(err.schema_key, Some(other.schema_key));
     }
 
     #[test]

@@ -50,6 +50,7 @@ fn frames() -> std::vec::Vec<(&'static str, Frame<'static>)> {
             conversions_lost: 2,
             line_errors: 3,
         },
+        schema_key: SCHEMA_KEY,
     };
     std::vec![
         ("header", Frame::Header(Header::new(500)),),
@@ -230,12 +231,12 @@ fn commands() -> std::vec::Vec<(&'static str, Command)> {
 
 /// (kind, encoded length, CRC-32 of the encoded bytes).
 const PINNED: &[(&str, usize, u32)] = &[
-    ("header", 16, 0xe245dac4),
+    ("header", 16, 0x43c89cdc),
     ("config", 109, 0x12f256cf),
     ("batch", 25, 0xf810f43d),
     ("snapshot", 130, 0xb016cc12),
     ("event", 18, 0x485a6c30),
-    ("status", 17, 0x4a72b65f),
+    ("status", 25, 0x2995d8e8),
     ("halt", 16, 0x4860d0e9),
     ("reply", 33, 0x807a0150),
     ("selftest", 25, 0x0c9ffd9b),
@@ -375,7 +376,7 @@ fn every_frame_and_command_kind_has_the_pinned_bytes() {
 /// The schema's hash, pinned with the version it belongs to: a change to
 /// any type on the wire — a field renamed, added or of another type, a
 /// variant no frame above carries — changes it, bytes or no bytes.
-const PINNED_SCHEMA: (u16, [u8; 8]) = (6, [228, 0, 11, 67, 117, 183, 95, 218]);
+const PINNED_SCHEMA: (u16, [u8; 8]) = (6, [222, 171, 188, 224, 15, 185, 243, 205]);
 
 #[test]
 fn the_schema_key_is_pinned_with_its_version() {
@@ -388,24 +389,53 @@ fn the_schema_key_is_pinned_with_its_version() {
 }
 
 #[test]
+fn the_schema_path_names_the_version() {
+    assert_eq!(
+        SCHEMA_PATH,
+        std::format!("needle-holder/{PROTOCOL_VERSION}")
+    );
+}
+
+#[test]
 fn the_schema_key_sees_a_field_the_bytes_may_not() {
     use postcard_schema::key::Key;
     use postcard_schema::schema::{DataModelType, NamedType, NamedValue};
-    // The header's schema as it is, and with one more field: the same
-    // bytes for a frame that leaves it out, another key.
-    const WITH: NamedType = NamedType {
-        name: "Header",
-        ty: &DataModelType::Struct(&[&NamedValue {
-            name: "extra",
-            ty: <u8 as postcard_schema::Schema>::SCHEMA,
-        }]),
-    };
-    struct Wider;
-    impl postcard_schema::Schema for Wider {
-        const SCHEMA: &'static NamedType = &WITH;
+    use postcard_schema::Schema;
+    const fn field(name: &'static str, ty: &'static NamedType) -> NamedValue {
+        NamedValue { name, ty }
     }
+    // The header written out field by field, and the same with one field
+    // more at its end (which a frame that leaves it out encodes alike).
+    struct Same;
+    impl Schema for Same {
+        const SCHEMA: &'static NamedType = &NamedType {
+            name: "Header",
+            ty: &DataModelType::Struct(&[
+                &field("protocol_version", u16::SCHEMA),
+                &field("sample_rate_hz", u16::SCHEMA),
+                &field("schema_key", <[u8; 8]>::SCHEMA),
+            ]),
+        };
+    }
+    struct Wider;
+    impl Schema for Wider {
+        const SCHEMA: &'static NamedType = &NamedType {
+            name: "Header",
+            ty: &DataModelType::Struct(&[
+                &field("protocol_version", u16::SCHEMA),
+                &field("sample_rate_hz", u16::SCHEMA),
+                &field("schema_key", <[u8; 8]>::SCHEMA),
+                &field("extra", u8::SCHEMA),
+            ]),
+        };
+    }
+    let key = |k: Key| k.to_bytes();
+    assert_eq!(
+        key(Key::for_path::<Header>(SCHEMA_PATH)),
+        key(Key::for_path::<Same>(SCHEMA_PATH))
+    );
     assert_ne!(
-        Key::for_path::<Header>(SCHEMA_PATH),
-        Key::for_path::<Wider>(SCHEMA_PATH)
+        key(Key::for_path::<Header>(SCHEMA_PATH)),
+        key(Key::for_path::<Wider>(SCHEMA_PATH))
     );
 }

@@ -44,17 +44,20 @@ use crate::pipeline::PipelineState;
 /// Version of the frame format; the host refuses other versions.
 pub const PROTOCOL_VERSION: u16 = 6;
 
-/// The schema of everything on the wire, frames and commands alike: a
-/// hash of every type's name, its fields' names and their types, down to
-/// each detector's state in the snapshot (postcard-schema's
-/// [`Key`](postcard_schema::key::Key), an FNV-1a hash computed at compile
-/// time). The header carries it; a host refuses a stream whose key is not
-/// its own under the same [`PROTOCOL_VERSION`] — a build that changed a
-/// type without a new version — and a golden test pins it.
+/// The schema of everything on the wire, frames and commands alike:
+/// postcard-schema's [`Key`](postcard_schema::key::Key), an FNV-1a hash
+/// computed at compile time of every field's and variant's name and every
+/// value's data-model type, down to each detector's state in the snapshot
+/// (not the types' own names, nor a heapless capacity, which the crate
+/// leaves out). The header and every status carry it; a host refuses a
+/// stream whose key is not its own under the same [`PROTOCOL_VERSION`] —
+/// a build that changed a type without a new version — and a golden test
+/// pins it with the version.
 pub const SCHEMA_KEY: [u8; 8] =
     postcard_schema::key::Key::for_path::<(Frame<'static>, CommandFrame)>(SCHEMA_PATH).to_bytes();
 
-/// The name [`SCHEMA_KEY`] is hashed under, with the version.
+/// The name [`SCHEMA_KEY`] is hashed under, with the version (a test
+/// checks they agree).
 pub const SCHEMA_PATH: &str = "needle-holder/6";
 
 /// Samples between two status heartbeats.
@@ -124,9 +127,12 @@ pub struct Status {
     pub streaming: bool,
     /// Sequence number the device takes for the next command.
     pub next_command_seq: u32,
-    /// What the board counts below the core. Last: a protocol-4 status
-    /// is this one without it.
+    /// What the board counts below the core. A protocol-4 status is
+    /// this one without it and the key.
     pub board: BoardCounters,
+    /// [`SCHEMA_KEY`] again, for a host that joined mid-stream. Last: a
+    /// protocol-5 status is this one without it.
+    pub schema_key: [u8; 8],
 }
 
 /// What a board counts below the core, since boot: zero on a board that
@@ -416,6 +422,7 @@ mod tests {
                     conversions_lost: u32::MAX,
                     line_errors: u32::MAX,
                 },
+                schema_key: [0xff; 8],
             }),
             Frame::Halt(Halt {
                 index: u32::MAX,
@@ -469,11 +476,43 @@ mod tests {
         assert_eq!(len(&batch), Batch::POSTCARD_MAX_SIZE);
         let text = command::text(&"é".repeat(60));
         assert_eq!(text.len(), command::REPLY_TEXT_BYTES);
-        let error = CommandError::InvalidTissue {
-            field: text.clone(),
-            problem: text,
-        };
-        assert_eq!(len(&error), CommandError::POSTCARD_MAX_SIZE);
+        // Every reason at its largest; the match fails to compile when a
+        // reason is added, until it is here.
+        let errors = [
+            CommandError::Corrupted,
+            CommandError::Unknown,
+            CommandError::Stale { next_seq: u32::MAX },
+            CommandError::NoSuchTissue {
+                library_len: u8::MAX,
+            },
+            CommandError::InvalidTissue {
+                field: text.clone(),
+                problem: text.clone(),
+            },
+            CommandError::OutOfRange { field: text },
+            CommandError::NeedleInTissue,
+            CommandError::LoadOnNeedle {
+                force: MicroNewtons::MIN,
+            },
+            CommandError::HaltCausePersists {
+                reason: HaltReason::SpeedLimit,
+            },
+        ];
+        for error in &errors {
+            match error {
+                CommandError::Corrupted
+                | CommandError::Unknown
+                | CommandError::Stale { .. }
+                | CommandError::NoSuchTissue { .. }
+                | CommandError::InvalidTissue { .. }
+                | CommandError::OutOfRange { .. }
+                | CommandError::NeedleInTissue
+                | CommandError::LoadOnNeedle { .. }
+                | CommandError::HaltCausePersists { .. } => {}
+            }
+        }
+        let largest = errors.iter().map(len).max();
+        assert_eq!(largest, Some(CommandError::POSTCARD_MAX_SIZE));
         let mut velocity = crate::kinematics::VelocityState::default();
         let config = crate::kinematics::VelocityConfig {
             sample_rate_hz: 500,
