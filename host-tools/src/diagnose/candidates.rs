@@ -16,8 +16,8 @@ use super::prepare::{Prepared, LOADING};
 pub type Columns = Vec<Vec<f64>>;
 
 /// A candidate's columns for one trial at every value of a grid, each
-/// given to the callback with its index in the grid as it is made, in an
-/// order of the candidate's choosing.
+/// given to the callback once, with its index in the grid, as it is made,
+/// in an order of the candidate's choosing.
 pub type OnGrid = fn(&Prepared, &[f64], &mut dyn FnMut(usize, Columns));
 
 /// One candidate effect.
@@ -221,7 +221,7 @@ fn relaxation(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
 /// [`relaxation`] at each of `grid`'s values, every relaxing branch
 /// computed once: the spectra about one centre share their branches
 /// (half a decade apart about it), so the grid's 40 spectra need 70
-/// branches, not 320. They are made centre by centre, and only one
+/// branches, not 160. They are made centre by centre, and only one
 /// centre's branches are kept (a trial of 70 000 samples would hold
 /// 39 MB of branches otherwise).
 fn relaxation_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize, Columns)) {

@@ -487,6 +487,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
             for (j, p) in data.iter().enumerate() {
                 c.columns_on_grid(p, &mut |gi, extra| {
                     let g = extended(p, &fixed_cols[j], &supports[j], &base[j], &extra);
+                    debug_assert_eq!(per_grid[gi].len(), j, "each grid value once a trial");
                     per_grid[gi].push(g);
                 });
             }
@@ -1250,17 +1251,23 @@ fn best_backfitted<'c>(
             scored_with_backfit(data, &with(*ci, *g), nominal, BACKFIT_ROUNDS),
         ));
     }
-    let (ci, winner) = contenders
-        .iter()
-        .take(BACKFIT_TRIED)
-        .map(|&(ci, g)| {
-            progress(&format!(
-                "backfitting the nominal under {}",
-                CANDIDATES[ci].effect
-            ));
-            (ci, backfitting(data, &with(ci, g), nominal).more(1))
-        })
-        .min_by(|a, b| a.1.state.0.rms().total_cmp(&b.1.state.0.rms()))?;
+    // Only the best so far is kept: each holds a copy of the data.
+    let mut best: Option<(usize, Backfitting)> = None;
+    for &(ci, g) in contenders.iter().take(BACKFIT_TRIED) {
+        progress(&format!(
+            "backfitting the nominal under {}",
+            CANDIDATES[ci].effect
+        ));
+        let tried = backfitting(data, &with(ci, g), nominal).more(1);
+        let rms = |b: &Backfitting| b.state.0.rms();
+        if best
+            .as_ref()
+            .is_none_or(|(_, b)| rms(&tried).total_cmp(&rms(b)).is_lt())
+        {
+            best = Some((ci, tried));
+        }
+    }
+    let (ci, winner) = best?;
     Some((ci, winner.more(BACKFIT_ROUNDS).state))
 }
 
