@@ -3,9 +3,10 @@
 //! behaviour; `cargo test -p host-tools --test integration MODULE::` runs
 //! one, e.g. `diagnose::` or `apart_validation::the_diagnosis`.
 //!
-//! Peak memory is measured apart, in `tests/memory.rs`: a child's peak as
-//! the kernel reports it counts the process it was spawned from, so
-//! nothing else may run beside it.
+//! Two are binaries of their own, each saying why: peak memory
+//! (`tests/memory.rs`: the kernel counts a child's peak with the process
+//! it was spawned from) and the device on a serial port
+//! (`tests/serial_device.rs`: real time).
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -26,4 +27,3 @@ mod hostile_input;
 mod qemu_twin;
 mod real_rig;
 mod rust_target;
-mod serial_device;

@@ -351,7 +351,7 @@ fn verdict_on(effect: &'static str, form: Form) -> (String, String, bool, f64, f
 /// standard and alternate columns are the tool's own output, misses
 /// included (`None`: `none`), pinned so that a change to them is seen and
 /// argued; the literature forms are only printed
-/// (`cargo test -p host-tools --test integration real_rig::snapshot -- --nocapture`).
+/// (`cargo test -p host-tools --test integration real_rig::confusion_snapshot -- --nocapture`).
 /// What is claimed, and checked apart, is that the verdict is never
 /// `none` over a gap.
 #[test]

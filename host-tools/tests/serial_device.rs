@@ -4,6 +4,10 @@
 //! and effect is checked in the frames that follow; `needle record` over
 //! the port gives the trial CSV `needle decode --csv` gives on a capture
 //! of the same replay. Nothing here skips itself.
+//!
+//! A test binary of its own: its devices run in real time and wait
+//! seconds for a reply, which they would not get on cores the analyses'
+//! tests keep busy beside them.
 
 use std::path::{Path, PathBuf};
 use std::process::Command as Process;
