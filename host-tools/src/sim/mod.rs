@@ -6,6 +6,7 @@
 //! whatever effects are on, plus sensor noise and encoder quantisation.
 
 pub mod effects;
+mod forces;
 pub mod motion;
 
 use std::path::{Path, PathBuf};
@@ -20,6 +21,7 @@ use rand_distr::{Distribution, Normal};
 use serde::Serialize;
 
 use self::effects::Effect;
+use self::forces::{give_way, Added, Bristles, Kinematics, Tent, Walls};
 use self::motion::Segment;
 use crate::trial::Trial;
 pub use needle_holder::model::params::TissueParams;
@@ -338,10 +340,8 @@ pub fn simulate_trial_in(
     sensor: &Sensor,
     rng: &mut impl Rng,
 ) -> (Trial, TrialTruth) {
-    let alternate = form == Form::Alternate;
-    let literature = form == Form::Literature;
     // Breathing does not start with the trial (alternate form).
-    let breath_phase = if alternate || literature {
+    let breath_phase = if form != Form::Standard {
         rng.gen_range(0.0..std::f64::consts::TAU)
     } else {
         0.0
@@ -397,23 +397,15 @@ pub fn simulate_trial_in(
         }
     }
     truth.structures.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut ruptured = vec![false; truth.structures.len()];
+    let mut walls = Walls::new(truth.structures.len());
     let mut layers_ruptured = vec![false; protocol.layers.len()];
 
     let mut trial = Trial::default();
     let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
-    let (mut last_sliding, mut friction, mut maxwell) = (0.0, 0.0, 0.0);
+    let mut last_sliding = 0.0;
     let mut last_cutting_n = 0.0;
-    // The tent: time at rest so far, and once the needle starts back after
-    // a rest, where it started and the force the rest held.
-    let mut rest_s = 0.0;
-    let mut tent: Option<(f64, f64)> = None;
-    let mut rest_force_n = 0.0;
-    let (mut maxwell_slow, mut a_filtered) = (0.0, 0.0);
-    // Literature forms' state: the box spectrum's branches, the mount's
-    // deflection and its rate.
-    let mut branches = [0.0_f64; 5];
-    let (mut mount, mut mount_rate) = (0.0_f64, 0.0_f64);
+    let (mut bristles, mut tent, mut added) =
+        (Bristles::default(), Tent::default(), Added::default());
     let mut prev_p = 0.0;
     // The puncture whose fall comes at the next sample (its peak is the
     // sample the capsule gave way at).
@@ -430,35 +422,13 @@ pub fn simulate_trial_in(
         }
         // Position and velocity relative to the tissue.
         let (mut p, mut vr) = (x, v);
-        for effect in effects {
-            if let Effect::TissueMotion {
-                amplitude_m,
-                freq_hz,
-            } = *effect
-            {
-                if literature {
-                    // The breathing period wanders by ±20 % over 30 s.
-                    let (w, w_m) = (
-                        std::f64::consts::TAU * freq_hz,
-                        std::f64::consts::TAU / 30.0,
-                    );
-                    let beta = 0.2 * w / w_m;
-                    let th = w * t + beta * (w_m * t).sin() + breath_phase;
-                    p -= amplitude_m * th.sin();
-                    vr -= amplitude_m * th.cos() * (w + beta * w_m * (w_m * t).cos());
-                } else if alternate {
-                    // Breathing is not a sine: a sharper inhale, 0.8 f.
-                    let w = 0.8 * std::f64::consts::TAU * freq_hz;
-                    let th = w * t + breath_phase;
-                    p -= amplitude_m * (th.sin() + 0.3 * (2.0 * th).sin());
-                    vr -= amplitude_m * w * (th.cos() + 0.6 * (2.0 * th).cos());
-                } else {
-                    let w = std::f64::consts::TAU * freq_hz;
-                    p -= amplitude_m * (w * t).sin();
-                    vr -= amplitude_m * w * (w * t).cos();
-                }
-            }
-        }
+        forces::move_with_tissue(effects, form, breath_phase, t, (&mut p, &mut vr));
+        let k = Kinematics {
+            t_s: t,
+            dt_s: dt,
+            vr_mps: vr,
+            a_mps2: a,
+        };
         let mut f = 0.0;
         if phase == Contact::Out && p >= s1 && x_s3 == 0.0 {
             phase = Contact::Loading;
@@ -512,44 +482,9 @@ pub fn simulate_trial_in(
                 phase = Contact::Out;
             } else {
                 let target = friction_target(tissue, effects, form, vr, l, &mut last_sliding);
-                let dx = (p - prev_p).abs();
-                friction = match effects.iter().find_map(|e| match *e {
-                    Effect::PreslidingHysteresis { x_c_m } if x_c_m > 0.0 => Some(x_c_m),
-                    _ => None,
-                }) {
-                    // Elasto-plastic: a bristle of fixed stiffness until
-                    // it slips, a linear ramp instead of an exponential.
-                    Some(x_c) if alternate => {
-                        let most = target.abs().max(0.05) * dx / x_c;
-                        friction + (target - friction).clamp(-most, most)
-                    }
-                    // Dahl with exponent 2: dF/dx ∝ (1 − F/F_c)², a
-                    // sharper start and a slower approach.
-                    Some(x_c) if literature => {
-                        let (gap, scale) = (target - friction, target.abs().max(0.05));
-                        let rel = (gap.abs() / scale).min(2.0);
-                        friction + gap.signum() * (scale * dx / x_c * rel * rel).min(gap.abs())
-                    }
-                    Some(x_c) => friction + (target - friction) * (dx / x_c).min(1.0),
-                    None => target,
-                };
-                let mut cutting = tissue.cutting_n(vr, p >= deepest && p < far);
-                for effect in effects {
-                    if let Effect::DepthDependentCutting { g_per_m } = *effect {
-                        let depth = p - s1;
-                        cutting *= if literature {
-                            // Growing as the square root of depth, the
-                            // same at 10 mm.
-                            1.0 + g_per_m * (depth.max(0.0) * 0.01).sqrt()
-                        } else if alternate {
-                            // Saturating over 20 mm, same initial slope.
-                            const L_M: f64 = 0.02;
-                            1.0 + g_per_m * L_M * (1.0 - (-depth / L_M).exp())
-                        } else {
-                            1.0 + g_per_m * depth
-                        };
-                    }
-                }
+                let friction = bristles.follow(effects, form, target, (p - prev_p).abs());
+                let cutting = tissue.cutting_n(vr, p >= deepest && p < far);
+                let cutting = forces::deeper_cutting(effects, form, p - s1, cutting);
                 deepest = deepest.max(p);
                 f = friction + cutting;
                 // At rest the static band holds the force the needle was
@@ -562,171 +497,44 @@ pub fn simulate_trial_in(
                 } else {
                     f += last_cutting_n.min((tissue.dp_n_per_m * l - friction).max(0.0));
                 }
-                // The tent: stuck to the shaft, the tissue follows the needle
-                // back until its pull reaches the static band, then slips.
-                if protocol.tent_n_per_m > 0.0 {
-                    if vr <= -tissue.half_band_mps && rest_s >= 1.0 {
-                        tent = Some((p, rest_force_n));
-                    }
-                    rest_s = if vr.abs() < tissue.half_band_mps {
-                        rest_s + dt
-                    } else {
-                        0.0
-                    };
-                    if let Some((from_m, held_n)) = tent {
-                        let pulled = held_n - protocol.tent_n_per_m * (from_m - p);
-                        if vr > -tissue.half_band_mps || pulled <= tissue.dn_n_per_m * l {
-                            tent = None;
-                        } else {
-                            f = pulled;
-                        }
-                    }
-                    rest_force_n = f;
-                }
-                for (k, layer) in protocol.layers.iter().enumerate() {
+                f = tent.step(protocol, tissue, &k, (p, l), f);
+                for (n, layer) in protocol.layers.iter().enumerate() {
                     let stretch = p - (s1 + layer.depth_m);
-                    if layers_ruptured[k] || stretch <= 0.0 {
+                    if layers_ruptured[n] || stretch <= 0.0 {
                         continue;
                     }
                     f += give_way(
                         layer.k_n_per_m * stretch,
                         layer.rupture_n,
-                        &mut layers_ruptured[k],
+                        &mut layers_ruptured[n],
                         &mut truth.events,
                         (t, t - dt, x),
                     );
                 }
-                for (k, &(depth, rupture)) in truth.structures.iter().enumerate() {
-                    let k_v = effects.iter().find_map(|e| match *e {
-                        Effect::InternalStructures { k_n_per_m, .. } => Some(k_n_per_m),
-                        _ => None,
-                    });
-                    if ruptured[k] || p <= depth {
-                        continue;
-                    }
-                    let stretch = p - depth;
-                    let mut wall = k_v.unwrap_or(0.0) * stretch;
-                    if literature {
-                        // Fung's exponential collagen law, over 0.5 mm.
-                        const L_M: f64 = 0.0005;
-                        wall = k_v.unwrap_or(0.0) * L_M * ((stretch / L_M).exp() - 1.0);
-                    } else if alternate {
-                        // Stiffening (a collagen wall), doubling at 1 mm.
-                        wall *= 1.0 + stretch / 0.001;
-                    }
-                    f += give_way(
-                        wall,
-                        rupture,
-                        &mut ruptured[k],
-                        &mut truth.events,
-                        (t, t - dt, x),
-                    );
-                }
+                let at = (t, t - dt, x);
+                walls.add(
+                    (effects, form),
+                    &truth.structures,
+                    p,
+                    &mut f,
+                    &mut truth.events,
+                    at,
+                );
             }
         }
         if phase == Contact::Out {
-            friction = 0.0;
+            bristles.release();
         }
-        for effect in effects {
-            match *effect {
-                Effect::Viscoelasticity { k_n_per_m, tau_s } if literature => {
-                    // Fung's box spectrum, discretised: five branches of
-                    // k/2 each, τ log-spaced over 0.05–20 s (τ of the
-                    // effect is the box's centre, 1 s by default).
-                    for (k, m) in branches.iter_mut().enumerate() {
-                        let tau = tau_s * 0.05 * 400f64.powf(k as f64 / 4.0);
-                        *m = if phase == Contact::Out {
-                            0.0
-                        } else {
-                            let decay = (-dt / tau).exp();
-                            *m * decay + 0.5 * k_n_per_m * vr * tau * (1.0 - decay)
-                        };
-                        f += *m;
-                    }
-                }
-                Effect::Viscoelasticity { k_n_per_m, tau_s } => {
-                    // Alternate: a Prony series of two branches.
-                    let (k1, tau1, k2, tau2) = if alternate {
-                        (0.5 * k_n_per_m, tau_s / 3.0, k_n_per_m, 3.0 * tau_s)
-                    } else {
-                        (k_n_per_m, tau_s, 0.0, 1.0)
-                    };
-                    if phase == Contact::Out {
-                        (maxwell, maxwell_slow) = (0.0, 0.0);
-                    } else {
-                        maxwell += (k1 * vr - maxwell / tau1) * dt;
-                        maxwell_slow += (k2 * vr - maxwell_slow / tau2) * dt;
-                    }
-                    f += maxwell + maxwell_slow;
-                }
-                Effect::HolderInertia { mass_kg } if literature => {
-                    // A mount ringing at 8 Hz, damping ratio 0.3: the load
-                    // cell feels the holder's acceleration through it
-                    // (integrated in sub-steps, stable over a 70 ms gap).
-                    let (w, zeta) = (std::f64::consts::TAU * 8.0, 0.3);
-                    let steps = ((dt * w / 0.1).ceil() as usize).max(1);
-                    let h = dt / steps as f64;
-                    for _ in 0..steps {
-                        mount_rate += (w * w * (a - mount) - 2.0 * zeta * w * mount_rate) * h;
-                        mount += mount_rate * h;
-                    }
-                    f += mass_kg * mount;
-                }
-                Effect::HolderInertia { mass_kg } => {
-                    // Alternate: the drive reaches its speed over ~10 ms.
-                    a_filtered += (a - a_filtered) * if alternate { dt / 0.01 } else { 1.0 };
-                    f += mass_kg * a_filtered;
-                }
-                Effect::SensorDrift { rate_n_per_s } if literature => {
-                    // A bridge warming up: the drift accelerates, reaching
-                    // the standard rate at 20 s.
-                    f += rate_n_per_s * t * t / (2.0 * 20.0);
-                }
-                Effect::SensorDrift { rate_n_per_s } => {
-                    // Alternate: a bridge settling thermally over 30 s.
-                    const TAU_S: f64 = 30.0;
-                    f += if alternate {
-                        rate_n_per_s * TAU_S * (1.0 - (-t / TAU_S).exp())
-                    } else {
-                        rate_n_per_s * t
-                    };
-                }
-                _ => {}
-            }
-        }
+        added.add((effects, form), &k, phase != Contact::Out, &mut f);
         f += protocol.tare_n;
         prev_p = p;
         let x_counts = (x / sensor.encoder_m).round() * sensor.encoder_m;
-        // The load cell reads no more than its full scale (every effect at
-        // ten times its size once wrote 483 N for a 10 N cell, while the
-        // trial's replay said saturated).
+        // The load cell reads no more than its full scale: its replay says
+        // saturated there.
         let measured_n = (f + noise.sample(rng)).clamp(-full_scale_n, full_scale_n);
         trial.push(t, x_counts, measured_n);
     }
     (trial, truth)
-}
-
-/// The force a wall or membrane pushes back with, or, once it reaches
-/// `rupture_n`, nothing: it gives way (a `structure` event at `(t, x)`)
-/// and stays ruptured.
-fn give_way(
-    force_n: f64,
-    rupture_n: f64,
-    ruptured: &mut bool,
-    events: &mut Vec<TruthEvent>,
-    (t_s, peak_t_s, x_m): (f64, f64, f64),
-) -> f64 {
-    if force_n < rupture_n {
-        return force_n;
-    }
-    *ruptured = true;
-    events.push(TruthEvent {
-        kind: "structure",
-        t_s,
-        peak_t_s,
-        x_m,
-    });
-    0.0
 }
 
 /// Karnopp friction with the rate-dependent damping effect applied.

@@ -1,0 +1,388 @@
+//! The unmodelled effects as the simulator steps them, one struct or
+//! function each, beside the tissue's own force (`simulate_trial_in`), as
+//! the core's pipeline keeps one state per stage. Each acts in the form
+//! asked for ([`Form`]): the standard form, an alternate one of the same
+//! effect, or one from the literature.
+//!
+//! Each adds its force to the sample's in the order the simulator always
+//! did, so that a dataset is the same, bit for bit, whatever the code's
+//! shape.
+
+use std::f64::consts::TAU;
+
+use super::effects::Effect;
+use super::{Form, Protocol, TissueParams, TruthEvent};
+
+/// What one sample's step reads: its time, the step to it, and the
+/// needle's velocity relative to the tissue and its acceleration.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Kinematics {
+    pub t_s: f64,
+    pub dt_s: f64,
+    pub vr_mps: f64,
+    pub a_mps2: f64,
+}
+
+/// The tissue moving along the needle's axis (breathing): the needle's
+/// position `p_m` and velocity `vr_mps` become relative to the tissue.
+/// `breath_phase` is where the breath was when the trial began.
+pub(super) fn move_with_tissue(
+    effects: &[Effect],
+    form: Form,
+    breath_phase: f64,
+    t: f64,
+    (p_m, vr_mps): (&mut f64, &mut f64),
+) {
+    for effect in effects {
+        let Effect::TissueMotion {
+            amplitude_m,
+            freq_hz,
+        } = *effect
+        else {
+            continue;
+        };
+        match form {
+            Form::Literature => {
+                // The breathing period wanders by ±20 % over 30 s.
+                let (w, w_m) = (TAU * freq_hz, TAU / 30.0);
+                let beta = 0.2 * w / w_m;
+                let th = w * t + beta * (w_m * t).sin() + breath_phase;
+                *p_m -= amplitude_m * th.sin();
+                *vr_mps -= amplitude_m * th.cos() * (w + beta * w_m * (w_m * t).cos());
+            }
+            Form::Alternate => {
+                // Breathing is not a sine: a sharper inhale, 0.8 f.
+                let w = 0.8 * TAU * freq_hz;
+                let th = w * t + breath_phase;
+                *p_m -= amplitude_m * (th.sin() + 0.3 * (2.0 * th).sin());
+                *vr_mps -= amplitude_m * w * (th.cos() + 0.6 * (2.0 * th).cos());
+            }
+            Form::Standard => {
+                let w = TAU * freq_hz;
+                *p_m -= amplitude_m * (w * t).sin();
+                *vr_mps -= amplitude_m * w * (w * t).cos();
+            }
+        }
+    }
+}
+
+/// Presliding: the friction the shaft exerts, lagging the Karnopp value
+/// over a travel x_c (without the effect it is that value at once).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Bristles {
+    friction_n: f64,
+}
+
+impl Bristles {
+    /// The friction after a travel `dx_m` towards `target_n`.
+    pub fn follow(&mut self, effects: &[Effect], form: Form, target_n: f64, dx_m: f64) -> f64 {
+        let x_c = effects.iter().find_map(|e| match *e {
+            Effect::PreslidingHysteresis { x_c_m } if x_c_m > 0.0 => Some(x_c_m),
+            _ => None,
+        });
+        let friction = self.friction_n;
+        self.friction_n = match (x_c, form) {
+            // Elasto-plastic: a bristle of fixed stiffness until it
+            // slips, a linear ramp instead of an exponential.
+            (Some(x_c), Form::Alternate) => {
+                let most = target_n.abs().max(0.05) * dx_m / x_c;
+                friction + (target_n - friction).clamp(-most, most)
+            }
+            // Dahl with exponent 2: dF/dx ∝ (1 − F/F_c)², a sharper
+            // start and a slower approach.
+            (Some(x_c), Form::Literature) => {
+                let (gap, scale) = (target_n - friction, target_n.abs().max(0.05));
+                let rel = (gap.abs() / scale).min(2.0);
+                friction + gap.signum() * (scale * dx_m / x_c * rel * rel).min(gap.abs())
+            }
+            (Some(x_c), Form::Standard) => friction + (target_n - friction) * (dx_m / x_c).min(1.0),
+            (None, _) => target_n,
+        };
+        self.friction_n
+    }
+
+    /// Out of the tissue: nothing to lag behind.
+    pub fn release(&mut self) {
+        self.friction_n = 0.0;
+    }
+}
+
+/// Cutting that grows with depth: `cutting_n` at `depth_m` below the
+/// surface.
+pub(super) fn deeper_cutting(effects: &[Effect], form: Form, depth_m: f64, cutting_n: f64) -> f64 {
+    let mut cutting = cutting_n;
+    for effect in effects {
+        if let Effect::DepthDependentCutting { g_per_m } = *effect {
+            cutting *= match form {
+                // Growing as the square root of depth, the same at 10 mm.
+                Form::Literature => 1.0 + g_per_m * (depth_m.max(0.0) * 0.01).sqrt(),
+                // Saturating over 20 mm, same initial slope.
+                Form::Alternate => {
+                    const L_M: f64 = 0.02;
+                    1.0 + g_per_m * L_M * (1.0 - (-depth_m / L_M).exp())
+                }
+                Form::Standard => 1.0 + g_per_m * depth_m,
+            };
+        }
+    }
+    cutting
+}
+
+/// The tent: tissue stuck to the shaft after a rest follows the needle
+/// back until its pull reaches the static band, then slips.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Tent {
+    /// Time at rest so far.
+    rest_s: f64,
+    /// Once the needle starts back after a rest: where it started and the
+    /// force the rest held.
+    from: Option<(f64, f64)>,
+    /// The force at the sample before.
+    rest_force_n: f64,
+}
+
+impl Tent {
+    /// The force at position `p_m` with `l_m` of shaft in the tissue,
+    /// `f_n` without the tent.
+    pub fn step(
+        &mut self,
+        protocol: &Protocol,
+        tissue: &TissueParams,
+        k: &Kinematics,
+        (p_m, l_m): (f64, f64),
+        f_n: f64,
+    ) -> f64 {
+        if protocol.tent_n_per_m <= 0.0 {
+            return f_n;
+        }
+        let mut f = f_n;
+        let vr = k.vr_mps;
+        if vr <= -tissue.half_band_mps && self.rest_s >= 1.0 {
+            self.from = Some((p_m, self.rest_force_n));
+        }
+        self.rest_s = if vr.abs() < tissue.half_band_mps {
+            self.rest_s + k.dt_s
+        } else {
+            0.0
+        };
+        if let Some((from_m, held_n)) = self.from {
+            let pulled = held_n - protocol.tent_n_per_m * (from_m - p_m);
+            if vr > -tissue.half_band_mps || pulled <= tissue.dn_n_per_m * l_m {
+                self.from = None;
+            } else {
+                f = pulled;
+            }
+        }
+        self.rest_force_n = f;
+        f
+    }
+}
+
+/// Interior walls (vessels, septa) at `(depth, rupture force)`: each
+/// pushes back as it is stretched until it gives way.
+pub(super) struct Walls {
+    ruptured: Vec<bool>,
+}
+
+impl Walls {
+    pub fn new(count: usize) -> Self {
+        Self {
+            ruptured: vec![false; count],
+        }
+    }
+
+    /// `f_n` with every intact wall's force at `p_m` added (in order); a
+    /// wall that gives way is a `structure` event at `(t, t − dt, x)`.
+    pub fn add(
+        &mut self,
+        (effects, form): (&[Effect], Form),
+        walls: &[(f64, f64)],
+        p_m: f64,
+        f_n: &mut f64,
+        events: &mut Vec<TruthEvent>,
+        at: (f64, f64, f64),
+    ) {
+        for (k, &(depth, rupture)) in walls.iter().enumerate() {
+            let k_v = effects.iter().find_map(|e| match *e {
+                Effect::InternalStructures { k_n_per_m, .. } => Some(k_n_per_m),
+                _ => None,
+            });
+            if self.ruptured[k] || p_m <= depth {
+                continue;
+            }
+            let stretch = p_m - depth;
+            let wall = match form {
+                // Fung's exponential collagen law, over 0.5 mm.
+                Form::Literature => {
+                    const L_M: f64 = 0.0005;
+                    k_v.unwrap_or(0.0) * L_M * ((stretch / L_M).exp() - 1.0)
+                }
+                // Stiffening (a collagen wall), doubling at 1 mm.
+                Form::Alternate => k_v.unwrap_or(0.0) * stretch * (1.0 + stretch / 0.001),
+                Form::Standard => k_v.unwrap_or(0.0) * stretch,
+            };
+            *f_n += give_way(wall, rupture, &mut self.ruptured[k], events, at);
+        }
+    }
+}
+
+/// The force a wall or membrane pushes back with, or, once it reaches
+/// `rupture_n`, nothing: it gives way (a `structure` event at `(t, x)`)
+/// and stays ruptured.
+pub(super) fn give_way(
+    force_n: f64,
+    rupture_n: f64,
+    ruptured: &mut bool,
+    events: &mut Vec<TruthEvent>,
+    (t_s, peak_t_s, x_m): (f64, f64, f64),
+) -> f64 {
+    if force_n < rupture_n {
+        return force_n;
+    }
+    *ruptured = true;
+    events.push(TruthEvent {
+        kind: "structure",
+        t_s,
+        peak_t_s,
+        x_m,
+    });
+    0.0
+}
+
+/// The effects that add a force of their own to the tissue's, each its
+/// state: relaxation, the holder's mass, the sensor's drift.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Added {
+    relaxing: Relaxing,
+    holder: Holder,
+}
+
+impl Added {
+    /// Add each effect's force at this sample to `f_n`, in `effects`'
+    /// order; `in_tissue` is false once the needle is out.
+    pub fn add(
+        &mut self,
+        (effects, form): (&[Effect], Form),
+        k: &Kinematics,
+        in_tissue: bool,
+        f_n: &mut f64,
+    ) {
+        for effect in effects {
+            match *effect {
+                Effect::Viscoelasticity { k_n_per_m, tau_s } => {
+                    self.relaxing
+                        .add(form, (k_n_per_m, tau_s), k, in_tissue, f_n)
+                }
+                Effect::HolderInertia { mass_kg } => self.holder.add(form, mass_kg, k, f_n),
+                Effect::SensorDrift { rate_n_per_s } => *f_n += drift_n(form, rate_n_per_s, k.t_s),
+                _ => {}
+            }
+        }
+    }
+}
+
+/// Relaxation: Maxwell branches driven by the needle's motion in the
+/// tissue.
+#[derive(Clone, Copy, Debug, Default)]
+struct Relaxing {
+    maxwell: f64,
+    maxwell_slow: f64,
+    /// The literature form's box spectrum.
+    branches: [f64; 5],
+}
+
+impl Relaxing {
+    fn add(
+        &mut self,
+        form: Form,
+        (k_n_per_m, tau_s): (f64, f64),
+        k: &Kinematics,
+        in_tissue: bool,
+        f_n: &mut f64,
+    ) {
+        let (dt, vr) = (k.dt_s, k.vr_mps);
+        if form == Form::Literature {
+            // Fung's box spectrum, discretised: five branches of k/2
+            // each, τ log-spaced over 0.05–20 s (τ of the effect is the
+            // box's centre, 1 s by default).
+            for (b, m) in self.branches.iter_mut().enumerate() {
+                let tau = tau_s * 0.05 * 400f64.powf(b as f64 / 4.0);
+                *m = if in_tissue {
+                    let decay = (-dt / tau).exp();
+                    *m * decay + 0.5 * k_n_per_m * vr * tau * (1.0 - decay)
+                } else {
+                    0.0
+                };
+                *f_n += *m;
+            }
+            return;
+        }
+        // Alternate: a Prony series of two branches.
+        let (k1, tau1, k2, tau2) = if form == Form::Alternate {
+            (0.5 * k_n_per_m, tau_s / 3.0, k_n_per_m, 3.0 * tau_s)
+        } else {
+            (k_n_per_m, tau_s, 0.0, 1.0)
+        };
+        if in_tissue {
+            self.maxwell += (k1 * vr - self.maxwell / tau1) * dt;
+            self.maxwell_slow += (k2 * vr - self.maxwell_slow / tau2) * dt;
+        } else {
+            (self.maxwell, self.maxwell_slow) = (0.0, 0.0);
+        }
+        *f_n += self.maxwell + self.maxwell_slow;
+    }
+}
+
+/// The holder's mass, felt by the load cell as it accelerates.
+#[derive(Clone, Copy, Debug, Default)]
+struct Holder {
+    /// The literature form's mount: its deflection and rate.
+    mount: f64,
+    mount_rate: f64,
+    /// The alternate form's acceleration, as the drive reaches it.
+    a_filtered: f64,
+}
+
+impl Holder {
+    fn add(&mut self, form: Form, mass_kg: f64, k: &Kinematics, f_n: &mut f64) {
+        let (dt, a) = (k.dt_s, k.a_mps2);
+        if form == Form::Literature {
+            // A mount ringing at 8 Hz, damping ratio 0.3: the load cell
+            // feels the holder's acceleration through it (integrated in
+            // sub-steps, stable over a 70 ms gap).
+            let (w, zeta) = (TAU * 8.0, 0.3);
+            let steps = ((dt * w / 0.1).ceil() as usize).max(1);
+            let h = dt / steps as f64;
+            for _ in 0..steps {
+                self.mount_rate +=
+                    (w * w * (a - self.mount) - 2.0 * zeta * w * self.mount_rate) * h;
+                self.mount += self.mount_rate * h;
+            }
+            *f_n += mass_kg * self.mount;
+            return;
+        }
+        // Alternate: the drive reaches its speed over ~10 ms.
+        let gain = if form == Form::Alternate {
+            dt / 0.01
+        } else {
+            1.0
+        };
+        self.a_filtered += (a - self.a_filtered) * gain;
+        *f_n += mass_kg * self.a_filtered;
+    }
+}
+
+/// The load cell's drift at `t_s`.
+fn drift_n(form: Form, rate_n_per_s: f64, t_s: f64) -> f64 {
+    match form {
+        // A bridge warming up: the drift accelerates, reaching the
+        // standard rate at 20 s.
+        Form::Literature => rate_n_per_s * t_s * t_s / (2.0 * 20.0),
+        // A bridge settling thermally over 30 s.
+        Form::Alternate => {
+            const TAU_S: f64 = 30.0;
+            rate_n_per_s * TAU_S * (1.0 - (-t_s / TAU_S).exp())
+        }
+        Form::Standard => rate_n_per_s * t_s,
+    }
+}
