@@ -363,39 +363,7 @@ pub fn simulate_trial_in(
         structures: Vec::new(),
         events: Vec::new(),
     };
-    for effect in effects {
-        if let Effect::InternalStructures {
-            max_count,
-            k_n_per_m,
-            rupture_min_n,
-            rupture_max_n,
-        } = *effect
-        {
-            let lo = s1 + tissue.puncture_depth_m + 0.003;
-            let hi = protocol.far_surface_x_m.unwrap_or(deepest_planned) - 0.002;
-            // Walls do not overlap: each is clear of the others by
-            // WALL_GAP_M beyond the travel it takes to rupture. Two walls
-            // loading together are one force bump, to a detector and to
-            // anyone reading the trace, so they would not be two events.
-            let reach = |(depth, rupture): (f64, f64)| depth + rupture / k_n_per_m.max(1.0);
-            if hi > lo {
-                for _ in 0..rng.gen_range(1..=max_count.max(1)) {
-                    for _attempt in 0..20 {
-                        let rupture =
-                            rng.gen_range(rupture_min_n..=rupture_max_n.max(rupture_min_n));
-                        let wall = (rng.gen_range(lo..hi), rupture);
-                        let clear = truth.structures.iter().all(|&other| {
-                            wall.0 > reach(other) + WALL_GAP_M || other.0 > reach(wall) + WALL_GAP_M
-                        });
-                        if clear {
-                            truth.structures.push(wall);
-                            break;
-                        }
-                    }
-                }
-            }
-        }
-    }
+    truth.structures = place_walls(tissue, protocol, effects, deepest_planned, rng);
     truth.structures.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut walls = Walls::new(truth.structures.len());
     let mut layers_ruptured = vec![false; protocol.layers.len()];
@@ -535,6 +503,54 @@ pub fn simulate_trial_in(
         trial.push(t, x_counts, measured_n);
     }
     (trial, truth)
+}
+
+/// Where the interior walls sit and the force each gives way at
+/// (`(depth, rupture)`, unsorted), drawn for one trial: between 3 mm past
+/// the puncture and 2 mm before the far surface or the deepest point.
+fn place_walls(
+    tissue: &TissueParams,
+    protocol: &Protocol,
+    effects: &[Effect],
+    deepest_planned: f64,
+    rng: &mut impl Rng,
+) -> Vec<(f64, f64)> {
+    let s1 = protocol.surface_x_m;
+    let mut walls: Vec<(f64, f64)> = Vec::new();
+    for effect in effects {
+        if let Effect::InternalStructures {
+            max_count,
+            k_n_per_m,
+            rupture_min_n,
+            rupture_max_n,
+        } = *effect
+        {
+            let lo = s1 + tissue.puncture_depth_m + 0.003;
+            let hi = protocol.far_surface_x_m.unwrap_or(deepest_planned) - 0.002;
+            // Walls do not overlap: each is clear of the others by
+            // WALL_GAP_M beyond the travel it takes to rupture. Two walls
+            // loading together are one force bump, to a detector and to
+            // anyone reading the trace, so they would not be two events.
+            let reach = |(depth, rupture): (f64, f64)| depth + rupture / k_n_per_m.max(1.0);
+            if hi > lo {
+                for _ in 0..rng.gen_range(1..=max_count.max(1)) {
+                    for _attempt in 0..20 {
+                        let rupture =
+                            rng.gen_range(rupture_min_n..=rupture_max_n.max(rupture_min_n));
+                        let wall = (rng.gen_range(lo..hi), rupture);
+                        let clear = walls.iter().all(|&other| {
+                            wall.0 > reach(other) + WALL_GAP_M || other.0 > reach(wall) + WALL_GAP_M
+                        });
+                        if clear {
+                            walls.push(wall);
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    walls
 }
 
 /// Karnopp friction with the rate-dependent damping effect applied.
