@@ -1,4 +1,4 @@
-//! Peak memory of `needle` on huge inputs (issue 20, row 11), in a test
+//! Peak memory of `needle` on huge inputs, in a test
 //! binary of its own: a child's peak as wait4 reports it includes the
 //! memory of the process it was spawned from, so no other test may run
 //! (and grow this process) beside these.
@@ -33,7 +33,7 @@ fn peak_memory(args: &[&str]) -> (bool, i64, String) {
 
 #[test]
 fn decode_reads_a_capture_in_bounded_memory() {
-    // Row 11 (for decode): a capture was read whole into memory. 64 MB of
+    // A capture was read whole into memory. 64 MB of
     // line noise (a zero every 100 kB) now pass through 64 kB blocks, and
     // are then refused as no capture.
     let dir = tempfile::tempdir().unwrap();
@@ -60,7 +60,7 @@ fn decode_reads_a_capture_in_bounded_memory() {
 
 #[test]
 fn fit_and_diagnose_read_a_huge_trial_in_bounded_memory_and_say_so() {
-    // Row 11 (for the analyses): a trial at 65 535 Hz beside two at
+    // A trial at 65 535 Hz beside two at
     // 500 Hz. Read whole, 2.3 M rows took `diagnose` 199 s and 900 MB
     // (fit: 290 MB). Now read in one pass, thinned as it streams to the
     // device's top rate (2 kHz), with a note saying so.

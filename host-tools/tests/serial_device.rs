@@ -725,7 +725,7 @@ fn ctrl_c_sigterm_and_sighup_stop_needle_record_with_the_stream_and_trial_whole(
 #[test]
 fn garbage_from_the_host_does_not_disturb_the_samples() {
     let _alone = one_at_a_time();
-    // Issue 19, bad input: a host that sends garbage continuously. In QEMU
+    // A host that sends garbage continuously. In QEMU
     // the device's clock is real time, so the stream's completeness is
     // what can be checked: 2 s of random bytes at full speed while it
     // samples at 500 Hz, and not one sample lost.
@@ -811,7 +811,7 @@ fn streams_on_then_stops(out: &Path, mut record: std::process::Child) {
 
 #[test]
 fn needle_record_asks_for_the_stream_again_when_it_stops() {
-    // Issue 29 row 7: a device whose stream went off left `needle record`
+    // A device whose stream went off left `needle record`
     // waiting forever in silence. Here another program turns the stream
     // off mid-insertion.
     use std::io::Write;
@@ -836,7 +836,7 @@ fn needle_record_asks_for_the_stream_again_when_it_stops() {
 
 #[test]
 fn needle_record_goes_on_after_the_device_is_reset() {
-    // Issue 29 row 7: after a reset the device (a live replay waits for
+    // After a reset the device (a live replay waits for
     // its host's first command, as at power-on) sent nothing, and `needle
     // record` waited forever in silence.
     let _alone = one_at_a_time();

@@ -271,7 +271,7 @@ fn detect_writes_the_devices_samples_per_trial_beside_no_trial() {
     );
 }
 
-/// Issue 33: on insert–dwell–withdraw trials whose tissue relaxes at rest
+/// On insert–dwell–withdraw trials whose tissue relaxes at rest
 /// (each of the simulator's forms, trial-to-trial spread, jitter, the
 /// tissue dragged on withdrawal), the tissue `needle fit --toml` writes
 /// carries the relaxation, and with it the device's residual over every

@@ -99,7 +99,7 @@ fn is_panic_path(name: &str) -> bool {
 
 #[test]
 fn no_firmware_image_links_a_panic_path() {
-    // Issue 20: the firmware is meant never to panic; here that is proved
+    // The firmware is meant never to panic; here that is proved
     // at link time for every image — the QEMU boards', the real board's
     // and its replay image's. Every division, index and unwrap that could
     // panic has been made total; semihosting and the defmt loggers are our

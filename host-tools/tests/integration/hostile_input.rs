@@ -1,4 +1,4 @@
-//! Issue 20's rows, one test each as they are fixed: bad arguments get a
+//! Hostile use, one test for each way found: bad arguments get a
 //! clear message and a non-zero exit, never silence.
 
 use crate::library;
@@ -33,7 +33,7 @@ fn refused(args: &[&str]) -> String {
 
 #[test]
 fn diagnose_rejects_an_unknown_tissue() {
-    // Row 9: `needle diagnose DIR --tissue nope` was accepted and ignored.
+    // `needle diagnose DIR --tissue nope` was accepted and ignored.
     let dir = simulated(2, 1);
     let d = dir.path().to_str().unwrap();
     let err = refused(&["diagnose", d, "--tissue", "nope"]);
@@ -42,7 +42,7 @@ fn diagnose_rejects_an_unknown_tissue() {
 
 #[test]
 fn decode_rejects_seconds_that_are_not_a_duration() {
-    // Row 1: `--seconds inf` (or 1e30) panicked converting to a Duration;
+    // `--seconds inf` (or 1e30) panicked converting to a Duration;
     // -1, NaN and 0 read nothing and exited 0. Checked before the port is
     // opened, so /dev/null stands in for one.
     for bad in ["inf", "1e30", "-1", "NaN", "0"] {
@@ -55,7 +55,7 @@ fn decode_rejects_seconds_that_are_not_a_duration() {
 
 #[test]
 fn decode_never_writes_over_the_capture_it_reads() {
-    // Row 4: `needle decode same.bin --csv same.bin` emptied the capture
+    // `needle decode same.bin --csv same.bin` emptied the capture
     // before reading it, printed 0 frames and exited 0.
     let dir = tempfile::tempdir().unwrap();
     let capture = dir.path().join("same.bin");
@@ -77,7 +77,7 @@ fn decode_never_writes_over_the_capture_it_reads() {
 
 #[test]
 fn decode_rejects_a_zero_sample_rate() {
-    // Row 5: `--rate-hz 0` wrote `inf` for every t_s and exited 0.
+    // `--rate-hz 0` wrote `inf` for every t_s and exited 0.
     let dir = tempfile::tempdir().unwrap();
     let capture = dir.path().join("cap.bin");
     std::fs::write(&capture, b"").unwrap();
@@ -96,7 +96,7 @@ fn decode_rejects_a_zero_sample_rate() {
 
 #[test]
 fn a_full_disk_on_stdout_is_an_error_and_a_closed_pipe_a_quiet_end() {
-    // Row 2: `needle fit DIR > /dev/full` panicked "failed printing to
+    // `needle fit DIR > /dev/full` panicked "failed printing to
     // stdout" (exit 101), and so did `needle evaluate … | head -1`.
     let dir = simulated(2, 1);
     let d = dir.path().to_str().unwrap();
@@ -352,7 +352,7 @@ fn a_csv_with_a_line_without_end_is_left_out_in_bounded_memory_and_quoted_short(
 
 #[test]
 fn a_second_simulation_replaces_the_first_and_never_deletes_real_trials() {
-    // Row 10: five trials, then two at another seed into the same
+    // Five trials, then two at another seed into the same
     // directory: the three stale ones stayed and `fit` mixed two seeds.
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path().to_str().unwrap();
@@ -381,7 +381,7 @@ fn a_second_simulation_replaces_the_first_and_never_deletes_real_trials() {
 
 #[test]
 fn a_csv_that_is_a_device_is_refused_not_read() {
-    // Row 14: a `.csv` symlink to /dev/zero aborted allocating 4 GiB while
+    // A `.csv` symlink to /dev/zero aborted allocating 4 GiB while
     // reading its header.
     let dir = tempfile::tempdir().unwrap();
     std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.csv")).unwrap();
@@ -396,7 +396,7 @@ fn a_csv_that_is_a_device_is_refused_not_read() {
 
 #[test]
 fn a_truth_json_or_tissue_library_that_is_a_device_is_refused_not_read() {
-    // Row 14's kin: `truth.json` linked to /dev/zero made `detect`, and
+    // `truth.json` linked to /dev/zero made `detect`, and
     // `--params /dev/zero` made `simulate`, `fit --params`… read without
     // end, memory growing.
     let dir = tempfile::tempdir().unwrap();
@@ -429,7 +429,7 @@ fn a_truth_json_or_tissue_library_that_is_a_device_is_refused_not_read() {
 
 #[test]
 fn a_csv_that_cannot_be_written_is_named() {
-    // Row 12 (in part): `needle decode cap.bin --csv /dev/full` failed
+    // `needle decode cap.bin --csv /dev/full` failed
     // without saying which file.
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path().to_str().unwrap();
@@ -498,7 +498,7 @@ fn times(path: &std::path::Path) -> Vec<f64> {
 
 #[test]
 fn decode_splits_at_an_index_that_goes_back_and_never_writes_time_backwards() {
-    // Row 6: a chunk repeated, or two captures joined (a reboot): the index
+    // A chunk repeated, or two captures joined (a reboot): the index
     // going back was not reported, the jump forward counted as thousands
     // of lost samples, and the CSV's time went backwards.
     let dir = tempfile::tempdir().unwrap();
@@ -646,7 +646,7 @@ fn decode_segments_never_write_over_the_capture_or_stay_stale() {
 
 #[test]
 fn one_bad_file_among_good_ones_is_left_out_by_every_command_naming_file_and_line() {
-    // Row 13: `fit` skipped a bad CSV, `detect` and `diagnose` stopped at
+    // `fit` skipped a bad CSV, `detect` and `diagnose` stopped at
     // it. One rule now: left out with a warning naming file and line,
     // listed in the JSON's `skipped`, the others analysed.
     let dir = simulated(3, 4);
@@ -705,7 +705,7 @@ fn one_bad_file_among_good_ones_is_left_out_by_every_command_naming_file_and_lin
 
 #[test]
 fn detect_warns_when_truth_json_and_the_csvs_disagree() {
-    // Row 10's second half: CSVs and truth.json that disagree were scored
+    // CSVs and truth.json that disagree were scored
     // without a word.
     let dir = simulated(3, 2);
     let d = dir.path().to_str().unwrap();
@@ -721,7 +721,7 @@ fn detect_warns_when_truth_json_and_the_csvs_disagree() {
 
 #[test]
 fn outputs_that_cannot_be_written_name_their_path_in_words() {
-    // Row 12's rest: `--plot /nodir/x.svg` said `BackendError(DrawingError(Os
+    // `--plot /nodir/x.svg` said `BackendError(DrawingError(Os
     // {..}))`, `simulate --out existing_file` said "cannot create: File
     // exists".
     let dir = tempfile::tempdir().unwrap();
@@ -752,7 +752,7 @@ fn outputs_that_cannot_be_written_name_their_path_in_words() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(err.contains("afile: is a file, not a directory"), "{err}");
-    // Issue 29 row 11: `--out` a dangling link said "File exists".
+    // `--out` a dangling link said "File exists".
     let link = dir.path().join("dangling");
     std::os::unix::fs::symlink(dir.path().join("gone"), &link).unwrap();
     let link = link.to_str().unwrap();
@@ -814,7 +814,7 @@ fn needle_device_checks_its_arguments_before_the_port() {
     let tmp = tempfile::tempdir().unwrap();
     let scratch = tmp.path().join("x");
     let scratch = scratch.to_str().unwrap();
-    // Issue 29 row 11: a file of several tissues with no --name uploaded
+    // A file of several tissues with no --name uploaded
     // its first without a word.
     let library = tmp.path().join("several.toml");
     let text = std::fs::read_to_string(
@@ -986,7 +986,7 @@ fn decode_takes_the_streams_rate_over_rate_hz_and_never_writes_to_its_stdout() {
     assert_eq!(times(&csv)[1], 0.002);
     let err = refused(&["decode", cap.to_str().unwrap(), "--csv", "/dev/stdout"]);
     assert!(err.contains("--csv names standard output"), "{err}");
-    // Issue 29 row 11: a header of 65 535 Hz before a 500 Hz device's
+    // A header of 65 535 Hz before a 500 Hz device's
     // configuration and status compressed the times without a word.
     use needle_holder::protocol::{Frame, FrameEncoder, Header};
     let mut lying = FrameEncoder::default()
@@ -1314,9 +1314,9 @@ fn decode_takes_a_segment_list_only_if_it_is_one_and_never_writes_through_a_link
     std::fs::create_dir(dir.path().join("many")).unwrap();
     let err = refused(&["decode", &at("many.bin"), "--csv", &at("many/m.csv")]);
     assert!(err.contains("more than 1000 segments"), "{err}");
-    // Issue 29 row 6: and left its 1000 segments unlisted, for `fit` to
-    // read and the next decode to trip over. They are listed, and the
-    // next decode to that name removes them.
+    // The segments written before the refusal are listed, not left for
+    // `fit` to read and the next decode to trip over; the next decode to
+    // that name removes them.
     let list = std::fs::read_to_string(at("many/m.csv.segments")).unwrap();
     assert_eq!(list.lines().count(), 1000, "m-2.csv … m-1001.csv");
     std::fs::write(at("one_more.bin"), &short).unwrap();
@@ -1456,7 +1456,7 @@ fn fit_leaves_out_what_is_no_needle_insertion() {
 
 #[test]
 fn a_decode_stopped_by_a_signal_writes_whole_rows_and_says_so() {
-    // Issue 29 row 6: Ctrl-C left the last CSV cut mid-line and its
+    // Ctrl-C left the last CSV cut mid-line and its
     // segments unlisted. The capture comes through a pipe held open, so
     // the decode is mid-stream when the signal comes.
     use std::io::Write;
