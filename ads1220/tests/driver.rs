@@ -2,12 +2,11 @@
 //! on the bus, the sign of what it reads, saturation, a missed data-ready,
 //! a converter that is not there, and a bus that fails.
 
+use ads1220::{command, Ads1220, Config, DataRate, Error};
 use embedded_hal::spi::{ErrorKind, ErrorType, Operation, SpiDevice};
 use embedded_hal_mock::eh1::delay::NoopDelay;
 use embedded_hal_mock::eh1::digital::{Mock as Pin, State, Transaction as PinT};
 use embedded_hal_mock::eh1::spi::{Mock as Spi, Transaction as SpiT};
-use needle_holder::ads1220::{command, Ads1220, Config, DataRate, Error};
-use needle_holder::hal::LoadCellAdc;
 
 /// The configuration bytes of the board's two rates, from the datasheet's
 /// register map worked by hand: AIN1/AIN2 (MUX 0011), gain 128 (111),
@@ -106,10 +105,9 @@ fn codes_are_sign_extended_and_full_scale_saturates() {
     let mut drdy = Pin::new(&pin_expected);
     let mut adc = Ads1220::new(spi.clone(), drdy.clone());
     for (bytes, counts, saturated) in cases {
-        let sample = adc.read().unwrap();
+        let sample = adc.read_checked().unwrap();
         assert_eq!(sample.counts, counts, "{bytes:02x?}");
         assert_eq!(sample.saturated, saturated, "{bytes:02x?}");
-        assert!(!sample.overrun);
     }
     spi.done();
     drdy.done();
@@ -121,7 +119,7 @@ fn a_missed_data_ready_reads_nothing_and_says_so() {
     let mut spi = Spi::new(&[]);
     let mut drdy = Pin::new(&[PinT::get(State::High)]);
     let mut adc = Ads1220::new(spi.clone(), drdy.clone());
-    assert_eq!(adc.read(), Err(Error::NotReady));
+    assert_eq!(adc.read_checked(), Err(Error::NotReady));
     spi.done();
     drdy.done();
 }
@@ -143,7 +141,7 @@ impl SpiDevice for BrokenBus {
 fn bus_errors_are_errors() {
     let mut drdy = Pin::new(&[PinT::get(State::Low)]);
     let mut adc = Ads1220::new(BrokenBus, drdy.clone());
-    assert_eq!(adc.read(), Err(Error::Spi(ErrorKind::ModeFault)));
+    assert_eq!(adc.read_checked(), Err(Error::Spi(ErrorKind::ModeFault)));
     assert_eq!(
         adc.start(&Config::bridge(DataRate::Sps1000), &mut NoopDelay::new()),
         Err(Error::Spi(ErrorKind::ModeFault))
@@ -179,7 +177,7 @@ fn noisy(i: usize) -> [u8; 3] {
 
 #[test]
 fn a_started_converter_reads_its_registers_back_every_so_often() {
-    let n = usize::from(needle_holder::ads1220::CHECK_EVERY);
+    let n = usize::from(ads1220::CHECK_EVERY);
     let mut expected = Vec::new();
     for i in 0..2 * n {
         expected.extend(rdata(noisy(i)));
@@ -191,10 +189,10 @@ fn a_started_converter_reads_its_registers_back_every_so_often() {
     }
     let (mut spi, mut drdy, mut adc) = started(expected, 2 * n);
     for _ in 0..2 * n - 1 {
-        assert!(adc.read().is_ok());
+        assert!(adc.read_checked().is_ok());
     }
     assert_eq!(
-        adc.read(),
+        adc.read_checked(),
         Err(Error::Readback {
             wrote: AT_1000_SPS,
             read: [0; 4]
@@ -206,15 +204,15 @@ fn a_started_converter_reads_its_registers_back_every_so_often() {
 
 #[test]
 fn a_stuck_data_line_is_an_error_but_a_held_overload_is_saturation() {
-    let stuck = usize::from(needle_holder::ads1220::STUCK_RUN);
+    let stuck = usize::from(ads1220::STUCK_RUN);
     for (code, counts) in [([0xFF, 0xFF, 0xFF], -1), ([0x00, 0x00, 0x00], 0)] {
         let mut spi = Spi::new(&(0..stuck).flat_map(|_| rdata(code)).collect::<Vec<_>>());
         let mut drdy = Pin::new(&vec![PinT::get(State::Low); stuck]);
         let mut adc = Ads1220::new(spi.clone(), drdy.clone());
         for _ in 1..stuck {
-            assert_eq!(adc.read().unwrap().counts, counts);
+            assert_eq!(adc.read_checked().unwrap().counts, counts);
         }
-        assert_eq!(adc.read(), Err(Error::Stuck { code: counts }));
+        assert_eq!(adc.read_checked(), Err(Error::Stuck { code: counts }));
         spi.done();
         drdy.done();
     }
@@ -227,7 +225,7 @@ fn a_stuck_data_line_is_an_error_but_a_held_overload_is_saturation() {
     let mut drdy = Pin::new(&vec![PinT::get(State::Low); held]);
     let mut adc = Ads1220::new(spi.clone(), drdy.clone());
     for _ in 0..held {
-        assert!(adc.read().unwrap().saturated);
+        assert!(adc.read_checked().unwrap().saturated);
     }
     spi.done();
     drdy.done();
@@ -236,7 +234,7 @@ fn a_stuck_data_line_is_an_error_but_a_held_overload_is_saturation() {
 #[test]
 fn at_gain_128_on_the_supply_codes_past_the_pgas_linear_range_are_saturated() {
     // 7/8 of full scale: the PGA's outputs 200 mV inside a 3.3 V supply.
-    let limit = needle_holder::ads1220::LINEAR_LIMIT_HIGH_GAIN;
+    let limit = ads1220::LINEAR_LIMIT_HIGH_GAIN;
     assert_eq!(limit, 7_340_032);
     assert_eq!(
         Config::bridge(DataRate::Sps1000).linear_range(),
@@ -255,7 +253,7 @@ fn at_gain_128_on_the_supply_codes_past_the_pgas_linear_range_are_saturated() {
     let expected = codes.iter().flat_map(|&(c, _)| rdata(bytes(c))).collect();
     let (mut spi, mut drdy, mut adc) = started(expected, codes.len());
     for (code, saturated) in codes {
-        let sample = adc.read().unwrap();
+        let sample = adc.read_checked().unwrap();
         assert_eq!((sample.counts, sample.saturated), (code, saturated));
     }
     spi.done();
