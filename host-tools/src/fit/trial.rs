@@ -363,6 +363,113 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let j0 = ip - rise;
     // What the load cell reads with nothing on the needle: before the rise.
     let zero_n = median(f[..j0].to_vec());
+    let Loading {
+        contact_x_m,
+        polynomial,
+        rational,
+    } = fit_loading(x, f, (j0, ip), thr)?;
+
+    let rate = trial.rate_hz();
+    let after = |s: f64| ip.saturating_add((s * rate) as usize).min(trial.len() - 1);
+    // A flat top can stand 20 samples before the fall: the level is read
+    // over 100 ms past whichever comes later, the peak's window or the
+    // fall's first sharp step (what find_puncture took for fallen can be
+    // a later event where the capsule's own fall was small).
+    let step_n = (10.0 * noise_n).max(0.05 * f[ip]);
+    let fall_start = (ip + 1..=fallen)
+        .find(|&i| f[i - 1] - f[i] > step_n)
+        .unwrap_or(fallen);
+    let fall_end = fall_start
+        .saturating_add((0.1 * rate) as usize)
+        .min(trial.len() - 1);
+    let puncture_drop_to_n = fall_level(&f[ip..=after(0.1).max(fall_end)]);
+
+    // Friction and x_s3: strokes inside the cut track, plus the samples
+    // after the needle left (which must read zero): grid over ρ.
+    let start = after(0.05);
+    let Strokes {
+        track,
+        advancing,
+        rests,
+        stuck,
+    } = strokes(trial, &v, (ip, start), noise_n);
+    let x_s2 = x[ip];
+    let inward = track.iter().filter(|s| s.1 > 0.0).count() >= MIN_STROKE_SAMPLES;
+    let dwell = dwell_relaxation(trial, &v, ip);
+    let friction = if inward {
+        both_ways(&track, &advancing, contact_x_m, x_s2, noise_n)?
+    } else {
+        one_way(&track, &advancing, contact_x_m, x_s2, noise_n, zero_n)?
+    };
+    let OneTrialFriction {
+        relaxed_x_m,
+        rho: best_rho,
+        rho_sd,
+        cp,
+        bp,
+        cn,
+        bn,
+        cutting_force_n,
+        ..
+    } = friction;
+
+    // Static band: the force held at rest, per length, against the sliding
+    // force just before the stop.
+    let (dp, mut dn) = static_band(trial, &v, (&rests, start), &friction, noise_n);
+    // The withdrawal's stick gives way where the tent's pull reaches the
+    // static band, D_n·l, l from where the withdrawing needle lets go.
+    let exit_m = friction.let_go_x_m.map(|g| g.min(relaxed_x_m));
+    if let (Some(last), Some(exit_m)) = (stuck.clone().last(), exit_m) {
+        let l = x[last] - exit_m;
+        if l >= 0.002 {
+            dn = stronger(dn, (f[last] / l, true), -1.0);
+        }
+    }
+
+    Ok(TrialFit {
+        noise_n,
+        contact_x_m,
+        puncture_index: ip,
+        fallen_index: fall_start,
+        puncture_x_m: x_s2,
+        puncture_force_n: f[ip],
+        puncture_depth_m: x_s2 - contact_x_m,
+        puncture_drop_to_n,
+        polynomial,
+        rational,
+        relaxed_x_m,
+        relaxation: best_rho,
+        relaxation_sd: rho_sd,
+        cp_n_per_m: cp,
+        bp_ns_per_m2: bp,
+        cn_n_per_m: cn,
+        bn_ns_per_m2: bn,
+        cutting_force_n,
+        dp,
+        dn,
+        insertion: friction.insertion,
+        withdrawal: friction.withdrawal,
+        relaxation_identified: friction.identified,
+        let_go_x_m: friction.let_go_x_m,
+        let_go_snapped: friction.let_go_snapped,
+        dwell,
+        layers: layers_after(trial, &v, ip, noise_n),
+    })
+}
+
+/// Samples a stroke needs to count.
+const MIN_STROKE_SAMPLES: usize = 20;
+
+/// The loading curve's fit: the contact point and both stiffness laws.
+struct Loading {
+    contact_x_m: f64,
+    polynomial: StiffnessFit,
+    rational: StiffnessFit,
+}
+
+/// Fit the loading curve over samples `j0..=ip` (the rise into the
+/// peak), reading as loaded what is above `thr`.
+fn fit_loading(x: &[f64], f: &[f64], (j0, ip): (usize, usize), thr: f64) -> Result<Loading> {
     // General quadratic through the rise; its root below the data is x_s1.
     let mut quad = Lsq::<3>::default();
     for j in j0..=ip {
@@ -442,30 +549,32 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         .find(|&j| f[j] <= 0.0)
         .map_or(x[0], |j| x[j].min(x[j0]));
     let contact_x_m = fitted_contact_x_m.max(2.0 * unloaded_x_m - x[j0]);
+    Ok(Loading {
+        contact_x_m,
+        polynomial,
+        rational,
+    })
+}
 
+/// A trial's samples after the puncture, by what they read: moving in
+/// the cut track, cutting new tissue, at rest; and the final retreat's
+/// stick, where the tissue was dragged along.
+struct Strokes {
+    /// Moving inside the cut track.
+    track: Vec<Xvf>,
+    /// Cutting new tissue.
+    advancing: Vec<Xvf>,
+    /// Indices at rest.
+    rests: Vec<usize>,
+    stuck: std::ops::Range<usize>,
+}
+
+/// [`Strokes`] from sample `start` on, the puncture at `ip`.
+fn strokes(trial: &Trial, v: &[f64], (ip, start): (usize, usize), noise_n: f64) -> Strokes {
+    let (x, f) = (&trial.x_m, &trial.f_n);
     let rate = trial.rate_hz();
-    let after = |s: f64| ip.saturating_add((s * rate) as usize).min(trial.len() - 1);
-    // A flat top can stand 20 samples before the fall: the level is read
-    // over 100 ms past whichever comes later, the peak's window or the
-    // fall's first sharp step (what find_puncture took for fallen can be
-    // a later event where the capsule's own fall was small).
-    let step_n = (10.0 * noise_n).max(0.05 * f[ip]);
-    let fall_start = (ip + 1..=fallen)
-        .find(|&i| f[i - 1] - f[i] > step_n)
-        .unwrap_or(fallen);
-    let fall_end = fall_start
-        .saturating_add((0.1 * rate) as usize)
-        .min(trial.len() - 1);
-    let puncture_drop_to_n = fall_level(&f[ip..=after(0.1).max(fall_end)]);
-
-    // Friction and x_s3: strokes inside the cut track, plus the samples
-    // after the needle left (which must read zero): grid over ρ.
-    let start = after(0.05);
     let mut deepest = x[ip];
-    let mut track = Vec::new(); // (x, v, f) moving inside the cut track
-    let mut advancing = Vec::new(); // (x, v, f) cutting new tissue
-    let mut rests = Vec::new(); // (index) at rest
-
+    let (mut track, mut advancing, mut rests) = (Vec::new(), Vec::new(), Vec::new());
     // A sample counts as cutting only if the needle goes on advancing
     // within 10 ms: the first sample of a stop reads no cutting, yet a
     // velocity window across the stop still calls it advancing, and one
@@ -510,30 +619,36 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
             rests.push(i);
         }
     }
-    let x_s2 = x[ip];
-    let inward = track.iter().filter(|s| s.1 > 0.0).count() >= MIN_STROKE_SAMPLES;
-    let dwell = dwell_relaxation(trial, &v, ip);
-    let friction = if inward {
-        both_ways(&track, &advancing, contact_x_m, x_s2, noise_n)?
-    } else {
-        one_way(&track, &advancing, contact_x_m, x_s2, noise_n, zero_n)?
-    };
+    Strokes {
+        track,
+        advancing,
+        rests,
+        stuck,
+    }
+}
+
+/// The static band's strongest holds, (D_p, D_n): at each real stop, the
+/// force held per length against the sliding force just before it.
+fn static_band(
+    trial: &Trial,
+    v: &[f64],
+    (rests, start): (&[usize], usize),
+    friction: &OneTrialFriction,
+    noise_n: f64,
+) -> (Option<Held>, Option<Held>) {
+    let (x, f) = (&trial.x_m, &trial.f_n);
+    let rate = trial.rate_hz();
     let OneTrialFriction {
         relaxed_x_m,
-        rho: best_rho,
-        rho_sd,
         cp,
         bp,
         cn,
         bn,
         cutting_force_n,
         ..
-    } = friction;
-
-    // Static band: the force held at rest, per length, against the sliding
-    // force just before the stop.
+    } = *friction;
     let (mut dp, mut dn): (Option<Held>, Option<Held>) = (None, None);
-    for &i in &rests {
+    for &i in rests {
         let l = x[i] - relaxed_x_m;
         if l < 0.002 || i < 1 || v[i - 1].abs() < REST_MPS {
             continue;
@@ -574,49 +689,8 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
             dn = stronger(dn, entry, -1.0);
         }
     }
-    // The withdrawal's stick gives way where the tent's pull reaches the
-    // static band, D_n·l, l from where the withdrawing needle lets go.
-    let exit_m = friction.let_go_x_m.map(|g| g.min(relaxed_x_m));
-    if let (Some(last), Some(exit_m)) = (stuck.clone().last(), exit_m) {
-        let l = x[last] - exit_m;
-        if l >= 0.002 {
-            dn = stronger(dn, (f[last] / l, true), -1.0);
-        }
-    }
-
-    Ok(TrialFit {
-        noise_n,
-        contact_x_m,
-        puncture_index: ip,
-        fallen_index: fall_start,
-        puncture_x_m: x_s2,
-        puncture_force_n: f[ip],
-        puncture_depth_m: x_s2 - contact_x_m,
-        puncture_drop_to_n,
-        polynomial,
-        rational,
-        relaxed_x_m,
-        relaxation: best_rho,
-        relaxation_sd: rho_sd,
-        cp_n_per_m: cp,
-        bp_ns_per_m2: bp,
-        cn_n_per_m: cn,
-        bn_ns_per_m2: bn,
-        cutting_force_n,
-        dp,
-        dn,
-        insertion: friction.insertion,
-        withdrawal: friction.withdrawal,
-        relaxation_identified: friction.identified,
-        let_go_x_m: friction.let_go_x_m,
-        let_go_snapped: friction.let_go_snapped,
-        dwell,
-        layers: layers_after(trial, &v, ip, noise_n),
-    })
+    (dp, dn)
 }
-
-/// Samples a stroke needs to count.
-const MIN_STROKE_SAMPLES: usize = 20;
 
 /// Friction, x_s3 and cutting of one trial.
 struct OneTrialFriction {
