@@ -1067,17 +1067,9 @@ pub fn diagnose_with_progress(
         .collect();
     ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
     let noise = noise_floor(data);
-    // Significant: it shrinks the held-out error by MIN_SHRINK, on nearly
-    // every withheld trial (paired t), and what it takes away is no less
-    // than the noise floor in RMS — less than that the leftovers of the
-    // trials' spread can give as well.
-    let worthy = |before: f64, after: f64, t: f64| {
-        let shrink = 1.0 - after / before.max(1e-12);
-        let taken = (before * before - after * after).max(0.0).sqrt();
-        shrink >= MIN_SHRINK && t >= MIN_T && taken >= MIN_EFFECT_FLOORS * noise
-    };
+    let bar = Bar { noise_n: noise };
     let significant =
-        |shrink: f64, t: f64| worthy(baseline.rms(), baseline.rms() * (1.0 - shrink), t);
+        |shrink: f64, t: f64| bar.worthy(baseline.rms(), baseline.rms() * (1.0 - shrink), t);
     // Only the significant: a larger shrink that does not hold across the
     // withheld trials (another effect's residual beside it) does not hide
     // a smaller one that does.
@@ -1098,45 +1090,10 @@ pub fn diagnose_with_progress(
             })
             .flatten()
     });
-    // The waterfall: each further effect is the candidate of most shrink
-    // that is significant against what the effects before it left (with
-    // the nominal found again under them), until none is.
-    let mut steps: Vec<(usize, Scored)> = Vec::new();
-    if let Some((ci, (alone, cleaned, fixed))) = &first {
-        steps.push((*ci, alone.clone()));
-        let (mut cur, mut fixed) = (cleaned.clone(), fixed.clone());
-        while steps.len() < MOST_EFFECTS {
-            let Some((_, left)) = steps.last() else { break };
-            // Within a tenth of the noise floor nothing is left to take.
-            if left.rms() <= NOTHING_LEFT_FACTOR * noise {
-                break;
-            }
-            progress(&format!("searching for effect {}", steps.len() + 1));
-            let mut next: Vec<(usize, Scored)> = CANDIDATES
-                .iter()
-                .enumerate()
-                .filter(|(cj, _)| steps.iter().all(|(ci, _)| ci != cj))
-                .map(|(cj, c)| (cj, score(&cur, &fixed, Some(c))))
-                .filter(|(_, with)| worthy(left.rms(), with.rms(), improvement(left, with).1))
-                .collect();
-            next.sort_by(|a, b| a.1.rms().total_cmp(&b.1.rms()));
-            let contenders: Vec<(usize, f64)> = next
-                .iter()
-                .map(|(cj, with)| (*cj, with.grid_value))
-                .collect();
-            let Some((cj, (scored, cleaned, kept))) =
-                best_backfitted(&cur, &fixed, &contenders, nominal, progress)
-            else {
-                break;
-            };
-            // A backfit that undoes the step's gain ends the waterfall.
-            if scored.rms() >= left.rms() {
-                break;
-            }
-            steps.push((cj, scored));
-            (cur, fixed) = (cleaned, kept);
-        }
-    }
+    let steps = match first {
+        Some(first) => waterfall(first, bar, nominal, progress),
+        None => Vec::new(),
+    };
     let after = steps.last().map(|(_, s)| s.clone());
     let left = after.as_ref().unwrap_or(&baseline);
     let gap_open = left.rms() > EXPLAINED_FACTOR * noise;
@@ -1175,28 +1132,7 @@ pub fn diagnose_with_progress(
     let verdict_shrink = after
         .as_ref()
         .map_or(0.0, |a| 1.0 - a.rms() / baseline.rms());
-    let candidates = ranked
-        .iter()
-        .map(|(ci, s, shrink, t)| {
-            let c = &CANDIDATES[*ci];
-            let mut params = std::collections::BTreeMap::new();
-            if c.grid.len() > 1 {
-                params.extend((c.grid_params)(c.grid_name, s.grid_value));
-            }
-            let linear = &s.theta[NOMINAL_CORRECTIONS.len()..];
-            params.extend(c.linear.iter().copied().zip(linear.iter().copied()));
-            CandidateScore {
-                effect: c.effect,
-                grid_value: s.grid_value,
-                heldout_rms_n: s.rms(),
-                shrink: *shrink,
-                paired_t: *t,
-                significant: significant(*shrink, *t),
-                by_phase: by_phase(s),
-                params,
-            }
-        })
-        .collect();
+    let candidates = candidate_scores(&ranked, &significant);
     Diagnosis {
         trials: data.len(),
         noise_floor_n: noise,
@@ -1224,6 +1160,98 @@ pub fn diagnose_with_progress(
         },
         skipped: None,
     }
+}
+
+/// Each candidate's report, in the order of its shrink alone.
+fn candidate_scores(
+    ranked: &[(usize, Scored, f64, f64)],
+    significant: &dyn Fn(f64, f64) -> bool,
+) -> Vec<CandidateScore> {
+    ranked
+        .iter()
+        .map(|(ci, s, shrink, t)| {
+            let c = &CANDIDATES[*ci];
+            let mut params = std::collections::BTreeMap::new();
+            if c.grid.len() > 1 {
+                params.extend((c.grid_params)(c.grid_name, s.grid_value));
+            }
+            let linear = &s.theta[NOMINAL_CORRECTIONS.len()..];
+            params.extend(c.linear.iter().copied().zip(linear.iter().copied()));
+            CandidateScore {
+                effect: c.effect,
+                grid_value: s.grid_value,
+                heldout_rms_n: s.rms(),
+                shrink: *shrink,
+                paired_t: *t,
+                significant: significant(*shrink, *t),
+                by_phase: by_phase(s),
+                params,
+            }
+        })
+        .collect()
+}
+
+/// What makes an effect significant: it shrinks the held-out error by
+/// [`MIN_SHRINK`], on nearly every withheld trial (paired t), and what it
+/// takes away is no less than half the noise floor in RMS — less than
+/// that the leftovers of the trials' spread can give as well.
+#[derive(Clone, Copy)]
+struct Bar {
+    noise_n: f64,
+}
+
+impl Bar {
+    fn worthy(self, before: f64, after: f64, t: f64) -> bool {
+        let shrink = 1.0 - after / before.max(1e-12);
+        let taken = (before * before - after * after).max(0.0).sqrt();
+        shrink >= MIN_SHRINK && t >= MIN_T && taken >= MIN_EFFECT_FLOORS * self.noise_n
+    }
+}
+
+/// The waterfall from the first effect: each further effect is the
+/// candidate of most shrink that is significant against what the effects
+/// before it left (with the nominal found again under them), until none
+/// is, a backfit undoes a step's gain, or [`MOST_EFFECTS`] are named.
+fn waterfall(
+    (ci, (alone, cleaned, fixed)): (usize, Backfitted<'static>),
+    bar: Bar,
+    nominal: Nominal,
+    progress: &mut dyn FnMut(&str),
+) -> Vec<(usize, Scored)> {
+    let mut steps = vec![(ci, alone)];
+    let (mut cur, mut fixed) = (cleaned, fixed);
+    while steps.len() < MOST_EFFECTS {
+        let Some((_, left)) = steps.last() else { break };
+        // Within a tenth of the noise floor nothing is left to take.
+        if left.rms() <= NOTHING_LEFT_FACTOR * bar.noise_n {
+            break;
+        }
+        progress(&format!("searching for effect {}", steps.len() + 1));
+        let mut next: Vec<(usize, Scored)> = CANDIDATES
+            .iter()
+            .enumerate()
+            .filter(|(cj, _)| steps.iter().all(|(ci, _)| ci != cj))
+            .map(|(cj, c)| (cj, score(&cur, &fixed, Some(c))))
+            .filter(|(_, with)| bar.worthy(left.rms(), with.rms(), improvement(left, with).1))
+            .collect();
+        next.sort_by(|a, b| a.1.rms().total_cmp(&b.1.rms()));
+        let contenders: Vec<(usize, f64)> = next
+            .iter()
+            .map(|(cj, with)| (*cj, with.grid_value))
+            .collect();
+        let Some((cj, (scored, cleaned, kept))) =
+            best_backfitted(&cur, &fixed, &contenders, nominal, progress)
+        else {
+            break;
+        };
+        // A backfit that undoes the step's gain ends the waterfall.
+        if scored.rms() >= left.rms() {
+            break;
+        }
+        steps.push((cj, scored));
+        (cur, fixed) = (cleaned, kept);
+    }
+    steps
 }
 
 /// Of `contenders` (candidate, grid value; best first), the one that
