@@ -19,6 +19,8 @@
 //! - reg 3: I1MUX\[7:5\], I2MUX\[4:2\], DRDYM\[1\], reserved 0
 
 #![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;

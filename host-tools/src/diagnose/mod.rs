@@ -1303,7 +1303,7 @@ fn best_backfitted<'c>(
 const MOST_EFFECTS: usize = 4;
 
 /// What an effect must take away, in RMS, in noise floors
-/// ([`diagnose_with_progress`]'s `worthy`).
+/// (`Bar::worthy`).
 pub const MIN_EFFECT_FLOORS: f64 = 0.5;
 
 /// Candidates tried with their backfit when none is significant without

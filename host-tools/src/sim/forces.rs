@@ -137,7 +137,7 @@ pub(super) struct Tent {
     /// Once the needle starts back after a rest: where it started and the
     /// force the rest held.
     from: Option<(f64, f64)>,
-    /// The force at the sample before.
+    /// The force the tent last left (the rest's hold).
     rest_force_n: f64,
 }
 
@@ -152,9 +152,22 @@ impl Tent {
         (p_m, l_m): (f64, f64),
         f_n: f64,
     ) -> f64 {
-        if protocol.tent_n_per_m <= 0.0 {
-            return f_n;
+        if protocol.tent_n_per_m > 0.0 {
+            self.pull(protocol, tissue, k, (p_m, l_m), f_n)
+        } else {
+            f_n
         }
+    }
+
+    /// [`Self::step`] with a tent.
+    fn pull(
+        &mut self,
+        protocol: &Protocol,
+        tissue: &TissueParams,
+        k: &Kinematics,
+        (p_m, l_m): (f64, f64),
+        f_n: f64,
+    ) -> f64 {
         let mut f = f_n;
         let vr = k.vr_mps;
         if vr <= -tissue.half_band_mps && self.rest_s >= 1.0 {

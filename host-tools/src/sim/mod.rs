@@ -497,8 +497,8 @@ pub fn simulate_trial_in(
         f += protocol.tare_n;
         prev_p = p;
         let x_counts = (x / sensor.encoder_m).round() * sensor.encoder_m;
-        // The load cell reads no more than its full scale: its replay says
-        // saturated there.
+        // The load cell reads no more than its full scale: the trial's
+        // replay says saturated there.
         let measured_n = (f + noise.sample(rng)).clamp(-full_scale_n, full_scale_n);
         trial.push(t, x_counts, measured_n);
     }

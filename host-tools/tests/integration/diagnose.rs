@@ -88,7 +88,7 @@ fn below_the_bar(out: &Value, effect: &str) -> bool {
 #[test]
 fn each_effect_and_none_is_named_with_a_real_shrink() {
     // (effect, least shrink, most gap left after it in noise floors: the
-    // issue's target is 1.5)
+    // target is 1.5)
     let cases = [
         ("none", 0.0, 1.5),
         ("viscoelasticity", 0.5, 1.5),

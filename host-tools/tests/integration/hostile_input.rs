@@ -142,7 +142,7 @@ fn a_full_disk_on_stdout_is_an_error_and_a_closed_pipe_a_quiet_end() {
 
 #[test]
 fn evaluate_rejects_rates_and_noises_it_cannot_simulate() {
-    // Rows 3, 7, 8: --rates-hz 1e9 grew to 24 GB; -500, 10 and 99.5 were
+    // --rates-hz 1e9 grew to 24 GB; -500, 10 and 99.5 were
     // accepted (99.5 silently as 100 Hz); 0 failed naming a temp file;
     // --noise-n -1 and NaN labelled tables "-1000 mN" and "NaN mN".
     for (flag, bad) in [

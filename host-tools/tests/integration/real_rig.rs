@@ -541,7 +541,7 @@ fn the_fitted_tissue_finds_every_puncture_in_its_window_and_no_worse_than_the_de
     }
 }
 
-/// The insert–dwell–withdraw case: relaxation (five times the
+/// The insert–dwell–withdraw case: relaxation (five times the
 /// standard branch, which holds and relaxes about a third of a newton
 /// through the dwell), the static band holding the tip's force through
 /// the dwell, the tissue dragged out as a tent, and each trial's tissue
