@@ -227,6 +227,61 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Pu
 pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport {
     let all: Vec<&TrialFit> = fits.iter().map(|(_, f)| f).collect();
     let col = |get: fn(&TrialFit) -> f64| all.iter().map(|t| get(t)).collect::<Vec<f64>>();
+    let stiffness_fit = stiffness_laws(&all);
+    let (cp, bp, insertion) =
+        split_by_speed(&all, |t| t.insertion, |t| (t.cp_n_per_m, t.bp_ns_per_m2));
+    let (cn, bn, withdrawal) =
+        split_by_speed(&all, |t| t.withdrawal, |t| (t.cn_n_per_m, t.bn_ns_per_m2));
+    let (relaxation, cutting) = relaxation_and_cutting(&all);
+    let drags: Vec<f64> = all
+        .iter()
+        .filter_map(|t| t.let_go_x_m.map(|x| t.contact_x_m - x))
+        .collect();
+    let let_go = (!drags.is_empty()).then(|| Estimate::of(&drags));
+    let dwell = dwell_summary(&all);
+    let layers = layer_summaries(&all);
+    FitReport {
+        trials: all.len(),
+        a1_n_per_m: Estimate::of(&col(|t| t.polynomial.p1)),
+        a2_n_per_m2: Estimate::of(&col(|t| t.polynomial.p2)),
+        rational_a_per_n: Estimate::of(&col(|t| t.rational.p1)),
+        rational_b_m_per_n: Estimate::of(&col(|t| t.rational.p2)),
+        stiffness_fit,
+        puncture_force_n: Estimate::of(&col(|t| t.puncture_force_n)),
+        puncture_depth_m: Estimate::of(&col(|t| t.puncture_depth_m)),
+        puncture_drop_to_n: Estimate::of(&col(|t| t.puncture_drop_to_n)),
+        puncture_drop_n: Estimate::of(&col(|t| t.puncture_force_n - t.puncture_drop_to_n)),
+        cutting_force_n: cutting,
+        cp_n_per_m: cp,
+        cn_n_per_m: cn,
+        bp_ns_per_m2: bp,
+        bn_ns_per_m2: bn,
+        insertion_friction: insertion,
+        withdrawal_friction: withdrawal,
+        dp_n_per_m: static_estimate(&all, |t| t.dp, true),
+        dn_n_per_m: static_estimate(&all, |t| t.dn, false),
+        relaxation,
+        let_go_before_contact_m: let_go,
+        dwell_relaxation: dwell,
+        layers,
+        noise_n: Estimate::of(&col(|t| t.noise_n)),
+        per_trial: fits
+            .iter()
+            .map(|(file, t)| TrialGeometry {
+                file: crate::trial::name_of(file),
+                contact_x_m: t.contact_x_m,
+                puncture_x_m: t.puncture_x_m,
+                puncture_force_n: t.puncture_force_n,
+                relaxed_surface_x_m: t.relaxed_x_m,
+            })
+            .collect(),
+        skipped,
+        puncture_detection: None,
+    }
+}
+
+/// How well each stiffness law fits the loading curves, and the better.
+fn stiffness_laws(all: &[&TrialFit]) -> StiffnessLaws {
     let stats = |fit: fn(&TrialFit) -> trial::StiffnessFit| {
         let (rms, _) = mean_sd(&all.iter().map(|t| fit(t).rms_n).collect::<Vec<_>>());
         let (r2, _) = mean_sd(&all.iter().map(|t| fit(t).r2).collect::<Vec<_>>());
@@ -235,15 +290,27 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
     let (poly_rms, poly_r2) = stats(|t| t.polynomial);
     let (rat_rms, rat_r2) = stats(|t| t.rational);
     // A NaN rms (a trial the rational law could not fit) is no win.
-    let better = if rat_rms < poly_rms && rational_mean_holds(&all) {
+    let better = if rat_rms < poly_rms && rational_mean_holds(all) {
         "rational"
     } else {
         "polynomial"
     };
-    let (cp, bp, insertion) =
-        split_by_speed(&all, |t| t.insertion, |t| (t.cp_n_per_m, t.bp_ns_per_m2));
-    let (cn, bn, withdrawal) =
-        split_by_speed(&all, |t| t.withdrawal, |t| (t.cn_n_per_m, t.bn_ns_per_m2));
+    StiffnessLaws {
+        polynomial: LawFit {
+            rms_n: poly_rms,
+            r2: poly_r2,
+        },
+        rational: LawFit {
+            rms_n: rat_rms,
+            r2: rat_r2,
+        },
+        better,
+    }
+}
+
+/// ρ and the cutting force, from the trials that place x_s3 where any do.
+fn relaxation_and_cutting(all: &[&TrialFit]) -> (Estimate, Estimate) {
+    let col = |get: fn(&TrialFit) -> f64| all.iter().map(|t| get(t)).collect::<Vec<f64>>();
     let identified: Vec<&TrialFit> = all
         .iter()
         .copied()
@@ -252,7 +319,7 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
     // Trials that place x_s3 (strokes in the cut track, a needle let go
     // inside the tissue) give ρ and the cutting
     // force; the others' cutting carries friction × (x_s3 − x_s1).
-    let (relaxation, cutting) = if identified.len() == all.len() {
+    if identified.len() == all.len() {
         (
             Estimate::of(&col(|t| t.relaxation)),
             Estimate::of(&col(|t| t.cutting_force_n)),
@@ -296,26 +363,29 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
                 ..Estimate::noting("confounded with friction × x_s3 (see relaxation)")
             },
         )
-    };
-    let drags: Vec<f64> = all
-        .iter()
-        .filter_map(|t| t.let_go_x_m.map(|x| t.contact_x_m - x))
-        .collect();
-    let let_go = (!drags.is_empty()).then(|| Estimate::of(&drags));
+    }
+}
+
+/// The relaxation read in the trials' dwells, if any has one.
+fn dwell_summary(all: &[&TrialFit]) -> Option<DwellSummary> {
     let dwells: Vec<_> = all.iter().filter_map(|t| t.dwell).collect();
     let over_dwells = |get: fn(&trial::DwellRelaxation) -> f64| {
         Estimate::of(&dwells.iter().map(get).collect::<Vec<_>>())
     };
-    let dwell = (!dwells.is_empty()).then(|| DwellSummary {
+    (!dwells.is_empty()).then(|| DwellSummary {
         trials: dwells.len(),
         duration_s: over_dwells(|d| d.duration_s),
         fraction: over_dwells(|d| d.fraction),
         tau_s: over_dwells(|d| d.tau_s),
         gain: over_dwells(|d| d.gain),
         fall_n: over_dwells(|d| d.fraction * d.start_level_n),
-    });
+    })
+}
+
+/// Each further layer's puncture, over the trials that reach it.
+fn layer_summaries(all: &[&TrialFit]) -> Vec<LayerSummary> {
     let most_layers = all.iter().map(|t| t.layers.len()).max().unwrap_or(0);
-    let layers = (0..most_layers)
+    (0..most_layers)
         .map(|k| {
             let of: Vec<_> = all.iter().filter_map(|t| t.layers.get(k)).collect();
             LayerSummary {
@@ -325,55 +395,7 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
                 drop_to_n: Estimate::of(&of.iter().map(|l| l.drop_to_n).collect::<Vec<_>>()),
             }
         })
-        .collect();
-    FitReport {
-        trials: all.len(),
-        a1_n_per_m: Estimate::of(&col(|t| t.polynomial.p1)),
-        a2_n_per_m2: Estimate::of(&col(|t| t.polynomial.p2)),
-        rational_a_per_n: Estimate::of(&col(|t| t.rational.p1)),
-        rational_b_m_per_n: Estimate::of(&col(|t| t.rational.p2)),
-        stiffness_fit: StiffnessLaws {
-            polynomial: LawFit {
-                rms_n: poly_rms,
-                r2: poly_r2,
-            },
-            rational: LawFit {
-                rms_n: rat_rms,
-                r2: rat_r2,
-            },
-            better,
-        },
-        puncture_force_n: Estimate::of(&col(|t| t.puncture_force_n)),
-        puncture_depth_m: Estimate::of(&col(|t| t.puncture_depth_m)),
-        puncture_drop_to_n: Estimate::of(&col(|t| t.puncture_drop_to_n)),
-        puncture_drop_n: Estimate::of(&col(|t| t.puncture_force_n - t.puncture_drop_to_n)),
-        cutting_force_n: cutting,
-        cp_n_per_m: cp,
-        cn_n_per_m: cn,
-        bp_ns_per_m2: bp,
-        bn_ns_per_m2: bn,
-        insertion_friction: insertion,
-        withdrawal_friction: withdrawal,
-        dp_n_per_m: static_estimate(&all, |t| t.dp, true),
-        dn_n_per_m: static_estimate(&all, |t| t.dn, false),
-        relaxation,
-        let_go_before_contact_m: let_go,
-        dwell_relaxation: dwell,
-        layers,
-        noise_n: Estimate::of(&col(|t| t.noise_n)),
-        per_trial: fits
-            .iter()
-            .map(|(file, t)| TrialGeometry {
-                file: crate::trial::name_of(file),
-                contact_x_m: t.contact_x_m,
-                puncture_x_m: t.puncture_x_m,
-                puncture_force_n: t.puncture_force_n,
-                relaxed_surface_x_m: t.relaxed_x_m,
-            })
-            .collect(),
-        skipped,
-        puncture_detection: None,
-    }
+        .collect()
 }
 
 /// Friction coefficients c and b of one direction. Trials with strokes
