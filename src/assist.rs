@@ -18,6 +18,7 @@
 //!   the puncture comes within a short overshoot.
 
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 use crate::insertion::{EventKind, Halt, HaltReason, Phase, Sample};
@@ -26,18 +27,7 @@ use crate::model::phase::PhaseState;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// A set of assist modes, one bit each.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    MaxSize,
-    postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct AssistModes(pub u8);
 
 impl AssistModes {
@@ -98,17 +88,7 @@ pub const fn target_depth_is_valid(depth: Nanometres) -> bool {
 }
 
 /// Assist configuration.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct AssistConfig {
     /// Modes in force.
     pub modes: AssistModes,

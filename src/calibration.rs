@@ -1,6 +1,8 @@
 //! Raw counts to physical units: load-cell tare and gain, encoder scale.
 
 use crate::units::{saturate_i32, MicroNewtons, Nanometres};
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Load-cell calibration: `force = (counts − tare) · gain`.
@@ -8,17 +10,7 @@ use serde::{Deserialize, Serialize};
 /// `gain_q16` is the gain in µN per ADC count in Q16.16 (resolution
 /// 1/65536 µN per count, range up to 32767 µN per count). The product is
 /// formed in `i64` and saturates at the [`MicroNewtons`] range.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct LoadCell {
     /// ADC counts at zero force.
     pub tare_counts: i32,
@@ -185,17 +177,7 @@ impl ZeroTracker {
 }
 
 /// Encoder scale: nanometres of needle travel per count.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct Encoder {
     /// Travel per count, nm (1000 for a 1 µm linear scale).
     pub nm_per_count: i32,

@@ -10,20 +10,11 @@ use crate::model::stiffness::Stiffness;
 use crate::model::ModelConfig;
 use crate::units::MicroNewtons;
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Configuration of the whole per-sample pipeline.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct DeviceConfig {
     /// Load-cell calibration.
     pub load_cell: LoadCell,
@@ -76,9 +67,7 @@ const MAX_DRIVE_NM_PER_S: i64 = 100_000_000;
 /// compile time for the on-device library, on the host for an upload — so
 /// the device itself never converts a float; an uploaded one is checked
 /// on the device by [`Self::check`], in integers.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct TissueModel {
     /// The force model.
     pub model: ModelConfig,
@@ -347,17 +336,7 @@ impl DeviceConfig {
 }
 
 /// Where the device's tissue model came from.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub enum TissueSource {
     /// The on-device library, by position.
     Library(u8),

@@ -1,21 +1,12 @@
 //! Fault flags: what went wrong, latched, reported in every status frame.
 
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// A set of faults, one bit each. Latched: once raised a bit stays set until
 /// reset, and any set bit keeps the halt line asserted.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Faults(pub u16);
 

@@ -4,22 +4,14 @@
 //! The core's own vocabulary: the model, the detectors and assist speak
 //! it, and the wire protocol carries it as it is.
 
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// Where the needle is in the insertion, as the device tracks it.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum Phase {
     /// Tip outside the tissue.
@@ -33,17 +25,7 @@ pub enum Phase {
 }
 
 /// What a detector saw.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum EventKind {
     /// The tip met the surface.
@@ -59,17 +41,7 @@ pub enum EventKind {
 }
 
 /// One processed sample.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Sample {
     /// Sample index since boot.
@@ -89,17 +61,7 @@ pub struct Sample {
 }
 
 /// A detected event.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Event {
     /// Sample index at which it was flagged.
@@ -115,17 +77,7 @@ pub struct Event {
 }
 
 /// Why the device asserted the halt line.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum HaltReason {
     /// A fault (see the status frame).
@@ -158,17 +110,7 @@ impl From<EventKind> for HaltReason {
 
 /// Sent when the halt line goes up: why, and where the robot should hold
 /// the tip (behind it when the device asks for a back-off).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Halt {
     /// Sample index at which the line went up.

@@ -22,6 +22,7 @@
 use heapless::Deque;
 use postcard::experimental::max_size::MaxSize;
 use postcard_schema::schema::{DataModelType, NamedType, NamedValue};
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 use crate::protocol::wire::varint_len;
@@ -31,15 +32,7 @@ use crate::units::{saturate_i32, Nanometres, NanometresPerSecond};
 pub const MAX_VELOCITY_WINDOW: usize = 32;
 
 /// Unwraps the wrapping encoder count into an `i32` count.
-#[derive(
-    Clone,
-    Debug,
-    Default,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, Schema, MaxSize)]
 pub struct EncoderTracker {
     last_raw: Option<u16>,
     total_counts: i32,
@@ -78,17 +71,7 @@ impl EncoderTracker {
 }
 
 /// Velocity estimator configuration.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct VelocityConfig {
     /// Sample rate, Hz.
     pub sample_rate_hz: u16,
@@ -111,7 +94,7 @@ pub struct VelocityState {
 /// Written out, as its [`MaxSize`] below: postcard-schema knows
 /// heapless's `Vec` but not its `Deque`, which serde writes as the same
 /// sequence.
-impl postcard_schema::Schema for VelocityState {
+impl Schema for VelocityState {
     const SCHEMA: &'static NamedType = &NamedType {
         name: "VelocityState",
         ty: &DataModelType::Struct(&[&NamedValue {

@@ -29,6 +29,8 @@
 //! log of records is [`Loaded::Invalid`]: the device runs the compiled
 //! default and says so in its config frame.
 
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 use crate::assist::AssistModes;
@@ -52,17 +54,7 @@ pub const MIN_ROOM: usize = MAX_RECORD;
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// What the device keeps across power cycles.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct Settings {
     /// Where the tissue came from.
     pub tissue: TissueSource,
@@ -107,17 +99,7 @@ impl Settings {
 }
 
 /// What a region held.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum Loaded {
     /// This board keeps no settings (the QEMU boards): the compiled

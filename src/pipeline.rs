@@ -11,6 +11,8 @@ use crate::model::phase::PhaseState;
 use crate::model::relax::RelaxState;
 use crate::model::{ModelConfig, ModelState};
 use crate::units::MicroNewtons;
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// What the sensors gave for one sample period.
@@ -23,15 +25,7 @@ pub struct RawSample {
 }
 
 /// Per-sample state of the pipeline.
-#[derive(
-    Clone,
-    Debug,
-    Default,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, Schema, MaxSize)]
 pub struct PipelineState {
     index: u32,
     encoder: EncoderTracker,

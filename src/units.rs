@@ -14,6 +14,7 @@
 //! calls them in the per-sample path.
 
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Saturate an `i64` intermediate into the `i32` range.
@@ -35,7 +36,7 @@ pub const fn saturate_i32(v: i64) -> i32 {
 macro_rules! quantity {
     ($(#[$doc:meta])* $name:ident, $per_si:expr, $si_fn:ident, $from_si:ident) => {
         $(#[$doc])*
-        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, MaxSize, postcard_schema::Schema)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, MaxSize, Schema)]
         #[cfg_attr(target_os = "none", derive(defmt::Format))]
         pub struct $name(pub i32);
 

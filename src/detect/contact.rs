@@ -16,6 +16,8 @@
 use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::faults::Faults;
 use crate::insertion::{Event, EventKind};
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Samples the force must stay above the threshold, advancing, for contact.
@@ -24,18 +26,7 @@ pub const CONTACT_CONFIRM_SAMPLES: u16 = 3;
 pub const NO_CONTACT_FAULT_SAMPLES: u16 = 32;
 
 /// Contact detector state.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct ContactState {
     touching_samples: u16,
     unexplained_samples: u16,

@@ -30,6 +30,8 @@
 use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::insertion::{Event, EventKind};
 use crate::units::{MicroNewtons, Nanometres};
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Samples over which a fall must come.
@@ -38,17 +40,7 @@ pub const SHARP_SAMPLES: usize = 3;
 pub const STRUCTURE_RISE_SAMPLES: u32 = 10;
 
 /// A fall waiting for the encoder to move on.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 struct Pending {
     event: Event,
     /// Position at the fall.
@@ -58,18 +50,7 @@ struct Pending {
 }
 
 /// Interior detector state.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct InteriorState {
     baseline: MicroNewtons,
     baseline_index: u32,

@@ -11,6 +11,7 @@
 //! meets its threshold, rising linearly to 1000 ‰ at twice the threshold.
 
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 pub mod contact;
@@ -81,9 +82,7 @@ const fn puncture_min_peak_n(p: &TissueParams) -> f64 {
 }
 
 /// Detector thresholds, derived from a tissue's parameters.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct DetectConfig {
     /// Force above which the tip is taken to touch the surface.
     pub contact_force: MicroNewtons,
@@ -177,18 +176,7 @@ impl DetectConfig {
 }
 
 /// Detector state.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct DetectState {
     /// Positions of the last two samples, newest first.
     previous_x: [Nanometres; 2],

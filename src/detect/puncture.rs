@@ -22,21 +22,12 @@ use super::{confidence_permille, event, DetectConfig, DetectInput};
 use crate::faults::Faults;
 use crate::insertion::{Event, EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres};
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Puncture detector state.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct PunctureState {
     /// The highest force while loading, leaking away by the confirming
     /// fall per fall window ([`fall_window_samples`]) once the force is below it:

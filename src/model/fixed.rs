@@ -15,52 +15,20 @@
 
 use crate::units::saturate_i32;
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// µN/nm in Q26: 1 N/m = 1e-3 µN/nm = 67 108.864 LSB.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    MaxSize,
-    postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct PerLengthQ26(pub i32);
 
 /// µN/nm² (stiffness) or µN·s/nm² (damping) in Q48: 1 N/m² is
 /// 2^48·1e-12 ≈ 281.47 LSB.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    MaxSize,
-    postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct PerLength2Q48(pub i32);
 
 /// A fraction 0–1 in Q16.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    MaxSize,
-    postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct FractionQ16(pub u32);
 
 /// LSB per N/m in [`PerLengthQ26`] (2^26 · 1e-3).

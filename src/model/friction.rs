@@ -24,12 +24,11 @@ use super::fixed::{affine_times, PerLength2Q48, PerLengthQ26};
 use super::params::TissueParams;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Karnopp coefficients in fixed point.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct Friction {
     /// C_p, µN/nm Q26.
     pub cp: PerLengthQ26,
@@ -48,18 +47,7 @@ pub struct Friction {
 }
 
 /// Friction state: the last sliding force.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct FrictionState {
     last_sliding: MicroNewtons,
 }

@@ -13,6 +13,7 @@
 //! error against it is bounded by the property tests in `tests/integration/model.rs`.
 
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 pub mod fixed;
@@ -32,9 +33,7 @@ use crate::insertion::Phase;
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
 /// The model's parameters in fixed point.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct ModelConfig {
     /// Capsule stiffness.
     pub stiffness: Stiffness,
@@ -47,18 +46,7 @@ pub struct ModelConfig {
 }
 
 /// Model state.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct ModelState {
     /// Karnopp memory.
     pub friction: FrictionState,

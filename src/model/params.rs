@@ -8,17 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Which stiffness law the capsule follows before puncture.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum StiffnessLaw {
     /// f = a1·x + a2·x² (paper eq. 4).

@@ -22,12 +22,11 @@ use super::fixed::FractionQ16;
 use crate::insertion::{EventKind, Phase};
 use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Phase machine configuration.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct PhaseConfig {
     /// Surface relaxation ρ.
     pub relaxation: FractionQ16,
@@ -39,17 +38,7 @@ pub struct PhaseConfig {
 }
 
 /// Phase and the surface positions found so far.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct PhaseState {
     /// Current phase.
     pub phase: Phase,

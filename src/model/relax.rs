@@ -33,6 +33,7 @@
 
 use micromath::F32Ext;
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 use super::fixed::FractionQ16;
@@ -50,18 +51,7 @@ pub const BRANCHES: usize = 2;
 pub const MOST_TAU_MS: u32 = 1_000_000;
 
 /// One branch: its gain and time constant.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    MaxSize,
-    postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct Branch {
     /// Share of the held force this branch relaxes away, 0..=1.
     pub gain: FractionQ16,
@@ -71,18 +61,7 @@ pub struct Branch {
 
 /// The tissue at rest: whether the needle holds the force it was applied
 /// with, and the relaxation spectrum of that force (all gains zero: none).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    MaxSize,
-    postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct Relaxation {
     /// The branches, in any order.
     pub branches: [Branch; BRANCHES],
@@ -97,18 +76,7 @@ pub struct Relaxation {
 
 /// Relaxation state: each branch's unrelaxed force and its decay factor
 /// for the rate it was computed at.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct RelaxState {
     /// The force the needle was held with since it came to rest in the
     /// tissue (while the first samples are averaged, their running mean);

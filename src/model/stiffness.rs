@@ -5,12 +5,11 @@ use super::fixed::{affine_times, round_i64, PerLength2Q48, PerLengthQ26};
 use super::params::{StiffnessLaw, TissueParams};
 use crate::units::{saturate_i32, MicroNewtons, Nanometres};
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 /// Stiffness law in fixed point.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize, Schema)]
 pub enum Stiffness {
     /// f = a1·d + a2·d², computed as (a1 + a2·d)·d.
     Polynomial {

@@ -20,6 +20,7 @@
 //! bench's liver insertion at its noise about 4 (the ADC noise sets it).
 
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 use super::wire::varint_len;
@@ -108,7 +109,7 @@ pub struct BatchWriter {
 }
 
 /// A batch as it goes on the wire.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema)]
 pub struct Batch<'a> {
     /// Index of the batch's first sample.
     pub first_index: u32,

@@ -15,6 +15,7 @@
 //! nothing.
 
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 use super::wire::{encoded_bound, varint_len, DecodeError};
@@ -24,9 +25,7 @@ use crate::config::TissueModel;
 use crate::units::{MicroNewtons, Nanometres};
 
 /// What the host can ask.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize, Schema)]
 pub enum Command {
     /// Make the load cell's present reading its zero (the mean of the last
     /// quarter second or so). Refused with the needle in tissue, or with
@@ -64,9 +63,7 @@ pub enum Command {
 }
 
 /// A command as it goes on the wire.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize, postcard_schema::Schema,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, MaxSize, Schema)]
 pub struct CommandFrame {
     /// Sequence number (see the module's docs).
     pub seq: u32,
@@ -81,7 +78,7 @@ pub type ReplyText = heapless::String<REPLY_TEXT_BYTES>;
 pub const REPLY_TEXT_BYTES: usize = 48;
 
 /// Why the device refused a command.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, postcard_schema::Schema)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, Schema)]
 pub enum CommandError {
     /// The frame was not one: bad COBS, bad CRC (corrupted, truncated, or
     /// another protocol version), or longer than any command.
@@ -168,16 +165,7 @@ pub fn text(s: &str) -> ReplyText {
 }
 
 /// The device's answer to one command frame.
-#[derive(
-    Clone,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct Reply {
     /// The command's sequence number; 0 when the frame was too damaged to
     /// read one.

@@ -27,6 +27,7 @@ mod golden;
 pub mod wire;
 
 use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 pub use self::batch::Batch;
@@ -64,17 +65,7 @@ pub const SCHEMA_PATH: &str = "needle-holder/6";
 pub const STATUS_PERIOD_SAMPLES: u32 = 250;
 
 /// Sent once at boot: what the stream is.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Header {
     /// [`PROTOCOL_VERSION`] of the sender.
@@ -98,17 +89,7 @@ impl Header {
 }
 
 /// Heartbeat with counters.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Status {
     /// [`PROTOCOL_VERSION`] again, so a host that missed the header can check.
@@ -138,18 +119,7 @@ pub struct Status {
 /// What a board counts below the core, since boot: zero on a board that
 /// has neither (the QEMU boards, whose converter is a replay and whose
 /// link cannot err).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct BoardCounters {
     /// Conversions whose data-ready fell but that were never read (the
@@ -164,17 +134,7 @@ pub struct BoardCounters {
 /// What the board found when asked to test itself
 /// ([`Command::SelfTest`]): what a person bringing it up would check with
 /// a probe, from the device's side.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct SelfTest {
     /// The board's own findings.
@@ -188,18 +148,7 @@ pub struct SelfTest {
 }
 
 /// What only the board can look at for a [`SelfTest`].
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct BoardFindings {
     /// The converter's configuration registers read back now, and as
@@ -223,17 +172,7 @@ pub struct BoardFindings {
 /// header, after every change, on request, and now and then for a host
 /// that joined late. The same configuration always gives the same bytes,
 /// and their hash seeds every batch's check ([`batch::BatchCheck::seed`]).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 pub struct ConfigFrame {
     /// Where the tissue model came from.
     pub tissue: TissueSource,
@@ -246,14 +185,7 @@ pub struct ConfigFrame {
 
 /// The pipeline's state before sample `next_index`: a host that lost
 /// frames, or joined late, continues from here.
-#[derive(
-    Clone,
-    Debug,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Debug, Serialize, Deserialize, Schema, MaxSize)]
 pub struct Snapshot {
     /// The next sample's index.
     pub next_index: u32,
@@ -262,14 +194,7 @@ pub struct Snapshot {
 }
 
 /// Everything the device sends.
-#[derive(
-    Clone,
-    Debug,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Debug, Serialize, Deserialize, Schema, MaxSize)]
 pub enum Frame<'a> {
     /// Stream header.
     Header(Header),

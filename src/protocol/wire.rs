@@ -14,6 +14,8 @@
 //! 2 frames had no implied byte: the host tells the versions apart by
 //! which check a frame passes.
 
+use postcard::experimental::max_size::MaxSize;
+use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
 use super::PROTOCOL_VERSION;
@@ -88,8 +90,8 @@ impl<const N: usize> Default for Encoder<N> {
 }
 
 /// Bytes postcard's varint takes for a length or count of at most
-/// `max_n`, for the [`MaxSize`](postcard::experimental::max_size::MaxSize)
-/// written out for types postcard knows no bound of (its own is private).
+/// `max_n`, for the [`MaxSize`] written out for types postcard knows no
+/// bound of (its own is private).
 pub const fn varint_len(max_n: usize) -> usize {
     let mut bytes = 1;
     let mut rest = max_n >> 7;
@@ -202,17 +204,7 @@ impl postcard::ser_flavors::Flavor for WireFlavor<'_> {
 }
 
 /// Why a received frame was refused.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    postcard_schema::Schema,
-    postcard::experimental::max_size::MaxSize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema, MaxSize)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum DecodeError {
     /// Not valid COBS, or longer than any message.
