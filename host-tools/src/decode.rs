@@ -777,7 +777,7 @@ pub fn describe(frame: &Message, rate_hz: Option<u16>) -> String {
     match frame {
         // The schema key from protocol 6 on (read as zeros before).
         Message::Header(h) if h.protocol_version >= 6 => {
-            let key: String = h.schema_key.iter().map(|b| format!("{b:02x}")).collect();
+            let key = crate::frames::hex(&h.schema_key);
             format!(
                 "header  protocol {}, schema {key}, {} Hz",
                 h.protocol_version, h.sample_rate_hz

@@ -228,7 +228,8 @@ const NEWER_VERSIONS: u16 = 16;
 
 impl std::error::Error for VersionMismatch {}
 
-fn hex(bytes: &[u8]) -> String {
+/// A schema key (or any bytes) as lowercase hex, as `needle` prints it.
+pub fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 

@@ -215,11 +215,11 @@ impl Walls {
         events: &mut Vec<TruthEvent>,
         at: (f64, f64, f64),
     ) {
+        let k_v = effects.iter().find_map(|e| match *e {
+            Effect::InternalStructures { k_n_per_m, .. } => Some(k_n_per_m),
+            _ => None,
+        });
         for (k, &(depth, rupture)) in walls.iter().enumerate() {
-            let k_v = effects.iter().find_map(|e| match *e {
-                Effect::InternalStructures { k_n_per_m, .. } => Some(k_n_per_m),
-                _ => None,
-            });
             if self.ruptured[k] || p_m <= depth {
                 continue;
             }

@@ -459,7 +459,7 @@ fn a_capture_of_another_schema_under_this_version_is_refused_naming_both_keys() 
     let cap = dir.path().join("other.bin");
     std::fs::write(&cap, bytes).unwrap();
     let err = refused(&["decode", cap.to_str().unwrap()]);
-    let ours: String = SCHEMA_KEY.iter().map(|b| format!("{b:02x}")).collect();
+    let ours = host_tools::frames::hex(&SCHEMA_KEY);
     assert!(err.contains("abababababababab"), "{err}");
     assert!(err.contains(&ours), "{err}");
 }
