@@ -1488,11 +1488,21 @@ fn a_decode_stopped_by_a_signal_writes_whole_rows_and_says_so() {
         .status()
         .unwrap()
         .success());
-    // The decode sees the signal once its read returns.
-    let _ = pipe.write_all(&stream[half..half + 4096]);
-    std::thread::sleep(std::time::Duration::from_millis(300));
-    let out = child.wait_with_output().unwrap();
+    // The decode sees the signal once a read returns, and its handler
+    // runs on a thread of its own, which a loaded machine can schedule
+    // after that read: more of the stream follows, a block at a time,
+    // until the decode has ended (running out of stream first is an end
+    // of input, not a signal, and fails below).
+    let mut child = child;
+    for block in stream[half..].chunks(4096) {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        let _ = pipe.write_all(block);
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
     drop(pipe);
+    let out = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
     assert!(err.contains("stopped by a signal"), "{err}");
