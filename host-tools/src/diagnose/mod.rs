@@ -40,9 +40,8 @@ use serde_json::Value;
 use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram, PerTrial};
 use self::prepare::{prepare, Prepared, DWELL, LOADING, PHASES, WITHDRAWAL};
-use crate::fit::fit_trial;
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
-use crate::fit::TrialFit;
+use crate::fit::{fit_trial, unloaded_zero_n, TrialFit};
 use crate::trial::Trial;
 
 /// Least held-out shrink that can name an effect.
@@ -624,7 +623,13 @@ pub fn load_reporting(
     let mut trials = Vec::new();
     let (dataset, unreadable) = crate::trial::read_dataset(dir, "diagnose")?;
     let mut skipped: Vec<Value> = unreadable.iter().map(|u| u.to_json()).collect();
-    for (file, trial) in dataset {
+    for (file, mut trial) in dataset {
+        // Each trial's own tare, as a per-trial nuisance like the rest of
+        // its spread: a load cell zeroed a few mN off reads that offset
+        // through the whole trial, which no tissue effect is.
+        if let Some(zero_n) = unloaded_zero_n(&trial) {
+            trial.f_n.iter_mut().for_each(|f| *f -= zero_n);
+        }
         match fit_trial(&trial) {
             Ok(fit) => trials.push((file, trial, fit)),
             Err(e) => {

@@ -19,7 +19,7 @@ use self::report::{mean_sd, AtSpeeds, Bound, DwellSummary, LawFit, LayerSummary}
 pub use self::report::{Estimate, FitReport};
 use self::report::{PunctureMargins, StiffnessLaws, TrialGeometry};
 pub use self::tissue::FittedTissue;
-pub use self::trial::{fit_trial, TrialFit, RELAXATION_PRIOR};
+pub use self::trial::{fit_trial, unloaded_zero_n, TrialFit, RELAXATION_PRIOR};
 use crate::trial::Trial;
 
 #[derive(Debug, clap::Args)]

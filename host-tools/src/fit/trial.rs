@@ -230,6 +230,19 @@ fn loading_samples(f: &[f64], ip: usize, noise_n: f64) -> usize {
     f[..ip].iter().rev().take_while(|&&fj| fj > thr).count()
 }
 
+/// What the load cell reads with nothing on the needle, when a trial's
+/// tare left an offset: the median of the first half of what comes
+/// before the loading rise into the puncture (the needle in air, clear of
+/// the loading curve's toe). `None` without a puncture or with fewer
+/// than 10 such samples.
+pub fn unloaded_zero_n(trial: &Trial) -> Option<f64> {
+    let f = &trial.f_n;
+    let noise_n = noise(f);
+    let (ip, _) = find_puncture(f, &trial.x_m, noise_n)?;
+    let before = (ip - loading_samples(f, ip, noise_n)) / 2;
+    (before >= 10).then(|| median(f[..before].to_vec()))
+}
+
 /// Gauss–Newton on f = d/(a·d + b), d = x − x_s1, in force space, over
 /// a, b and the contact point together: the linearised fit of d/f weighs
 /// the noisy small forces too much, and the quadratic's root is not this
