@@ -1277,7 +1277,7 @@ mod tests {
         let mut at: Vec<(f64, f64)> = Vec::new();
         let mut x: f64 = 0.0;
         // In air, then the capsule (liver 1's curve) to 2.3 N.
-        while at.last().map_or(true, |s| s.1 < 2.3) {
+        while at.last().is_none_or(|s| s.1 < 2.3) {
             let u = (x - contact_m).max(0.0);
             at.push((x, 48.0 * u + 5200.0 * u * u));
             x += v_mps / rate;
