@@ -314,9 +314,21 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let mut bounds: Vec<usize> = jumps.iter().map(|j| j.index).collect();
     let least_rest = k.max((LEAST_STOP_S / dt).round() as usize);
     let rests = rests(x, least_rest, step_m);
-    for edge in rests.iter().flat_map(|r| [r.start, r.end]) {
-        if edge > 0 && edge < n && !bounds.contains(&edge) {
-            bounds.push(edge);
+    // A rest's end just after a jump is the jump's: a stage setting off
+    // at speed can move less than an encoder step by the first sample the
+    // jump places after it, and that sample slides with the samples after
+    // it, not at rest as a one-sample run of its own would have it. A
+    // rest's start stays where the encoder puts it: a needle within half
+    // a step of where it stops has stopped.
+    for r in &rests {
+        let set_off = jumps.iter().any(|j| j.index + 1 == r.end);
+        for edge in [Some(r.start), (!set_off).then_some(r.end)]
+            .into_iter()
+            .flatten()
+        {
+            if edge > 0 && edge < n && !bounds.contains(&edge) {
+                bounds.push(edge);
+            }
         }
     }
     bounds.sort_unstable();
@@ -615,6 +627,41 @@ mod tests {
         assert!(settled.contains(&(first_moved - 1)), "{settled:?}");
         assert!(v.uncertain.iter().all(|u| u.1 < 0.0 && u.0 < first_moved));
         assert!(settled.iter().all(|&i| i + 5 >= first_moved), "{settled:?}");
+    }
+
+    #[test]
+    fn a_start_at_speed_under_one_encoder_step_slides_from_the_jump() {
+        // 200 Hz, 1 µm encoder: a creep in at a count a sample, at rest,
+        // then off at 4 mm/s 0.1 ms before a sample, which reads the
+        // rest's position (0.4 µm moved) though the force law has flipped
+        // there. The jump is placed before that sample, so it slides.
+        let dt = 0.005;
+        let n = 100;
+        let start_s = 50.0 * dt - 1e-4;
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let x_m: Vec<f64> = t_s
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| {
+                let creep_m = 1e-6 * 20usize.saturating_sub(i) as f64;
+                ((0.03 - creep_m - 0.004 * (t - start_s).max(0.0)) * 1e6).round() * 1e-6
+            })
+            .collect();
+        assert_eq!(x_m[50], x_m[49]);
+        let trial = Trial {
+            f_n: vec![0.0; n],
+            x_m,
+            t_s,
+        };
+        let v = needle_velocity(&trial);
+        let jump = v
+            .jumps
+            .iter()
+            .find(|j| j.index.abs_diff(50) <= 1)
+            .unwrap_or_else(|| panic!("{:?}", v.jumps));
+        assert_eq!(jump.index, 50, "{jump:?}");
+        assert!(v.v_mps[50] < -0.003, "{}", v.v_mps[50]);
+        assert_eq!(v.v_mps[49], 0.0);
     }
 
     #[test]
