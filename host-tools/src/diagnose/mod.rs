@@ -41,7 +41,7 @@ use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram, PerTrial};
 use self::prepare::{prepare, Prepared, DWELL, LOADING, PHASES, WITHDRAWAL};
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
-use crate::fit::{fit_trial, unloaded_zero_n, TrialFit};
+use crate::fit::{fit_trial, tare, TrialFit};
 use crate::trial::Trial;
 
 /// Least held-out shrink that can name an effect.
@@ -75,7 +75,8 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     pub device_model: bool,
     /// Write every sample's nominal model and residual as CSV here
-    /// (`file,t_s,x_m,f_n,model_n,residual_n,phase`).
+    /// (`file,t_s,x_m,f_n,model_n,residual_n,phase`; `f_n` less the
+    /// trial's tare, which `needle fit` reports as `per_trial[].tare_n`).
     #[arg(long)]
     pub residuals: Option<PathBuf>,
 }
@@ -624,14 +625,11 @@ pub fn load_reporting(
     let (dataset, unreadable) = crate::trial::read_dataset(dir, "diagnose")?;
     let mut skipped: Vec<Value> = unreadable.iter().map(|u| u.to_json()).collect();
     for (file, mut trial) in dataset {
-        // Each trial's own tare, as a per-trial nuisance like the rest of
-        // its spread: a load cell zeroed a few mN off reads that offset
-        // through the whole trial, which no tissue effect is.
-        if let Some(zero_n) = unloaded_zero_n(&trial) {
-            trial.f_n.iter_mut().for_each(|f| *f -= zero_n);
-        }
+        // Each trial's own tare, a per-trial nuisance like the rest of its
+        // spread.
+        let tare_n = tare(&mut trial);
         match fit_trial(&trial) {
-            Ok(fit) => trials.push((file, trial, fit)),
+            Ok(fit) => trials.push((file, trial, TrialFit { tare_n, ..fit })),
             Err(e) => {
                 crate::note!(
                     "needle diagnose: {}: cannot find its geometry: {e:#} (left out)",
@@ -1491,6 +1489,10 @@ fn with_device_model(
     let mut kept = Vec::new();
     for mut p in data {
         let path = dir.join(&p.file);
+        // The device's model is of the force as it measured it: the
+        // host's tare is not the device's.
+        let tare_n = p.geometry.tare_n;
+        p.trial.f_n.iter_mut().for_each(|f| *f += tare_n);
         let used = crate::trial::read_column_for_analysis(&path, "model_n").and_then(|model_n| {
             p.use_nominal(model_n)
                 .with_context(|| format!("{}: `model_n`", path.display()))

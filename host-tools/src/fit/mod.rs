@@ -19,7 +19,7 @@ use self::report::{mean_sd, AtSpeeds, Bound, DwellSummary, LawFit, LayerSummary}
 pub use self::report::{Estimate, FitReport};
 use self::report::{PunctureMargins, StiffnessLaws, TrialGeometry};
 pub use self::tissue::FittedTissue;
-pub use self::trial::{fit_trial, unloaded_zero_n, TrialFit, RELAXATION_PRIOR};
+pub use self::trial::{fit_trial, tare, TrialFit, RELAXATION_PRIOR};
 use crate::trial::Trial;
 
 #[derive(Debug, clap::Args)]
@@ -108,7 +108,8 @@ fn static_estimate(
 /// Fit every trial of a dataset and aggregate. Files that cannot be
 /// fitted are reported in `skipped` and left out.
 pub fn fit_dataset(dir: &Path) -> Result<FitReport> {
-    let (trials, unreadable) = crate::trial::read_dataset(dir, "fit")?;
+    let (mut trials, unreadable) = crate::trial::read_dataset(dir, "fit")?;
+    let tares: Vec<f64> = trials.iter_mut().map(|(_, t)| tare(t)).collect();
     let total = trials.len() + unreadable.len();
     let mut fits = Vec::new();
     let mut skipped: Vec<Value> = unreadable
@@ -126,7 +127,13 @@ pub fn fit_dataset(dir: &Path) -> Result<FitReport> {
             )
         });
         match fit_trial(trial).with_context(|| format!("{}: cannot fit", file.display())) {
-            Ok(fit) => fits.push((file.clone(), fit)),
+            Ok(fit) => fits.push((
+                file.clone(),
+                TrialFit {
+                    tare_n: tares[k],
+                    ..fit
+                },
+            )),
             Err(err) => {
                 crate::note!("needle fit: {err:#} (left out)");
                 skipped.push(crate::trial::skipped(file, &format!("{err:#}")));
@@ -273,6 +280,7 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
                 puncture_x_m: t.puncture_x_m,
                 puncture_force_n: t.puncture_force_n,
                 relaxed_surface_x_m: t.relaxed_x_m,
+                tare_n: t.tare_n,
             })
             .collect(),
         skipped,

@@ -315,11 +315,13 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let least_rest = k.max((LEAST_STOP_S / dt).round() as usize);
     let rests = rests(x, least_rest, step_m);
     // A rest's end just after a jump is the jump's: a stage setting off
-    // at speed can move less than an encoder step by the first sample the
-    // jump places after it, and that sample slides with the samples after
-    // it, not at rest as a one-sample run of its own would have it. A
-    // rest's start stays where the encoder puts it: a needle within half
-    // a step of where it stops has stopped.
+    // at speed can move less than half an encoder step by the first
+    // sample the jump places after it, and that sample slides with the
+    // samples after it, not at rest as a one-sample run of its own would
+    // have it. One sample at most: the slowest jump read (`least_mps`,
+    // five steps a window) covers half a step in a tenth of a window,
+    // under a sample up to 1 kHz. A rest's start stays where the encoder
+    // puts it: a needle within half a step of where it stops has stopped.
     for r in &rests {
         let set_off = jumps.iter().any(|j| j.index + 1 == r.end);
         for edge in [Some(r.start), (!set_off).then_some(r.end)]

@@ -169,6 +169,9 @@ pub struct TrialGeometry {
     pub puncture_x_m: f64,
     pub puncture_force_n: f64,
     pub relaxed_surface_x_m: f64,
+    /// The offset taken off the trial's force before fitting, N (its
+    /// residual tare: the median force in air before the loading rise).
+    pub tare_n: f64,
 }
 
 /// How far to trust the puncture detector with the fitted tissue, on the

@@ -74,6 +74,9 @@ pub struct TrialFit {
     pub dwell: Option<DwellRelaxation>,
     /// Membranes punctured after the capsule, in order.
     pub layers: Vec<LayerPuncture>,
+    /// The offset [`tare`] took off the trial's force before it was
+    /// fitted, N (0 where it was fitted as recorded).
+    pub tare_n: f64,
 }
 
 /// A friction coefficient per length seen at one speed.
@@ -182,8 +185,8 @@ fn noise(f: &[f64]) -> f64 {
 }
 
 /// The capsule puncture: the first sharp fall (below 60 % of the running
-/// peak, or by a quarter of it within three samples; the peak well above
-/// noise) with the needle further in than at the
+/// peak, or by a tenth of it and twenty noise sd within three samples;
+/// the peak well above noise) with the needle further in than at the
 /// peak — a force that falls at rest (a tissue relaxing through a dwell,
 /// cutting stopping with the needle) is no puncture, and neither is a
 /// spike without a loading curve before it (a holder's inertia as the
@@ -233,14 +236,32 @@ fn loading_samples(f: &[f64], ip: usize, noise_n: f64) -> usize {
 /// What the load cell reads with nothing on the needle, when a trial's
 /// tare left an offset: the median of the first half of what comes
 /// before the loading rise into the puncture (the needle in air, clear of
-/// the loading curve's toe). `None` without a puncture or with fewer
-/// than 10 such samples.
+/// the loading curve's toe). The rise is found above the median of the
+/// first 20 samples, so an offset larger than the rise's threshold does
+/// not pass for loading. `None` without a puncture or with fewer than 10
+/// such samples.
 pub fn unloaded_zero_n(trial: &Trial) -> Option<f64> {
     let f = &trial.f_n;
-    let noise_n = noise(f);
-    let (ip, _) = find_puncture(f, &trial.x_m, noise_n)?;
-    let before = (ip - loading_samples(f, ip, noise_n)) / 2;
+    let first_n = median(f[..f.len().min(20)].to_vec());
+    let above: Vec<f64> = f.iter().map(|v| v - first_n).collect();
+    let noise_n = noise(&above);
+    let (ip, _) = find_puncture(&above, &trial.x_m, noise_n)?;
+    let before = (ip - loading_samples(&above, ip, noise_n)) / 2;
     (before >= 10).then(|| median(f[..before].to_vec()))
+}
+
+/// Take a trial's own tare off its force ([`unloaded_zero_n`]): a load
+/// cell zeroed a few mN off reads that offset through the whole trial, in
+/// air before and after as in the tissue, which no tissue does. Returns
+/// the offset taken off, N (0 where none is found).
+pub fn tare(trial: &mut Trial) -> f64 {
+    match unloaded_zero_n(trial).filter(|z| z.is_finite()) {
+        Some(zero_n) => {
+            trial.f_n.iter_mut().for_each(|f| *f -= zero_n);
+            zero_n
+        }
+        None => 0.0,
+    }
 }
 
 /// Gauss–Newton on f = d/(a·d + b), d = x − x_s1, in force space, over
@@ -471,6 +492,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         let_go_snapped: friction.let_go_snapped,
         dwell,
         layers: layers_after(trial, &v, ip, noise_n),
+        tare_n: 0.0,
     })
 }
 
@@ -673,10 +695,12 @@ fn static_band(
         // speed brings its whole sliding force there, cutting at the
         // front included; one easing to rest only what the sliding law's
         // slow end leaves. A hold clearly under it is the band's clamp.
-        let Some(j) = (k..i).rev().find(|&j| (x[j] - x[i]).abs() > 1e-6) else {
+        let Some(j) = (k..i).rev().find(|&j| (x[j] - x[i]).abs() > LEFT_REST_M) else {
             continue;
         };
-        let sliding = f[j];
+        // Three samples' median: one is a braking holder's spike as
+        // easily as the tissue's force.
+        let sliding = median(f[j.saturating_sub(2).max(k)..=j].to_vec());
         // A real stop, not the turning point of an oscillation.
         let end = (i + (0.2 * rate) as usize).min(trial.len());
         if end - i < (0.1 * rate) as usize || v[i..end].iter().any(|u| u.abs() >= REST_MPS) {
@@ -684,8 +708,13 @@ fn static_band(
         }
         let window = &f[i..end];
         let held = window.iter().sum::<f64>() / window.len().max(1) as f64;
-        // Clamped: the tissue holds clearly less than it slid with.
-        let clamped = sliding.abs() - held.abs() > 5.0 * noise_n + 0.1 * sliding.abs();
+        // Clamped: the tissue holds clearly less than it slid with, on
+        // the side it slid (a force of the other sign says nothing).
+        let side = v[k].signum();
+        if side * sliding <= 0.0 {
+            continue;
+        }
+        let clamped = side * (sliding - held) > 5.0 * noise_n + 0.1 * sliding.abs();
         let entry = (held / l, clamped);
         if v[k] > 0.0 {
             dp = stronger(dp, entry, 1.0);
@@ -1198,6 +1227,10 @@ fn layers_after(trial: &Trial, v: &[f64], ip: usize, noise_n: f64) -> Vec<LayerP
     layers
 }
 
+/// How far from its rest position a needle has left it: half a count of
+/// the finest encoder (1 µm), so that one count is clear of rounding.
+const LEFT_REST_M: f64 = 5e-7;
+
 /// Of two static-friction readings, the one that says most: a clamped one
 /// over a bound, then the larger on `sign`'s side.
 fn stronger(kept: Option<Held>, new: Held, sign: f64) -> Option<Held> {
@@ -1303,6 +1336,24 @@ mod tests {
         );
     }
 
+    /// A load cell zeroed 0.1 N high, more than the 46 mN above which
+    /// liver 1's rise counts as loading: the offset is found and taken
+    /// off, the air before the rise not taken for loading curve.
+    #[test]
+    fn a_tare_above_the_loading_threshold_is_found() {
+        let mut trial = liver();
+        let clean = fit_trial(&trial).unwrap();
+        trial.f_n.iter_mut().for_each(|f| *f += 0.1);
+        let taken_n = tare(&mut trial);
+        assert!((taken_n - 0.1).abs() < 0.002, "{taken_n}");
+        let fit = fit_trial(&trial).unwrap();
+        assert!(
+            (fit.contact_x_m - clean.contact_x_m).abs() < 2e-4,
+            "{}",
+            fit.contact_x_m
+        );
+    }
+
     #[test]
     fn a_spike_as_the_drive_sets_off_is_no_puncture() {
         // A rigid holder's inertia: one sample of 0.3 N as the needle
@@ -1318,9 +1369,9 @@ mod tests {
 
     /// The paper's friction, C = 0: sliding force is all damping. A stroke
     /// that eases to rest back at a depth already cut brings ~0 N into the
-    /// stop and holds it; that is no clamp of the band at 0 N/m. The
-    /// stop at the cutting front (0.5 N of cutting, 0.55 N held under a
-    /// 0.9 N band) bounds the band from below.
+    /// stop and holds it; that is no clamp of the band at 0 N/m, either
+    /// way. The stop at the cutting front (0.5 N of cutting and 0.05 N of
+    /// damping carried in, and held) bounds the band from below.
     #[test]
     fn a_stroke_easing_to_rest_on_damping_alone_is_no_clamp() {
         let (rate, b, relaxed_m, cutting_n) = (500.0, 900.0, 0.01, 0.5);
@@ -1355,9 +1406,10 @@ mod tests {
             f_n: at.iter().map(|s| s.1).collect(),
         };
         let every: Vec<usize> = (0..n).collect();
-        let (dp, _) = static_band(&trial, &velocity(&trial), (&every, 1), relaxed_m, 0.002);
+        let (dp, dn) = static_band(&trial, &velocity(&trial), (&every, 1), relaxed_m, 0.002);
         let (per_m, clamped) = dp.unwrap();
         assert!(!clamped, "{per_m} N/m read as a clamp");
         assert!((per_m - carried_n / 0.03).abs() < 0.5, "{per_m} N/m");
+        assert!(dn.is_none_or(|d| !d.1), "{dn:?}");
     }
 }

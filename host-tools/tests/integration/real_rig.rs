@@ -412,7 +412,7 @@ const SNAPSHOT: [(&str, &str, &str); 9] = [
     ("depth_dependent_cutting", "none", "none"),
     ("holder_inertia", "none", "none"),
     ("sensor_drift", "sensor_drift", "sensor_drift"),
-    ("tissue_motion", "tissue_motion", "unexplained"),
+    ("tissue_motion", "tissue_motion", "tissue_motion"),
 ];
 
 #[test]
