@@ -10,6 +10,10 @@ use serde_json::Value;
 #[derive(Clone, Debug, Serialize)]
 pub struct Diagnosis {
     pub trials: usize,
+    /// What was taken off each trial's force before it was diagnosed, N,
+    /// by file: its tare, the median force in air before the loading
+    /// rise (0 with `--device-model`, whose force is the device's own).
+    pub tare_n: BTreeMap<String, f64>,
     /// The sensor's noise, the trials' mean (N).
     pub noise_floor_n: f64,
     /// The nominal with its corrections, each trial's spread its own.

@@ -1057,6 +1057,10 @@ pub fn diagnose_with_progress(
     progress: &mut dyn FnMut(&str),
 ) -> Diagnosis {
     progress("scoring the baseline and every candidate on withheld trials");
+    let tare_n = data
+        .iter()
+        .map(|p| (p.file.clone(), p.geometry.tare_n))
+        .collect();
     let (data, baseline) = fitted_and_baseline(data.to_vec());
     let data = &data;
     let mut ranked: Vec<(usize, Scored, f64, f64)> = CANDIDATES
@@ -1138,6 +1142,7 @@ pub fn diagnose_with_progress(
     let candidates = candidate_scores(&ranked, &significant);
     Diagnosis {
         trials: data.len(),
+        tare_n,
         noise_floor_n: noise,
         baseline: Baseline {
             heldout_rms_n: baseline.rms(),
@@ -1491,7 +1496,7 @@ fn with_device_model(
         let path = dir.join(&p.file);
         // The device's model is of the force as it measured it: the
         // host's tare is not the device's.
-        let tare_n = p.geometry.tare_n;
+        let tare_n = std::mem::take(&mut p.geometry.tare_n);
         p.trial.f_n.iter_mut().for_each(|f| *f += tare_n);
         let used = crate::trial::read_column_for_analysis(&path, "model_n").and_then(|model_n| {
             p.use_nominal(model_n)

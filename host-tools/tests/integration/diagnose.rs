@@ -238,10 +238,14 @@ fn spread_alone_with_friction_at_rest_is_none_too() {
 /// on its own approach.
 #[test]
 fn a_tare_left_on_each_trial_is_no_effect() {
-    spread_alone_is_none("liver1", 21, 0.01);
+    let out = spread_alone_is_none("liver1", 21, 0.01);
+    // What was taken off is reported, trial by trial.
+    let tares = out["tare_n"].as_object().unwrap();
+    assert_eq!(tares.len(), 10, "{tares:?}");
+    assert!(tares.values().any(|t| num(t).abs() > 0.003), "{tares:?}");
 }
 
-fn spread_alone_is_none(tissue_name: &'static str, seed: u64, tare_sd_n: f64) {
+fn spread_alone_is_none(tissue_name: &'static str, seed: u64, tare_sd_n: f64) -> serde_json::Value {
     let dir = tempfile::tempdir().unwrap();
     Dataset {
         tissue_name,
@@ -274,6 +278,7 @@ fn spread_alone_is_none(tissue_name: &'static str, seed: u64, tare_sd_n: f64) {
         left <= 1.5 * noise,
         "{tissue_name} seed {seed}: {left} vs {noise}"
     );
+    out
 }
 
 #[test]
