@@ -41,7 +41,7 @@ use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram, PerTrial};
 use self::prepare::{prepare, Prepared, DWELL, LOADING, PHASES, WITHDRAWAL};
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
-use crate::fit::{fit_trial, tare, TrialFit};
+use crate::fit::{fit_tared, fit_trial, TrialFit};
 use crate::trial::Trial;
 
 /// Least held-out shrink that can name an effect.
@@ -627,9 +627,8 @@ pub fn load_reporting(
     for (file, mut trial) in dataset {
         // Each trial's own tare, a per-trial nuisance like the rest of its
         // spread.
-        let tare_n = tare(&mut trial);
-        match fit_trial(&trial) {
-            Ok(fit) => trials.push((file, trial, TrialFit { tare_n, ..fit })),
+        match fit_tared(&mut trial) {
+            Ok(fit) => trials.push((file, trial, fit)),
             Err(e) => {
                 crate::note!(
                     "needle diagnose: {}: cannot find its geometry: {e:#} (left out)",

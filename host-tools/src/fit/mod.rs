@@ -19,7 +19,7 @@ use self::report::{mean_sd, AtSpeeds, Bound, DwellSummary, LawFit, LayerSummary}
 pub use self::report::{Estimate, FitReport};
 use self::report::{PunctureMargins, StiffnessLaws, TrialGeometry};
 pub use self::tissue::FittedTissue;
-pub use self::trial::{fit_trial, tare, TrialFit, RELAXATION_PRIOR};
+pub use self::trial::{fit_tared, fit_trial, TrialFit, RELAXATION_PRIOR};
 use crate::trial::Trial;
 
 #[derive(Debug, clap::Args)]
@@ -109,7 +109,6 @@ fn static_estimate(
 /// fitted are reported in `skipped` and left out.
 pub fn fit_dataset(dir: &Path) -> Result<FitReport> {
     let (mut trials, unreadable) = crate::trial::read_dataset(dir, "fit")?;
-    let tares: Vec<f64> = trials.iter_mut().map(|(_, t)| tare(t)).collect();
     let total = trials.len() + unreadable.len();
     let mut fits = Vec::new();
     let mut skipped: Vec<Value> = unreadable
@@ -117,23 +116,11 @@ pub fn fit_dataset(dir: &Path) -> Result<FitReport> {
         .map(crate::trial::Unreadable::to_json)
         .collect();
     let mut progress = crate::trial::Progress::new("fit");
-    for (k, (file, trial)) in trials.iter().enumerate() {
-        progress.say(|| {
-            format!(
-                "fitting trial {} of {}: {}",
-                k + 1,
-                trials.len(),
-                file.display()
-            )
-        });
-        match fit_trial(trial).with_context(|| format!("{}: cannot fit", file.display())) {
-            Ok(fit) => fits.push((
-                file.clone(),
-                TrialFit {
-                    tare_n: tares[k],
-                    ..fit
-                },
-            )),
+    let count = trials.len();
+    for (k, (file, trial)) in trials.iter_mut().enumerate() {
+        progress.say(|| format!("fitting trial {} of {count}: {}", k + 1, file.display()));
+        match fit_tared(trial).with_context(|| format!("{}: cannot fit", file.display())) {
+            Ok(fit) => fits.push((file.clone(), fit)),
             Err(err) => {
                 crate::note!("needle fit: {err:#} (left out)");
                 skipped.push(crate::trial::skipped(file, &format!("{err:#}")));

@@ -264,6 +264,12 @@ pub fn tare(trial: &mut Trial) -> f64 {
     }
 }
 
+/// [`tare`] a trial, then [`fit_trial`] it, the fit recording the tare.
+pub fn fit_tared(trial: &mut Trial) -> Result<TrialFit> {
+    let tare_n = tare(trial);
+    fit_trial(trial).map(|fit| TrialFit { tare_n, ..fit })
+}
+
 /// Gauss–Newton on f = d/(a·d + b), d = x − x_s1, in force space, over
 /// a, b and the contact point together: the linearised fit of d/f weighs
 /// the noisy small forces too much, and the quadratic's root is not this
@@ -1245,6 +1251,15 @@ mod tests {
     use super::*;
     use needle_holder::model::params::LIVER1;
 
+    /// A trial of `(x, f)` samples at `rate_hz`.
+    fn sampled(rate_hz: f64, at: &[(f64, f64)]) -> Trial {
+        Trial {
+            t_s: (0..at.len()).map(|i| i as f64 / rate_hz).collect(),
+            x_m: at.iter().map(|s| s.0).collect(),
+            f_n: at.iter().map(|s| s.1).collect(),
+        }
+    }
+
     fn liver() -> Trial {
         crate::sim::insertion(&LIVER1, &crate::sim::Plan::PAPER).0
     }
@@ -1322,12 +1337,7 @@ mod tests {
             x += v_mps / rate;
         }
         at.extend((0..rate as usize).map(|_| (x, 0.5)));
-        let n = at.len();
-        let trial = Trial {
-            t_s: (0..n).map(|i| i as f64 / rate).collect(),
-            x_m: at.iter().map(|s| s.0).collect(),
-            f_n: at.iter().map(|s| s.1).collect(),
-        };
+        let trial = sampled(rate, &at);
         let (peak, _) = find_puncture(&trial.f_n, &trial.x_m, 0.002).unwrap();
         assert!(
             (trial.x_m[peak] - capsule_x_m).abs() < 1e-5,
@@ -1399,13 +1409,8 @@ mod tests {
             x = at[at.len() - 1].0;
         }
         at.extend((0..rate as usize).map(|_| (x, 0.0)));
-        let n = at.len();
-        let trial = Trial {
-            t_s: (0..n).map(|i| i as f64 / rate).collect(),
-            x_m: at.iter().map(|s| s.0).collect(),
-            f_n: at.iter().map(|s| s.1).collect(),
-        };
-        let every: Vec<usize> = (0..n).collect();
+        let trial = sampled(rate, &at);
+        let every: Vec<usize> = (0..trial.len()).collect();
         let (dp, dn) = static_band(&trial, &velocity(&trial), (&every, 1), relaxed_m, 0.002);
         let (per_m, clamped) = dp.unwrap();
         assert!(!clamped, "{per_m} N/m read as a clamp");
