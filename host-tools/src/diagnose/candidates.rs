@@ -716,10 +716,14 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let best = (0..MOTION_PHASES)
         .map(|k| {
             let shift = sine(k);
-            let cols = moved_nominal(coarse, &|i| shift.at_harmonics(harmonics[i]));
+            let (moved, ..) = moved_model(coarse, &coarse.params, &|i| {
+                shift.at_harmonics(harmonics[i])
+            });
+            // The column after the puncture is the moved model less the
+            // nominal ([`moved_nominal`]); the loading curve's is not searched.
             let sse: f64 = (0..coarse.trial.len())
                 .filter(|&i| coarse.phase[i] != LOADING)
-                .map(|i| (coarse.residual_n[i] - cols[0][i]).powi(2))
+                .map(|i| (coarse.residual_n[i] - (moved[i] - coarse.nominal_n[i])).powi(2))
                 .sum();
             (k, sse)
         })

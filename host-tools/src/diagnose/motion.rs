@@ -26,7 +26,7 @@ use needle_holder::model::params::TissueParams;
 
 use super::prepare::{relaxed_surface, Prepared, LOADING};
 use crate::fit::lsq::Lsq;
-use crate::fit::predict::{predict_parts_at, NeedleVelocity};
+use crate::fit::predict::{predict_total_at, NeedleVelocity};
 
 /// Breathing frequencies searched, Hz (6 to 40 breaths a minute).
 const FREQ_FROM_HZ: f64 = 0.1;
@@ -201,7 +201,7 @@ pub fn moved_model(
     // found again in the tissue's frame has each trial's own again, by
     // `relaxed_surfaces`, read in that frame.)
     geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
-    let model = predict_parts_at(params, &geometry, &relative, v_rel).total_n();
+    let model = predict_total_at(params, &geometry, &relative, &v_rel);
     (model, relative.x_m, geometry.contact_x_m)
 }
 

@@ -6,7 +6,9 @@ use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::TissueParams;
 
 use crate::fit::jumps::Jump;
-use crate::fit::predict::{predict_parts_at, NeedleVelocity, Parts};
+use crate::fit::predict::{
+    last_loaded_sample, predict_each, predict_parts_at, NeedleVelocity, Parts,
+};
 use crate::fit::TrialFit;
 use crate::trial::Trial;
 
@@ -254,22 +256,22 @@ pub fn fit_relaxation(
                     relaxed_x_m: relaxed_surface(geometry, rho),
                     ..(*geometry).clone()
                 };
-                let parts = predict_parts_at(params, &g, trial, (*v).clone());
                 // Each sample's square capped at ten noise sd: a membrane's
                 // or a wall's few newtons, which no ρ explains, must not
                 // decide it. Samples at rest neither: what the static band
                 // holds there (D_p·l) moves with ρ, but its level is each
                 // trial's own (the diagnosis frees it per trial), and a
-                // dwell's thousands of samples would set ρ by it.
+                // dwell's thousands of samples would set ρ by it. The
+                // loading curve is the capsule's, which ρ does not move.
                 let cap = (10.0 * geometry.noise_n).powi(2).max(f64::MIN_POSITIVE);
-                (parts.puncture_index + 1..trial.len())
-                    .filter(|&i| parts.v_mps[i].abs() >= params.half_band_mps)
-                    .map(|i| {
-                        (trial.f_n[i] - parts.friction_n[i] - parts.cutting_n[i])
-                            .powi(2)
-                            .min(cap)
-                    })
-                    .sum::<f64>()
+                let puncture = last_loaded_sample(&g, trial);
+                let mut sse = 0.0;
+                predict_each(params, &g, trial, v, &mut |i, s| {
+                    if i > puncture && v.v_mps[i].abs() >= params.half_band_mps {
+                        sse += (trial.f_n[i] - s.friction_n - s.cutting_n).powi(2).min(cap);
+                    }
+                });
+                sse
             })
             .sum::<f64>()
     };

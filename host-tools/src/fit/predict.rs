@@ -43,6 +43,27 @@ impl Parts {
     }
 }
 
+/// The model's force at one sample, by term (each 0 where it does not act).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleParts {
+    pub stiffness_n: f64,
+    pub friction_n: f64,
+    pub cutting_n: f64,
+    pub length_m: f64,
+    /// See [`Parts::friction_basis`].
+    pub friction_basis: [f64; 4],
+    /// How likely the sample lies on the other side of a jump, where it
+    /// may ([`Parts::other_side`]).
+    pub other_side: Option<f64>,
+}
+
+impl SampleParts {
+    /// The model's whole force.
+    pub fn total_n(&self) -> f64 {
+        self.stiffness_n + self.friction_n + self.cutting_n
+    }
+}
+
 /// The expected force at every sample of `trial` under `params`, term by
 /// term, with the surface positions found by the fit, at a needle
 /// velocity already known (from [`needle_velocity`], with the load cell's
@@ -55,6 +76,56 @@ pub fn predict_parts_at(
     trial: &Trial,
     v: NeedleVelocity,
 ) -> Parts {
+    let n = trial.len();
+    let mut p = Parts {
+        stiffness_n: vec![0.0; n],
+        friction_n: vec![0.0; n],
+        cutting_n: vec![0.0; n],
+        length_m: vec![0.0; n],
+        friction_basis: vec![[0.0; 4]; n],
+        ..Parts::default()
+    };
+    let puncture = predict_each(params, geometry, trial, &v, &mut |i, s| {
+        p.stiffness_n[i] = s.stiffness_n;
+        p.friction_n[i] = s.friction_n;
+        p.cutting_n[i] = s.cutting_n;
+        p.length_m[i] = s.length_m;
+        p.friction_basis[i] = s.friction_basis;
+        if let Some(w) = s.other_side {
+            p.other_side.push((i, w));
+        }
+    });
+    p.puncture_index = puncture;
+    p.v_mps = v.v_mps;
+    p
+}
+
+/// [`predict_parts_at`]'s whole force alone: what a search that evaluates
+/// the model along a trial thousands of times needs, without the terms'
+/// arrays.
+pub fn predict_total_at(
+    params: &TissueParams,
+    geometry: &TrialFit,
+    trial: &Trial,
+    v: &NeedleVelocity,
+) -> Vec<f64> {
+    let mut total = vec![0.0; trial.len()];
+    predict_each(params, geometry, trial, v, &mut |i, s| {
+        total[i] = s.total_n()
+    });
+    total
+}
+
+/// The model along `trial`, handed to `each` sample by sample in order
+/// (every sample, zeros where no term acts); returns the last sample on
+/// the loading curve.
+pub fn predict_each(
+    params: &TissueParams,
+    geometry: &TrialFit,
+    trial: &Trial,
+    v: &NeedleVelocity,
+    each: &mut dyn FnMut(usize, &SampleParts),
+) -> usize {
     let puncture = last_loaded_sample(geometry, trial);
     let mut deepest = geometry.puncture_x_m;
     let mut last_sliding = 0.0;
@@ -75,33 +146,24 @@ pub fn predict_parts_at(
     let observed = v.sd_mps > 0.0 && v.tissue_sd_m > 0.0 && v.force_sd_n > 0.0;
     let mut observer =
         CuttingObserver::at_puncture(trial.t_s.get(puncture).copied().unwrap_or(0.0));
-    let mut p = Parts {
-        stiffness_n: vec![0.0; n],
-        friction_n: vec![0.0; n],
-        cutting_n: vec![0.0; n],
-        length_m: vec![0.0; n],
-        puncture_index: puncture,
-        v_mps: Vec::new(),
-        other_side: Vec::new(),
-        friction_basis: vec![[0.0; 4]; n],
-    };
     // The samples next to a jump, in order, met by a cursor (a search of
     // the whole list at every sample was a tenth of the model's time).
     let mut uncertain = v.uncertain.clone();
     uncertain.sort_by_key(|u| u.0);
     let mut next_uncertain = 0;
-    #[allow(clippy::needless_range_loop)] // six parallel per-sample arrays
     for i in 0..n {
         let x = trial.x_m[i];
+        let mut s = SampleParts::default();
         if i <= puncture {
             // A rational law fitted to a bent loading curve can reach its
             // pole; the capsule holds no more than its puncture force.
             let f = params.stiffness_n(x - geometry.contact_x_m);
-            p.stiffness_n[i] = if f.is_finite() {
+            s.stiffness_n = if f.is_finite() {
                 f
             } else {
                 params.puncture_force_n
             };
+            each(i, &s);
             continue;
         }
         // A withdrawing needle holds the tissue until it lets go, which a
@@ -112,6 +174,7 @@ pub fn predict_parts_at(
         };
         let l = x - exit_m;
         if l <= 0.0 {
+            each(i, &s);
             continue;
         }
         let here = Sliding::at(params, v.v_mps[i], l, last_sliding, last_basis);
@@ -157,8 +220,7 @@ pub fn predict_parts_at(
         };
         let at_rest = v.v_mps[i].abs() < params.half_band_mps;
         let cutting_n = tip(v.v_mps[i], here.friction_n);
-        (p.friction_n[i], p.friction_basis[i], p.cutting_n[i]) =
-            (here.friction_n, here.basis, cutting_n);
+        (s.friction_n, s.friction_basis, s.cutting_n) = (here.friction_n, here.basis, cutting_n);
         // Next to a jump placed to within a fraction of a sample, the
         // sample may be on its other side: the force law there is the
         // expected one over both.
@@ -178,27 +240,26 @@ pub fn predict_parts_at(
                 v.force_sd_n,
             );
             let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
-            p.friction_n[i] = mix(here.friction_n, other.friction_n);
-            for (k, b) in p.friction_basis[i].iter_mut().enumerate() {
+            s.friction_n = mix(here.friction_n, other.friction_n);
+            for (k, b) in s.friction_basis.iter_mut().enumerate() {
                 *b = mix(*b, other.basis[k]);
             }
-            p.cutting_n[i] = mix(cutting_n, other_cutting_n);
-            p.other_side.push((i, w));
+            s.cutting_n = mix(cutting_n, other_cutting_n);
+            s.other_side = Some(w);
         }
         let on = if observed {
             // What the tip holds at rest is not cutting.
             let (moving_n, held_n) = if at_rest {
-                (cut(v.v_mps[i], cutting), p.cutting_n[i])
+                (cut(v.v_mps[i], cutting), s.cutting_n)
             } else {
-                (p.cutting_n[i], 0.0)
+                (s.cutting_n, 0.0)
             };
             let predicted = moving_n / params.cutting_force_n.max(f64::MIN_POSITIVE);
-            let friction_n = p.friction_n[i];
             observer.correct(
                 odds_at(v.v_mps[i]),
                 predicted,
                 trial.f_n[i] - held_n,
-                [friction_n, friction_n + params.cutting_force_n],
+                [s.friction_n, s.friction_n + params.cutting_force_n],
                 v.force_sd_n,
             )
         } else {
@@ -206,9 +267,10 @@ pub fn predict_parts_at(
         };
         (last_basis, last_sliding, cutting) = (here.basis, here.last_sliding, on);
         if !at_rest {
-            held_cut_n = p.cutting_n[i];
+            held_cut_n = s.cutting_n;
         }
-        p.length_m[i] = l;
+        s.length_m = l;
+        each(i, &s);
         // The front follows the tip while it cuts and while it is not
         // advancing (a stop at speed lands between samples, and the rest
         // reading is the true deepest point), but not while it creeps
@@ -219,8 +281,7 @@ pub fn predict_parts_at(
             observer.advanced(t);
         }
     }
-    p.v_mps = v.v_mps;
-    p
+    puncture
 }
 
 /// How likely a sample next to a jump lies on its other side, given the
@@ -272,7 +333,7 @@ impl Sliding {
 /// is the peak of a noisy, nearly flat top, often a few samples before the
 /// capsule gives way; modelling those samples as inserted would put the
 /// whole drop (over 1 N) into the residual.
-fn last_loaded_sample(geometry: &TrialFit, trial: &Trial) -> usize {
+pub fn last_loaded_sample(geometry: &TrialFit, trial: &Trial) -> usize {
     let mid = 0.5 * (geometry.puncture_force_n + geometry.puncture_drop_to_n);
     let mut i = geometry.puncture_index;
     while i + 1 < trial.len() && trial.f_n[i + 1] > mid {
