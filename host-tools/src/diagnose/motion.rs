@@ -169,14 +169,14 @@ pub fn moved_model(
 ) -> (Vec<f64>, Vec<f64>, f64) {
     let trial = &p.trial;
     let n = trial.len();
-    let mut relative = trial.clone();
+    let mut relative_x_m = trial.x_m.clone();
     let mut v_rel = NeedleVelocity {
         v_mps: p.velocity.v_mps.clone(),
         encoder_step_m: p.velocity.encoder_step_m,
         ..NeedleVelocity::default()
     };
     let mut fastest_mps: f64 = 0.0;
-    for (i, (x, v)) in relative.x_m.iter_mut().zip(&mut v_rel.v_mps).enumerate() {
+    for (i, (x, v)) in relative_x_m.iter_mut().zip(&mut v_rel.v_mps).enumerate() {
         let (dx, dv) = shift(i);
         *x -= dx;
         *v -= dv;
@@ -194,15 +194,15 @@ pub fn moved_model(
         .unwrap_or(0);
     let d_threshold = depth_at(params, threshold);
     let mut geometry = p.geometry.clone();
-    geometry.contact_x_m = relative.x_m[crossing] - d_threshold;
-    geometry.puncture_x_m = relative.x_m[p.geometry.puncture_index.min(n - 1)];
+    geometry.contact_x_m = relative_x_m[crossing] - d_threshold;
+    geometry.puncture_x_m = relative_x_m[p.geometry.puncture_index.min(n - 1)];
     // The tissue's ρ, not the trial's own: read in the lab frame, the
     // motion bends a trial's own. (Once the motion is named, the nominal
     // found again in the tissue's frame has each trial's own again, by
     // `relaxed_surfaces`, read in that frame.)
     geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
-    let model = predict_total_at(params, &geometry, &relative, &v_rel);
-    (model, relative.x_m, geometry.contact_x_m)
+    let model = predict_total_at(params, &geometry, (trial, &relative_x_m), &v_rel);
+    (model, relative_x_m, geometry.contact_x_m)
 }
 
 /// The depth at which the nominal's loading law reaches `force_n`, by

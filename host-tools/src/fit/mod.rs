@@ -525,7 +525,7 @@ fn plot_first_trial(dir: &Path, fit: &FitReport, params: TissueParams, path: &Pa
         force_sd_n: geometry.noise_n,
         ..predict::needle_velocity(&trial)
     };
-    let model = predict::predict_total_at(&params, &geometry, &trial, &velocity);
+    let model = predict::predict_total_at(&params, &geometry, (&trial, &trial.x_m), &velocity);
     let measured: Vec<(f64, f64)> = trial
         .x_m
         .iter()

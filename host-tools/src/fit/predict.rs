@@ -85,7 +85,7 @@ pub fn predict_parts_at(
         friction_basis: vec![[0.0; 4]; n],
         ..Parts::default()
     };
-    let puncture = predict_each(params, geometry, trial, &v, &mut |i, s| {
+    let puncture = predict_each(params, geometry, (trial, &trial.x_m), &v, &mut |i, s| {
         p.stiffness_n[i] = s.stiffness_n;
         p.friction_n[i] = s.friction_n;
         p.cutting_n[i] = s.cutting_n;
@@ -100,29 +100,30 @@ pub fn predict_parts_at(
     p
 }
 
-/// [`predict_parts_at`]'s whole force alone: what a search that evaluates
-/// the model along a trial thousands of times needs, without the terms'
-/// arrays.
+/// [`predict_parts_at`]'s whole force alone, with the needle at `x_m`
+/// (see [`predict_each`]): what a search that evaluates the model along a
+/// trial thousands of times needs, without the terms' arrays.
 pub fn predict_total_at(
     params: &TissueParams,
     geometry: &TrialFit,
-    trial: &Trial,
+    (trial, x_m): (&Trial, &[f64]),
     v: &NeedleVelocity,
 ) -> Vec<f64> {
     let mut total = vec![0.0; trial.len()];
-    predict_each(params, geometry, trial, v, &mut |i, s| {
+    predict_each(params, geometry, (trial, x_m), v, &mut |i, s| {
         total[i] = s.total_n()
     });
     total
 }
 
-/// The model along `trial`, handed to `each` sample by sample in order
-/// (every sample, zeros where no term acts); returns the last sample on
-/// the loading curve.
+/// The model along `trial` with the needle at `x_m` (the trial's own
+/// positions, or the same in a moving tissue's frame), handed to `each`
+/// sample by sample in order (every sample, zeros where no term acts);
+/// returns the last sample on the loading curve.
 pub fn predict_each(
     params: &TissueParams,
     geometry: &TrialFit,
-    trial: &Trial,
+    (trial, x_m): (&Trial, &[f64]),
     v: &NeedleVelocity,
     each: &mut dyn FnMut(usize, &SampleParts),
 ) -> usize {
@@ -151,8 +152,7 @@ pub fn predict_each(
     let mut uncertain = v.uncertain.clone();
     uncertain.sort_by_key(|u| u.0);
     let mut next_uncertain = 0;
-    for i in 0..n {
-        let x = trial.x_m[i];
+    for (i, &x) in x_m.iter().enumerate().take(n) {
         let mut s = SampleParts::default();
         if i <= puncture {
             // A rational law fitted to a bent loading curve can reach its
