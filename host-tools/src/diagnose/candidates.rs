@@ -163,7 +163,7 @@ pub const CANDIDATES: [Candidate; 8] = [
             "loading_offset_n",
         ],
         columns: tissue_motion,
-        on_grid: None,
+        on_grid: Some(tissue_motion_on_grid),
         grid_params: motion_params,
         backfit: Backfit::TissueFrame,
     },
@@ -697,41 +697,59 @@ fn motion_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
 /// is where the breathing was when the trial began, not a property of
 /// the tissue.
 fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
-    let (f_hz, amplitude_m) = motion_at(g);
-    let t0 = p.trial.t_s[0];
-    let omega_rad_s = TAU * f_hz;
-    // A·sin(ωt + φ) = A·cos φ·sin ωt + A·sin φ·cos ωt.
-    let sine = |k: usize| {
-        let (s, c) = (TAU * k as f64 / MOTION_PHASES as f64).sin_cos();
-        TissueShift {
-            omega_rad_s,
-            t_ref_s: t0,
-            coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
-        }
-    };
+    let mut cols = Vec::new();
+    tissue_motion_on_grid(p, &[g], &mut |_, c| cols = c);
+    cols
+}
+
+/// [`tissue_motion`] at each of `grid`'s values, the harmonics of each
+/// frequency made once for all its amplitudes (a sine and a cosine a
+/// sample, at the search rate and at the full one).
+fn tissue_motion_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize, Columns)) {
     // The phase is searched on the trial at the search rate, the columns
     // made at the full one.
     let coarse = p.for_search();
-    let harmonics = harmonics_along(omega_rad_s, t0, &coarse.trial.t_s);
-    let best = (0..MOTION_PHASES)
-        .map(|k| {
-            let shift = sine(k);
-            let (moved, ..) = moved_model(coarse, &coarse.params, &|i| {
-                shift.at_harmonics(harmonics[i])
-            });
-            // The column after the puncture is the moved model less the
-            // nominal ([`moved_nominal`]); the loading curve's is not searched.
-            let sse: f64 = (0..coarse.trial.len())
-                .filter(|&i| coarse.phase[i] != LOADING)
-                .map(|i| (coarse.residual_n[i] - (moved[i] - coarse.nominal_n[i])).powi(2))
-                .sum();
-            (k, sse)
-        })
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(0, |b| b.0);
-    let harmonics = harmonics_along(omega_rad_s, t0, &p.trial.t_s);
-    let shift = sine(best);
-    moved_nominal(p, &|i| shift.at_harmonics(harmonics[i]))
+    let t0 = p.trial.t_s[0];
+    // Frequency by frequency, so that one frequency's harmonics are kept.
+    let mut order: Vec<usize> = (0..grid.len()).collect();
+    order.sort_by(|&a, &b| motion_at(grid[a]).0.total_cmp(&motion_at(grid[b]).0));
+    // (ω, its harmonics at the search rate, at the full rate.)
+    let (mut kept_omega, mut coarse_h, mut full_h) = (f64::NAN, Vec::new(), Vec::new());
+    for gi in order {
+        let (f_hz, amplitude_m) = motion_at(grid[gi]);
+        let omega_rad_s = TAU * f_hz;
+        if kept_omega != omega_rad_s {
+            kept_omega = omega_rad_s;
+            coarse_h = harmonics_along(omega_rad_s, t0, &coarse.trial.t_s);
+            full_h = harmonics_along(omega_rad_s, t0, &p.trial.t_s);
+        }
+        // A·sin(ωt + φ) = A·cos φ·sin ωt + A·sin φ·cos ωt.
+        let sine = |k: usize| {
+            let (s, c) = (TAU * k as f64 / MOTION_PHASES as f64).sin_cos();
+            TissueShift {
+                omega_rad_s,
+                t_ref_s: t0,
+                coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
+            }
+        };
+        let best = (0..MOTION_PHASES)
+            .map(|k| {
+                let shift = sine(k);
+                let (moved, ..) =
+                    moved_model(coarse, &coarse.params, &|i| shift.at_harmonics(coarse_h[i]));
+                // The column after the puncture is the moved model less the
+                // nominal ([`moved_nominal`]); the loading curve's is not searched.
+                let sse: f64 = (0..coarse.trial.len())
+                    .filter(|&i| coarse.phase[i] != LOADING)
+                    .map(|i| (coarse.residual_n[i] - (moved[i] - coarse.nominal_n[i])).powi(2))
+                    .sum();
+                (k, sse)
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(0, |b| b.0);
+        let shift = sine(best);
+        each(gi, moved_nominal(p, &|i| shift.at_harmonics(full_h[i])));
+    }
 }
 
 /// Columns of [`tissue_motion`] for one tissue displacement and velocity
