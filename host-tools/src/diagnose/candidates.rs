@@ -703,8 +703,8 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
 }
 
 /// [`tissue_motion`] at each of `grid`'s values, the harmonics of each
-/// frequency made once for all its amplitudes (a sine and a cosine a
-/// sample, at the search rate and at the full one).
+/// frequency made once for all its amplitudes (sine and cosine of both
+/// harmonics at every sample, at the search rate and at the full one).
 fn tissue_motion_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize, Columns)) {
     // The phase is searched on the trial at the search rate, the columns
     // made at the full one.
@@ -737,11 +737,10 @@ fn tissue_motion_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize,
                 let shift = sine(k);
                 let (moved, ..) =
                     moved_model(coarse, &coarse.params, &|i| shift.at_harmonics(coarse_h[i]));
-                // The column after the puncture is the moved model less the
-                // nominal ([`moved_nominal`]); the loading curve's is not searched.
+                // The loading curve's column is not searched.
                 let sse: f64 = (0..coarse.trial.len())
                     .filter(|&i| coarse.phase[i] != LOADING)
-                    .map(|i| (coarse.residual_n[i] - (moved[i] - coarse.nominal_n[i])).powi(2))
+                    .map(|i| (coarse.residual_n[i] - moved_less_nominal(coarse, &moved, i)).powi(2))
                     .sum();
                 (k, sse)
             })
@@ -767,8 +766,13 @@ fn moved_nominal(p: &Prepared, shift: &dyn Fn(usize) -> (f64, f64)) -> Vec<Vec<f
             cols[3][i] = -p.nominal_n[i];
             cols[4][i] = f64::from(u8::from(d > 0.0));
         } else {
-            cols[0][i] = moved[i] - p.nominal_n[i];
+            cols[0][i] = moved_less_nominal(p, &moved, i);
         }
     }
     cols
+}
+
+/// The column of [`moved_nominal`] after the puncture at sample i.
+fn moved_less_nominal(p: &Prepared, moved: &[f64], i: usize) -> f64 {
+    moved[i] - p.nominal_n[i]
 }

@@ -43,12 +43,17 @@ impl Parts {
     }
 }
 
-/// The model's force at one sample, by term (each 0 where it does not act).
+/// The model at one sample: its force by term (each 0 where it does not
+/// act), as [`Parts`] holds them along a trial.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SampleParts {
+    /// See [`Parts::stiffness_n`].
     pub stiffness_n: f64,
+    /// See [`Parts::friction_n`].
     pub friction_n: f64,
+    /// See [`Parts::cutting_n`].
     pub cutting_n: f64,
+    /// See [`Parts::length_m`].
     pub length_m: f64,
     /// See [`Parts::friction_basis`].
     pub friction_basis: [f64; 4],
@@ -142,6 +147,7 @@ pub fn predict_each(
     let front_m = 3.0 * v.encoder_step_m;
     let mut cutting = true;
     let n = trial.len();
+    debug_assert_eq!(x_m.len(), n, "a position for every sample");
     // In a moving tissue, with the force's noise known, the cutting state
     // is followed from the force ([`CuttingObserver`]).
     let observed = v.sd_mps > 0.0 && v.tissue_sd_m > 0.0 && v.force_sd_n > 0.0;
