@@ -940,42 +940,54 @@ fn backfit_rounds<'c>(
 /// The nominal found again in the tissue's frame: the tissue's
 /// displacement fitted per trial under the current nominal (cross-fitted,
 /// [`motion::fit_shifts`]), the positions moved into its frame, `needle
-/// fit`'s code run on them, repeated until the held-out RMS settles. As
-/// in [`backfit_rounds`], a round that leaves the withheld trials worse,
-/// or in which a moved trial no longer fits, is not kept and ends the
-/// rounds (the choice among rounds is made on the withheld trials that
-/// score it: the figure is the best of up to six, mildly optimistic).
+/// fit`'s code run on them, in rounds kept as [`kept_rounds`] keeps them.
 /// `None` when no round fits.
 fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored, Vec<Prepared>)> {
     let k = folds(data.len());
-    let mut params = data[0].params;
-    let mut shifts: Option<Vec<motion::TissueShift>> = None;
-    let mut last: Option<(Scored, Vec<Prepared>)> = None;
     // The displacement is fitted at the search rate, applied at the full
     // one. (Finding the nominal at the search rate too, and only the last
     // round at the full one, left 0.56 N of a 0.15 N gap at 100 Hz.)
     let searched: Vec<Prepared> = data.iter().map(|p| p.for_search().clone()).collect();
-    for _ in 0..TISSUE_FRAME_ROUNDS {
-        let found = motion::fit_shifts(&searched, &params, k, shifts.as_deref());
-        let Some(prepared) = moved_into(data, &found, refit_params) else {
+    let round = |last: Option<&(Scored, Vec<Prepared>, Vec<TissueShift>)>| {
+        // Each round from the nominal and displacements the last one kept.
+        let (params, start) = match last {
+            Some((_, prepared, shifts)) => (prepared[0].params, Some(&shifts[..])),
+            None => (data[0].params, None),
+        };
+        let found = motion::fit_shifts(&searched, &params, k, start);
+        let prepared = moved_into(data, &found, refit_params)?;
+        let scored = score(&prepared, &[], None);
+        Some((scored.rms(), (scored, prepared, found)))
+    };
+    kept_rounds(TISSUE_FRAME_ROUNDS, round).map(|(scored, prepared, _)| (scored, prepared))
+}
+
+/// At most `most` rounds of an iteration judged on withheld trials, as
+/// [`backfit_rounds`] judges its own: `round` makes the next from the
+/// last one kept (`None` before the first) and gives its held-out RMS, or
+/// `None` when it cannot be made. A round that cannot be made, or leaves
+/// the RMS worse or not a number, is not kept and ends the rounds; one
+/// that changes it by less than [`BACKFIT_TOL`] of it is kept and ends
+/// them. The choice among rounds is made on the withheld trials that then
+/// score it: the figure is the best of several, mildly optimistic.
+fn kept_rounds<T>(most: usize, mut round: impl FnMut(Option<&T>) -> Option<(f64, T)>) -> Option<T> {
+    let mut last: Option<(f64, T)> = None;
+    for _ in 0..most {
+        let Some((rms, next)) = round(last.as_ref().map(|l| &l.1)) else {
             break;
         };
-        let scored = score(&prepared, &[], None);
-        let before_rms = last.as_ref().map(|l| l.0.rms());
-        // Worse, or not a number: not kept.
-        let kept = |before: f64| scored.rms().partial_cmp(&before).is_some_and(|o| o.is_le());
-        if before_rms.is_some_and(|before| !kept(before)) {
+        let before = last.as_ref().map(|l| l.0);
+        let no_worse = |b: f64| rms.partial_cmp(&b).is_some_and(|o| o.is_le());
+        if before.is_some_and(|b| !no_worse(b)) {
             break;
         }
-        let done = before_rms.is_some_and(|before| before - scored.rms() < BACKFIT_TOL * before);
-        params = prepared[0].params;
-        last = Some((scored, prepared));
-        shifts = Some(found);
-        if done {
+        let settled = before.is_some_and(|b| b - rms < BACKFIT_TOL * b);
+        last = Some((rms, next));
+        if settled {
             break;
         }
     }
-    last
+    last.map(|l| l.1)
 }
 
 /// Each trial moved into the tissue's frame by its `shifts`, and the
@@ -1599,5 +1611,55 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
             std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
         }
         None => crate::stdout::write(&text),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The rounds `kept_rounds` asks for and the one it keeps, for rounds
+    /// whose held-out RMS are `rms` in turn (`None`: cannot be made).
+    fn run(rms: &[Option<f64>]) -> (usize, Option<usize>) {
+        let mut asked = 0usize;
+        let kept = kept_rounds(TISSUE_FRAME_ROUNDS, |last: Option<&usize>| {
+            // Made from the round before: in these tests every round
+            // before the last asked is kept.
+            assert_eq!(last.copied(), asked.checked_sub(1));
+            asked += 1;
+            rms.get(asked - 1)
+                .copied()
+                .flatten()
+                .map(|r| (r, asked - 1))
+        });
+        (asked, kept)
+    }
+
+    #[test]
+    fn a_round_that_leaves_the_withheld_trials_worse_is_not_kept_and_ends_them() {
+        assert_eq!(
+            run(&[Some(10.0), Some(5.0), Some(6.0), Some(1.0)]),
+            (3, Some(1))
+        );
+    }
+
+    #[test]
+    fn a_round_that_cannot_be_made_or_is_not_a_number_ends_them() {
+        assert_eq!(run(&[Some(10.0), None, Some(1.0)]), (2, Some(0)));
+        assert_eq!(run(&[Some(10.0), Some(f64::NAN), Some(1.0)]), (2, Some(0)));
+        assert_eq!(run(&[None, Some(1.0)]), (1, None));
+    }
+
+    #[test]
+    fn a_round_that_barely_changes_the_rms_is_kept_and_ends_them() {
+        let by_half: Vec<_> = (0..10).map(|k| Some(0.5f64.powi(k))).collect();
+        assert_eq!(
+            run(&by_half),
+            (TISSUE_FRAME_ROUNDS, Some(TISSUE_FRAME_ROUNDS - 1))
+        );
+        assert_eq!(
+            run(&[Some(10.0), Some(5.0), Some(4.99), Some(1.0)]),
+            (3, Some(2))
+        );
     }
 }
