@@ -405,8 +405,11 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         bail!("too few samples on the loading curve before the puncture");
     }
     let j0 = ip - rise;
-    // What the load cell reads with nothing on the needle: before the rise.
-    let zero_n = median(f[..j0].to_vec());
+    // What the load cell reads before contact, over every sample before
+    // the rise (on a trial `tare` has tared, what the tare left): a
+    // withdrawal's snap returns to it. Not the tare itself
+    // (`unloaded_zero_n`), which keeps clear of the loading curve's toe.
+    let before_contact_n = median(f[..j0].to_vec());
     let Loading {
         contact_x_m,
         polynomial,
@@ -443,7 +446,14 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
     let friction = if inward {
         both_ways(&track, &advancing, contact_x_m, x_s2, noise_n)?
     } else {
-        one_way(&track, &advancing, contact_x_m, x_s2, noise_n, zero_n)?
+        one_way(
+            &track,
+            &advancing,
+            contact_x_m,
+            x_s2,
+            noise_n,
+            before_contact_n,
+        )?
     };
     let OneTrialFriction {
         relaxed_x_m,
@@ -972,18 +982,20 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
 
 /// Where a withdrawing needle was let go with a snap (`out` in time
 /// order): the last sample still pulling by ten noise sd, followed at once
-/// by five or more within three noise sd of the trial's zero (`zero_n`,
-/// what the load cell read before contact: a real rig's tare leaves an
+/// by five or more within three noise sd of what the load cell read
+/// before contact (`before_contact_n`: a real rig's tare leaves an
 /// offset of a few mN, a sizeable part of three noise sd). A pull that only
 /// friction makes fades with the length in tissue and has no snap; one
 /// that also carries what the friction line does not (a relaxing branch's
 /// offset) would move the line's zero, and with it the let-go point,
 /// millimetres away.
-fn snapped_free(out: &[Xvf], noise_n: f64, zero_n: f64) -> Option<f64> {
-    let (quiet_n, pull_n) = (3.0 * noise_n, zero_n - 10.0 * noise_n);
+fn snapped_free(out: &[Xvf], noise_n: f64, before_contact_n: f64) -> Option<f64> {
+    let (quiet_n, pull_n) = (3.0 * noise_n, before_contact_n - 10.0 * noise_n);
     let last_pull = out.iter().rposition(|s| s.2 < pull_n)?;
     let after = out.get(last_pull + 1..last_pull + 6)?;
-    let free = after.iter().all(|s| (s.2 - zero_n).abs() <= quiet_n);
+    let free = after
+        .iter()
+        .all(|s| (s.2 - before_contact_n).abs() <= quiet_n);
     let (pull, first_free) = (out.get(last_pull)?, after.first()?);
     free.then_some(0.5 * (pull.0 + first_free.0))
 }
@@ -1023,7 +1035,7 @@ fn one_way(
     contact_x_m: f64,
     x_s2: f64,
     noise_n: f64,
-    zero_n: f64,
+    before_contact_n: f64,
 ) -> Result<OneTrialFriction> {
     let out: Vec<Xvf> = track.iter().copied().filter(|s| s.1 < 0.0).collect();
     let depth = x_s2 - contact_x_m;
@@ -1040,7 +1052,7 @@ fn one_way(
         (outside + c.map_or(f64::INFINITY, |c| fit.sse(&c)), c)
     };
     let mut let_go = None;
-    let snapped = snapped_free(&out, noise_n, zero_n);
+    let snapped = snapped_free(&out, noise_n, before_contact_n);
     let let_go_snapped = snapped.is_some() && out.len() >= MIN_STROKE_SAMPLES;
     if out.len() >= MIN_STROKE_SAMPLES {
         let (mut best, mut best_x) = (f64::INFINITY, contact_x_m);
