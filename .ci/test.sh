@@ -38,10 +38,10 @@ cargo fmt --all -- --check
 
 step "lints (host, and firmware for each board)"
 cargo clippy --workspace --all-targets -- -D warnings
-cargo clippy --target thumbv7m-none-eabi --lib --bins -- -D warnings
-cargo clippy --target thumbv7em-none-eabihf --features board-mps2 --lib --bins -- -D warnings
-cargo clippy --target thumbv7em-none-eabihf --features board-f411 --lib --bins --target-dir "$target_dir/f411" -- -D warnings
-cargo clippy --target thumbv7em-none-eabihf --features f411-replay --lib --bins --target-dir "$target_dir/f411-replay" -- -D warnings
+cargo clippy --target thumbv7m-none-eabi -p needle-holder -p needle-holder-firmware -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf -p needle-holder-firmware --features board-mps2 -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf -p needle-holder-firmware --features board-f411 --target-dir "$target_dir/f411" -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf -p needle-holder-firmware --features f411-replay --target-dir "$target_dir/f411-replay" -- -D warnings
 
 step "docs (rustdoc with warnings denied, the book, a README of at most 150 lines)"
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --workspace

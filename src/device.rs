@@ -448,11 +448,20 @@ impl<W: Write, H: OutputPin> Device<W, H> {
     /// Latch new faults, send a fault event, assert halt, send a status.
     /// `at` is the sample (index, position, force) that raised them.
     /// Returns whether a status was sent.
+    #[inline]
     fn raise_at(&mut self, faults: Faults, at: (u32, Nanometres, MicroNewtons)) -> bool {
         let new = Faults(faults.0 & !self.faults.0);
         if new.is_empty() {
             return false;
         }
+        self.latch(new, at);
+        true
+    }
+
+    /// [`Self::raise_at`] with faults not yet latched: out of line, as
+    /// rare as faults are.
+    #[inline(never)]
+    fn latch(&mut self, new: Faults, at: (u32, Nanometres, MicroNewtons)) {
         self.faults = self.faults.union(new);
         self.send(&Frame::Event(Event {
             index: at.0,
@@ -468,7 +477,6 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             hold_x: at.1,
         });
         self.send_status();
-        true
     }
 
     /// Raise the halt line (latched) and say why, once.

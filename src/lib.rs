@@ -2,8 +2,8 @@
 //! sample between the load-cell ADC and the serial port.
 //!
 //! `no_std`, integer-only in the per-sample path, free of registers and
-//! `unsafe`. The same code runs in the firmware (`src/main.rs`, behind
-//! `target_os = "none"`) and on the host (`host-tools`, tests), so the two
+//! `unsafe`. The same code runs in the firmware (crate
+//! `needle-holder-firmware`, `firmware/`) and on the host (`host-tools`, tests), so the two
 //! produce byte-identical frames for the same input.
 //!
 //! Pipeline, one call of [`device::Device::tick`] per sample:

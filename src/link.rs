@@ -7,8 +7,15 @@
 
 use heapless::spsc::{Consumer, Producer};
 
-/// The sample's end of a byte queue of `N` bytes.
-pub struct QueueWriter<'a, const N: usize>(pub Producer<'a, u8, N>);
+/// Bytes of frames the link holds (4 KiB: every frame of a sample and a
+/// snapshot besides, while the UART drains at 4–5 bytes a sample).
+pub const QUEUE_BYTES: usize = 4096;
+
+/// The sample's end of the link's byte queue. Of one size, not generic:
+/// its bytes are copied on every sample, and a generic writer would be
+/// built with whichever crate uses it (the firmware's images build theirs
+/// for size), this one with the core (for speed).
+pub struct QueueWriter<'a>(pub Producer<'a, u8, QUEUE_BYTES>);
 
 /// The queue has no room for the whole frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -20,11 +27,11 @@ impl embedded_io::Error for QueueFull {
     }
 }
 
-impl<const N: usize> embedded_io::ErrorType for QueueWriter<'_, N> {
+impl embedded_io::ErrorType for QueueWriter<'_> {
     type Error = QueueFull;
 }
 
-impl<const N: usize> embedded_io::Write for QueueWriter<'_, N> {
+impl embedded_io::Write for QueueWriter<'_> {
     /// All of `buf` or nothing: a frame cut short would be garbage on the
     /// wire (COBS resynchronises, but the bytes would be wasted).
     fn write(&mut self, buf: &[u8]) -> Result<usize, QueueFull> {
@@ -121,19 +128,20 @@ mod tests {
 
     #[test]
     fn a_frame_goes_in_whole_or_not_at_all() {
-        let mut queue: Queue<u8, 8> = Queue::new();
+        let mut queue: Queue<u8, QUEUE_BYTES> = Queue::new();
         let (producer, mut consumer) = queue.split();
         let mut writer = QueueWriter(producer);
-        assert_eq!(writer.write(&[1, 2, 3, 4, 5]), Ok(5));
-        assert_eq!(writer.write(&[6, 7, 8]), Err(QueueFull), "7 slots, 5 used");
-        assert_eq!(consumer.len(), 5);
+        let most = [1; QUEUE_BYTES - 3];
+        assert_eq!(writer.write(&most), Ok(most.len()));
+        assert_eq!(writer.write(&[6, 7, 8]), Err(QueueFull), "2 slots left");
+        assert_eq!(consumer.len(), most.len());
         while consumer.dequeue().is_some() {}
         assert_eq!(writer.write(&[6, 7, 8]), Ok(3));
     }
 
     #[test]
     fn the_drain_stops_at_the_first_byte_refused_and_keeps_it() {
-        let mut queue: Queue<u8, 8> = Queue::new();
+        let mut queue: Queue<u8, QUEUE_BYTES> = Queue::new();
         let (producer, mut consumer) = queue.split();
         QueueWriter(producer).write(&[1, 2, 3]).unwrap();
         let mut sent = std::vec::Vec::new();

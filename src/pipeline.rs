@@ -112,6 +112,11 @@ impl DeviceConfig {
     /// from the first fault on the detectors stop: the halt line is latched
     /// by then, and their inputs can no longer be trusted, so a fault never
     /// fires an event (above all, never a puncture).
+    ///
+    /// Never inlined: the firmware's images build their own crate for size
+    /// and this one for speed, and a caller built for size would build the
+    /// per-sample work inlined into it for size too.
+    #[inline(never)]
     pub fn step(&self, state: &mut PipelineState, raw: RawSample) -> StepOutput {
         let index = state.index;
         state.index = state.index.saturating_add(1);

@@ -156,6 +156,8 @@ fn build_image(target: &str, features: &[&str], subdir: Option<&str>) -> Result<
             "build",
             "--profile",
             "firmware",
+            "-p",
+            "needle-holder-firmware",
             "--bin",
             "needle-holder",
             "--target",

@@ -118,8 +118,16 @@ pub struct Batch<'a> {
     /// [`BatchCheck`] of the samples, little-endian.
     pub check: [u8; 4],
     /// The coded readings.
-    #[serde(borrow)]
+    #[serde(borrow, serialize_with = "as_bytes")]
     pub raw: &'a [u8],
+}
+
+/// A byte slice as postcard's bytes — a length and the bytes, as a
+/// sequence of `u8` is written, so neither the wire nor the schema
+/// changes — which postcard hands to its flavor in one call, where a
+/// sequence costs a call a byte.
+fn as_bytes<S: serde::Serializer>(raw: &&[u8], serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.serialize_bytes(raw)
 }
 
 /// Written out: its readings are a borrowed slice, of at most
@@ -163,7 +171,8 @@ impl BatchWriter {
 
     /// Add a sample's readings and its computed values; `true` when the
     /// batch is full and must be sent (and then [`Self::clear`]ed).
-    #[inline]
+    /// Never inlined, as [`crate::config::DeviceConfig::step`].
+    #[inline(never)]
     pub fn push(&mut self, raw: RawSample, sample: &Sample) -> bool {
         if self.samples == 0 {
             self.first_index = sample.index;

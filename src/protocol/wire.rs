@@ -193,6 +193,14 @@ impl postcard::ser_flavors::Flavor for WireFlavor<'_> {
         self.push_cobs(byte)
     }
 
+    /// A run of bytes — a batch's readings, most of what is sent — in one
+    /// loop out of line, so that it is built as this crate is (for
+    /// speed), whatever the crate that serialises the frame is built for.
+    #[inline(never)]
+    fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
+        bytes.iter().try_for_each(|&byte| self.try_push(byte))
+    }
+
     fn finalize(mut self) -> postcard::Result<usize> {
         for byte in (!self.crc).to_le_bytes() {
             self.push_cobs(byte)?;

@@ -10,11 +10,11 @@ use super::serial::Usart2;
 
 /// Bytes the queue holds: about 40 ms of a 2 kHz stream, so a stall of
 /// the drain that long loses nothing.
-pub const QUEUE_BYTES: usize = 4096;
+pub use needle_holder::link::QUEUE_BYTES;
 
 /// The sample task's end of the queue (the core's queue sink, see
 /// [`needle_holder::link`]).
-pub type QueueWriter = needle_holder::link::QueueWriter<'static, QUEUE_BYTES>;
+pub type QueueWriter = needle_holder::link::QueueWriter<'static>;
 
 /// Send what the transmitter takes now, without waiting.
 pub fn send_waiting(serial: &mut Usart2, queue: &mut Consumer<'static, u8, QUEUE_BYTES>) {

@@ -17,10 +17,9 @@ mod hardware;
 #[cortex_m_rt::entry]
 fn main() -> ! {
     use heapless::spsc::Queue;
-    use needle_holder::{config::DeviceConfig, link::QueueWriter, replay::Replayer};
-
-    /// Bytes of frames the link holds between two samples.
-    const QUEUE_BYTES: usize = 4096;
+    use needle_holder::config::DeviceConfig;
+    use needle_holder::link::{QueueWriter, QUEUE_BYTES};
+    use needle_holder::replay::Replayer;
 
     defmt::info!(
         "needle-holder {} on {}",
