@@ -4,7 +4,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{bench, decode, demo, detect, device, diagnose, evaluate, fit, record, sim};
+use needle_analysis::{detect, diagnose, evaluate, fit, sim};
+use needle_io::{decode, device, record};
+use needle_qemu::{bench, demo};
 
 #[derive(Parser)]
 #[command(
@@ -64,7 +66,7 @@ fn main() -> ExitCode {
         // `needle decode … | head` closing the pipe is not a failure.
         Err(err) if is_broken_pipe(&err) => ExitCode::SUCCESS,
         Err(err) => {
-            host_tools::note!("needle: {err:#}");
+            needle_io::note!("needle: {err:#}");
             ExitCode::FAILURE
         }
     }
@@ -81,7 +83,7 @@ fn clap_exit(e: &clap::Error) -> ExitCode {
     }
     match printed {
         Err(io) if io.kind() != BrokenPipe => {
-            host_tools::note!("needle: cannot write to standard output: {io}");
+            needle_io::note!("needle: cannot write to standard output: {io}");
             ExitCode::FAILURE
         }
         _ => ExitCode::SUCCESS,

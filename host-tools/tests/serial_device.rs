@@ -13,10 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command as Process;
 use std::time::{Duration, Instant};
 
-use host_tools::firmware::{self, Board, QemuLive, Serial};
-use host_tools::frames::{Item, Message};
-use host_tools::link::Link;
-use host_tools::sim::{self, Plan};
+use needle_analysis::sim::{self, Plan};
 use needle_holder::assist::AssistModes;
 use needle_holder::config::{DeviceConfig, TissueModel};
 use needle_holder::model::params::{LIBRARY, LIVER1};
@@ -25,6 +22,9 @@ use needle_holder::protocol::{
     Command, CommandError, ConfigFrame, HaltReason, Status, TissueSource,
 };
 use needle_holder::units::Nanometres;
+use needle_io::frames::{Item, Message};
+use needle_io::link::Link;
+use needle_qemu::firmware::{self, Board, QemuLive, Serial};
 
 /// The devices here run in real time: one at a time, so that two QEMUs
 /// (and their hosts) do not share the machine's cores and slow each
@@ -542,7 +542,7 @@ fn a_second_needle_record_into_one_directory_is_refused_naming_the_first() {
     std::fs::create_dir(&out).unwrap();
     // The first recording's lock, as `needle record` takes it.
     let _first =
-        host_tools::input::lock_output(&out, &out.join(".needle-record.lock"), "needle record")
+        needle_io::input::lock_output(&out, &out.join(".needle-record.lock"), "needle record")
             .unwrap();
     let second = Process::new(env!("CARGO_BIN_EXE_needle"))
         .args(["record", "--port", &device.port, "--seconds", "2", "--out"])
@@ -859,7 +859,7 @@ fn hung_mass_replay(dir: &Path, seconds: usize, loaded_from_s: usize) -> PathBuf
     let rate_hz = 500u16;
     let n = seconds * usize::from(rate_hz);
     let loaded_from = loaded_from_s * usize::from(rate_hz);
-    let trial = host_tools::trial::Trial {
+    let trial = needle_io::trial::Trial {
         t_s: (0..n).map(|i| i as f64 / f64::from(rate_hz)).collect(),
         x_m: vec![0.0; n],
         f_n: (0..n)

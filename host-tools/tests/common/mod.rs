@@ -31,7 +31,7 @@ pub fn needle(args: &[&str]) {
 /// the device samples under `dir`: the sum of its squared residuals, N²,
 /// and its length, samples.
 pub fn dwells(dir: &Path) -> Vec<(f64, usize)> {
-    host_tools::trial::dataset_files(dir)
+    needle_io::trial::dataset_files(dir)
         .unwrap()
         .iter()
         .map(|file| {

@@ -11,10 +11,10 @@
 use crate::apart;
 use crate::common;
 
-use host_tools::detect::detect_dataset;
-use host_tools::diagnose::candidates::CANDIDATES;
-use host_tools::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
-use host_tools::fit::fit_dataset;
+use needle_analysis::detect::detect_dataset;
+use needle_analysis::diagnose::candidates::CANDIDATES;
+use needle_analysis::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
+use needle_analysis::fit::fit_dataset;
 use needle_holder::config::DeviceConfig;
 use serde_json::Value;
 

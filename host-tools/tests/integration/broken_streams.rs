@@ -8,10 +8,10 @@ use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
-use host_tools::sim::{self, Plan};
-use host_tools::twin;
+use needle_analysis::sim::{self, Plan};
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
+use needle_io::twin;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Stream {
@@ -224,11 +224,14 @@ fn record_with_no_device_and_stderr_full_exits_1_and_leaves_no_directory() {
 #[test]
 fn no_tool_prints_through_a_macro_that_panics() {
     // `println!` and friends panic when their stream breaks; the tools
-    // write through `host_tools::stdout` instead. Every source file is
+    // write through `needle_io::stdout` instead. Every source file is
     // read, so a new one is covered without being listed.
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut offenders = Vec::new();
-    let mut dirs = vec![src];
+    let mut dirs: Vec<_> = ["src", "io/src", "analysis/src", "qemu/src"]
+        .iter()
+        .map(|d| root.join(d))
+        .collect();
     while let Some(dir) = dirs.pop() {
         for entry in std::fs::read_dir(&dir).unwrap() {
             let path = entry.unwrap().path();

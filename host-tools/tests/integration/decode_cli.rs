@@ -2,10 +2,10 @@
 
 use std::process::Command;
 
-use host_tools::sim::{self, Plan};
-use host_tools::twin;
+use needle_analysis::sim::{self, Plan};
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
+use needle_io::twin;
 use rand::{RngCore, SeedableRng};
 
 use crate::common;
@@ -58,7 +58,7 @@ fn capture_to_trial_csv_round_trips_the_simulated_trial() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let back = host_tools::trial::read(&csv_path).unwrap();
+    let back = needle_io::trial::read(&csv_path).unwrap();
     assert_eq!(back.len(), trial.len());
     for i in 0..trial.len() {
         assert!((back.t_s[i] - trial.t_s[i]).abs() < 1e-9);

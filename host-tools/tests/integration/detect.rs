@@ -11,11 +11,11 @@ use std::sync::OnceLock;
 
 use crate::common;
 
-use host_tools::evaluate::{cell, kind, Cell};
+use needle_analysis::evaluate::{cell, kind, Cell};
 
 /// A 500 Hz trial's true puncture: peak at 10.000 s, fall at 10.002 s.
-fn true_event(kind: &str) -> host_tools::detect::TrueEvent {
-    host_tools::detect::TrueEvent {
+fn true_event(kind: &str) -> needle_analysis::detect::TrueEvent {
+    needle_analysis::detect::TrueEvent {
         kind: kind.into(),
         t_s: 10.002,
         peak_t_s: 10.000,
@@ -23,8 +23,8 @@ fn true_event(kind: &str) -> host_tools::detect::TrueEvent {
     }
 }
 
-fn found_at(kind: &str, t_s: f64, needle_x_m: f64) -> host_tools::detect::Found {
-    host_tools::detect::Found {
+fn found_at(kind: &str, t_s: f64, needle_x_m: f64) -> needle_analysis::detect::Found {
+    needle_analysis::detect::Found {
         kind: kind.into(),
         t_s,
         needle_x_m,
@@ -33,7 +33,7 @@ fn found_at(kind: &str, t_s: f64, needle_x_m: f64) -> host_tools::detect::Found 
 
 #[test]
 fn the_scorer_takes_a_puncture_from_its_peak_to_2_samples_after_the_fall_only() {
-    use host_tools::detect::finds;
+    use needle_analysis::detect::finds;
     let period = 1.0 / 500.0;
     let puncture = true_event("puncture");
     let at = |t| finds(&puncture, &found_at("puncture", t, 0.02), period);
@@ -65,7 +65,7 @@ fn the_scorer_takes_a_puncture_from_its_peak_to_2_samples_after_the_fall_only() 
 
 #[test]
 fn a_detection_outside_its_window_is_a_miss_and_a_false_alarm() {
-    use host_tools::detect::score;
+    use needle_analysis::detect::score;
     let truth = [true_event("puncture")];
     let early = [found_at("puncture", 10.000 - 10.0 / 500.0, 0.02)];
     let s = &score(&truth, &early, 500.0, &["puncture"])[0];
@@ -157,10 +157,11 @@ fn puncture_holds_up_under_every_unmodelled_effect() {
 /// of the target past the surface the device found.
 #[test]
 fn assist_halts_at_the_event_sample_and_at_the_target_depth() {
-    use host_tools::detect::{detect_trial, parse_assist};
-    use host_tools::sim::{simulate_dataset, Sensor};
+    use needle_analysis::detect::detect_trial;
+    use needle_analysis::sim::{simulate_dataset, Sensor};
     use needle_holder::config::DeviceConfig;
     use needle_holder::model::params::LIVER1;
+    use needle_io::device::parse_assist;
     let dir = tempfile::tempdir().unwrap();
     let sensor = Sensor {
         rate_hz: 1000.0,
@@ -171,8 +172,8 @@ fn assist_halts_at_the_event_sample_and_at_the_target_depth() {
     let on_puncture = DeviceConfig::default().with_assist(parse_assist("puncture").unwrap());
     let mut at_depth = DeviceConfig::default().with_assist(parse_assist("depth").unwrap());
     at_depth.assist.target_depth = needle_holder::units::Nanometres::from_m(0.02);
-    for file in host_tools::trial::dataset_files(dir.path()).unwrap() {
-        let trial = host_tools::trial::read(&file).unwrap();
+    for file in needle_io::trial::dataset_files(dir.path()).unwrap() {
+        let trial = needle_io::trial::read(&file).unwrap();
         let found = detect_trial(&trial, &on_puncture);
         let puncture = found.events.iter().find(|e| e.kind == "puncture").unwrap();
         let halt = found.halt.as_ref().expect("a halt");
@@ -198,7 +199,7 @@ fn assist_halts_at_the_event_sample_and_at_the_target_depth() {
 /// over earlier output.
 #[test]
 fn detect_writes_the_devices_samples_per_trial_beside_no_trial() {
-    use host_tools::sim::{simulate_dataset, Sensor};
+    use needle_analysis::sim::{simulate_dataset, Sensor};
     use needle_holder::model::params::LIVER1;
     let sensor = Sensor {
         rate_hz: 500.0,
@@ -222,15 +223,15 @@ fn detect_writes_the_devices_samples_per_trial_beside_no_trial() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let trials = host_tools::trial::dataset_files(dir.path()).unwrap();
+    let trials = needle_io::trial::dataset_files(dir.path()).unwrap();
     assert_eq!(trials.len(), 2);
     for input in &trials {
         let name = input.file_name().unwrap();
-        let recorded = host_tools::trial::read(input).unwrap();
+        let recorded = needle_io::trial::read(input).unwrap();
         let mut rows = csv::Reader::from_path(out.join(name)).unwrap();
         assert_eq!(
             rows.headers().unwrap().iter().collect::<Vec<_>>(),
-            host_tools::decode::CSV_HEADER
+            needle_io::decode::CSV_HEADER
         );
         let rows: Vec<csv::StringRecord> = rows.records().map(Result::unwrap).collect();
         assert_eq!(rows.len(), recorded.len());
@@ -266,7 +267,7 @@ fn detect_writes_the_devices_samples_per_trial_beside_no_trial() {
     assert!(!into.status.success());
     assert!(String::from_utf8_lossy(&into.stderr).contains("names the dataset itself"));
     assert_eq!(
-        host_tools::trial::dataset_files(dir.path()).unwrap().len(),
+        needle_io::trial::dataset_files(dir.path()).unwrap().len(),
         2
     );
 }

@@ -5,8 +5,10 @@
 use std::path::Path;
 use std::process::Command;
 
-use host_tools::diagnose::{diagnose, heldout_rms_with_displacement, load, Nominal, TissueShift};
-use host_tools::sim::{effects, Dataset, Form, Sensor};
+use needle_analysis::diagnose::{
+    diagnose, heldout_rms_with_displacement, load, Nominal, TissueShift,
+};
+use needle_analysis::sim::{effects, Dataset, Form, Sensor};
 use needle_holder::model::params::{tissue, LIVER1};
 use serde_json::Value;
 
@@ -256,7 +258,7 @@ fn spread_alone_is_none(tissue_name: &'static str, seed: u64, tare_sd_n: f64) ->
         sensor: SENSOR,
         through: false,
         form: Form::Standard,
-        rig: host_tools::sim::Rig {
+        rig: needle_analysis::sim::Rig {
             spread: 0.2,
             tare_sd_n,
             ..Default::default()
@@ -360,7 +362,7 @@ fn a_decoded_stream_names_the_drift_and_the_device_models_gap_has_it_closest() {
     for k in 0..10 {
         let replay = std::fs::read(sim.path().join(format!("trial_{k:03}.replay"))).unwrap();
         let frames = live.path().join(format!("trial_{k:03}.frames"));
-        std::fs::write(&frames, host_tools::twin::run(&replay).frames).unwrap();
+        std::fs::write(&frames, needle_io::twin::run(&replay).frames).unwrap();
         let csv = live.path().join(format!("trial_{k:03}.csv"));
         let status = Command::new(needle)
             .args([

@@ -4,11 +4,11 @@
 
 use std::path::PathBuf;
 
-use host_tools::bench::{count_instructions, image_size};
-use host_tools::firmware::{self, Board};
-use host_tools::sim::{self, Plan};
+use needle_analysis::sim::{self, Plan};
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
+use needle_qemu::bench::{count_instructions, image_size};
+use needle_qemu::firmware::{self, Board};
 use object::{Object, ObjectSymbol};
 
 fn elf(board: Board) -> PathBuf {

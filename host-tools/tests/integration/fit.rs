@@ -4,9 +4,9 @@
 
 use std::process::Command;
 
-use host_tools::fit::{fit_dataset, value_of, FitReport};
-use host_tools::sim::effects::{self, Effect};
-use host_tools::sim::{simulate_dataset, Sensor, TissueParams};
+use needle_analysis::fit::{fit_dataset, value_of, FitReport};
+use needle_analysis::sim::effects::{self, Effect};
+use needle_analysis::sim::{simulate_dataset, Sensor, TissueParams};
 use needle_holder::model::params::{tissue, LIVER1};
 use serde_json::Value;
 
@@ -199,8 +199,8 @@ fn the_fitted_toml_is_a_valid_library_entry_close_to_the_truth() {
     let fit = fit(&LIVER1, &[], 6);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("fitted.toml");
-    std::fs::write(&path, host_tools::fit::to_toml(&fit)).unwrap();
-    let loaded = host_tools::tissue::load(&path).unwrap();
+    std::fs::write(&path, needle_analysis::fit::to_toml(&fit)).unwrap();
+    let loaded = needle_io::tissue::load(&path).unwrap();
     assert_eq!(loaded[0].name, "fitted");
     let p = loaded[0].params;
     assert!((p.a2_n_per_m2 - 5200.0).abs() < 520.0);
@@ -215,7 +215,7 @@ fn the_fitted_toml_is_a_valid_library_entry_close_to_the_truth() {
         simulate_dataset(dir.path(), "t", &LIVER1, &[], 1, 6, &SENSOR).unwrap();
         fit_dataset(dir.path()).unwrap()
     };
-    let toml = host_tools::fit::to_toml(&one);
+    let toml = needle_analysis::fit::to_toml(&one);
     assert!(
         toml.contains("# note: puncture_force_sd_n is left out: one trial has no spread\n"),
         "{toml}"

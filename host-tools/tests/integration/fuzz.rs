@@ -10,14 +10,14 @@ use crate::library;
 use library::liver1_entry;
 use std::sync::OnceLock;
 
-use host_tools::frames::{decode_all, Item};
-use host_tools::sim::{self, Plan};
+use needle_analysis::sim::{self, Plan};
 use needle_holder::config::{DeviceConfig, LIBRARY_MODELS};
 use needle_holder::model::params::LIVER1;
 use needle_holder::protocol::command::{CommandReader, MAX_ENCODED_COMMAND};
 use needle_holder::protocol::wire::Encoder;
 use needle_holder::protocol::{Command, CommandFrame, Sample};
 use needle_holder::units::Nanometres;
+use needle_io::frames::{decode_all, Item};
 use proptest::prelude::*;
 
 /// A short insertion through the host twin: its bytes and its samples.
@@ -33,9 +33,9 @@ fn capture() -> &'static (Vec<u8>, Vec<Sample>) {
         let (trial, _) = sim::insertion(&LIVER1, &plan);
         let config = DeviceConfig::default();
         let replay = sim::to_replay(&trial, 500, &config.load_cell, &config.encoder);
-        let bytes = host_tools::twin::run(&replay).frames;
+        let bytes = needle_io::twin::run(&replay).frames;
         let (items, _) = decode_all(&bytes).unwrap();
-        (bytes, host_tools::frames::samples(&items))
+        (bytes, needle_io::frames::samples(&items))
     })
 }
 
@@ -130,8 +130,8 @@ proptest! {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.csv");
         std::fs::write(&path, &text).unwrap();
-        let _ = host_tools::trial::read(&path);
-        let _ = host_tools::tissue::parse(&text, std::path::Path::new("fuzz.toml"));
+        let _ = needle_io::trial::read(&path);
+        let _ = needle_io::tissue::parse(&text, std::path::Path::new("fuzz.toml"));
     }
 
     /// Liver 1's entry with one number replaced by anything: the loader
@@ -154,7 +154,7 @@ proptest! {
             .map(|l| if l.starts_with(&format!("{} =", keys[key])) { format!("{} = {value:?}", keys[key]) } else { l.to_string() })
             .collect::<Vec<_>>()
             .join("\n");
-        let parsed = host_tools::tissue::parse(&text, std::path::Path::new("fuzz.toml"));
+        let parsed = needle_io::tissue::parse(&text, std::path::Path::new("fuzz.toml"));
         let mut p = LIVER1;
         let valid = match toml::from_str::<toml::Value>(&format!("v = {value:?}")) {
             Ok(_) => {
@@ -298,12 +298,12 @@ fn an_accepted_trial_round_trips() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.csv");
         std::fs::write(&path, damage_text(&text, &damages)).unwrap();
-        let Ok(trial) = host_tools::trial::read(&path) else {
+        let Ok(trial) = needle_io::trial::read(&path) else {
             return Ok(false);
         };
         let again = dir.path().join("again.csv");
-        host_tools::trial::write(&again, &trial).unwrap();
-        let back = host_tools::trial::read(&again);
+        needle_io::trial::write(&again, &trial).unwrap();
+        let back = needle_io::trial::read(&again);
         prop_assert!(back.is_ok(), "{:?}", back.err());
         let back = back.unwrap();
         prop_assert_eq!(back.len(), trial.len());
@@ -326,7 +326,7 @@ fn an_accepted_tissue_is_valid_and_converts() {
     let strategy = prop::collection::vec(text_damage(), 0..4);
     counted("tissue loader", 400, 100, strategy, |damages| {
         let text = damage_text(&liver1, &damages);
-        match host_tools::tissue::parse(&text, std::path::Path::new("fuzz.toml")) {
+        match needle_io::tissue::parse(&text, std::path::Path::new("fuzz.toml")) {
             Ok(tissues) => {
                 for t in &tissues {
                     prop_assert!(t.params.validate().is_ok());

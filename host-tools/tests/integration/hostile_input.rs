@@ -418,7 +418,7 @@ fn a_truth_json_or_tissue_library_that_is_a_device_is_refused_not_read() {
     let huge = dir.path().join("huge.toml");
     std::fs::File::create(&huge)
         .unwrap()
-        .set_len(host_tools::input::MOST_TEXT_BYTES + 1)
+        .set_len(needle_io::input::MOST_TEXT_BYTES + 1)
         .unwrap();
     let err = refused(&["simulate", "--params", huge.to_str().unwrap(), "--out", x]);
     assert!(
@@ -438,7 +438,7 @@ fn a_csv_that_cannot_be_written_is_named() {
         .success());
     let replay = std::fs::read(dir.path().join("trial_000.replay")).unwrap();
     let capture = dir.path().join("cap.bin");
-    std::fs::write(&capture, host_tools::twin::run(&replay).frames).unwrap();
+    std::fs::write(&capture, needle_io::twin::run(&replay).frames).unwrap();
     let err = refused(&["decode", capture.to_str().unwrap(), "--csv", "/dev/full"]);
     assert!(err.contains("/dev/full"), "{err}");
 }
@@ -459,14 +459,14 @@ fn a_capture_of_another_schema_under_this_version_is_refused_naming_both_keys() 
     let cap = dir.path().join("other.bin");
     std::fs::write(&cap, bytes).unwrap();
     let err = refused(&["decode", cap.to_str().unwrap()]);
-    let ours = host_tools::frames::hex(&SCHEMA_KEY);
+    let ours = needle_io::frames::hex(&SCHEMA_KEY);
     assert!(err.contains("abababababababab"), "{err}");
     assert!(err.contains(&ours), "{err}");
 }
 
 /// A capture of the host twin on a simulated liver insertion at 500 Hz.
 fn twin_capture(seconds: f64) -> Vec<u8> {
-    use host_tools::sim::{self, Plan};
+    use needle_analysis::sim::{self, Plan};
     use needle_holder::config::DeviceConfig;
     use needle_holder::model::params::LIVER1;
     let plan = Plan {
@@ -477,7 +477,7 @@ fn twin_capture(seconds: f64) -> Vec<u8> {
     let (trial, _) = sim::insertion(&LIVER1, &plan);
     let config = DeviceConfig::default();
     let replay = sim::to_replay(&trial, 500, &config.load_cell, &config.encoder);
-    host_tools::twin::run(&replay).frames
+    needle_io::twin::run(&replay).frames
 }
 
 /// Each CSV's `t_s` column, which must rise from row to row.

@@ -7,17 +7,17 @@ use std::process::Command;
 use std::sync::{Mutex, OnceLock};
 use std::time::Duration;
 
-use host_tools::firmware::{self, Board, Serial};
-use host_tools::frames::decode_all;
-use host_tools::frames::Message as Frame;
-use host_tools::sim::{self, Plan};
-use host_tools::twin;
+use needle_analysis::sim::{self, Plan};
 use needle_holder::config::DeviceConfig;
 use needle_holder::faults::Faults;
 use needle_holder::model::params::LIVER1;
 use needle_holder::protocol::{EventKind, HaltReason, Status};
 use needle_holder::replay::{Record, ReplayHeader, OVERRUN_MARK};
 use needle_holder::units::MicroNewtons;
+use needle_io::frames::decode_all;
+use needle_io::frames::Message as Frame;
+use needle_io::twin;
+use needle_qemu::firmware::{self, Board, Serial};
 
 /// One firmware build per board per test run, and one at a time (cargo
 /// serialises builds anyway; this keeps the output readable).
@@ -99,7 +99,7 @@ fn frames_of(bytes: &[u8]) -> Vec<Frame> {
     items
         .into_iter()
         .filter_map(|i| match i {
-            host_tools::frames::Item::Frame(f) => Some(f),
+            needle_io::frames::Item::Frame(f) => Some(f),
             _ => None,
         })
         .collect()
@@ -126,7 +126,7 @@ fn cortex_m3_in_qemu_matches_the_host_twin_byte_for_byte() {
     let kinds: Vec<EventKind> = items
         .iter()
         .filter_map(|i| match i {
-            host_tools::frames::Item::Frame(Frame::Event(e)) => Some(e.kind),
+            needle_io::frames::Item::Frame(Frame::Event(e)) => Some(e.kind),
             _ => None,
         })
         .collect();
@@ -136,7 +136,7 @@ fn cortex_m3_in_qemu_matches_the_host_twin_byte_for_byte() {
 
 #[test]
 fn a_simulated_trial_with_effects_replays_in_qemu_like_on_the_host() {
-    use host_tools::sim::{effects, simulate_dataset, Sensor};
+    use needle_analysis::sim::{effects, simulate_dataset, Sensor};
     let dir = tempfile::tempdir().unwrap();
     let sensor = Sensor {
         rate_hz: 1000.0,
@@ -195,7 +195,7 @@ fn a_relaxing_tissue_held_still_matches_the_host_twin_on_every_board() {
             "{board:?}"
         );
         let (items, _) = decode_all(&qemu.frames).unwrap();
-        let samples = host_tools::frames::samples(&items);
+        let samples = needle_io::frames::samples(&items);
         let mut best: &[needle_holder::protocol::Sample] = &[];
         for run in
             samples.split(|s| s.v.0 != 0 || s.phase != needle_holder::protocol::Phase::Inserted)

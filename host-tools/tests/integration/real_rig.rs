@@ -9,10 +9,10 @@
 
 use std::path::Path;
 
-use host_tools::detect::{detect_dataset, Detection};
-use host_tools::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
-use host_tools::fit::{fit_dataset, to_toml, Estimate, FitReport, RELAXATION_PRIOR};
-use host_tools::sim::{effects, Dataset, Form, ProtocolKind, Rig, Sensor};
+use needle_analysis::detect::{detect_dataset, Detection};
+use needle_analysis::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
+use needle_analysis::fit::{fit_dataset, to_toml, Estimate, FitReport, RELAXATION_PRIOR};
+use needle_analysis::sim::{effects, Dataset, Form, ProtocolKind, Rig, Sensor};
 use needle_holder::config::DeviceConfig;
 use serde_json::Value;
 
@@ -58,7 +58,7 @@ const SKIN: Skin = Skin {
 impl Skin {
     /// Write the dataset into `dir`; returns the true parameters.
     fn write(self, dir: &Path) -> needle_holder::model::params::TissueParams {
-        let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
+        let skin = needle_io::tissue::resolve(Some("skin_phantom"), None).unwrap();
         let list = effects::parse_list(self.effects).unwrap();
         Dataset {
             tissue_name: "skin_phantom",
@@ -113,7 +113,7 @@ fn within(key: &str, estimate: &Estimate, truth: f64, tolerance: f64) {
 
 /// `needle detect --params` with the tissue `needle fit --toml` wrote.
 fn detect_with_fitted(dir: &Path, fit: &FitReport) -> Detection {
-    let tissue = host_tools::tissue::parse(&to_toml(fit), Path::new("fitted.toml"))
+    let tissue = needle_io::tissue::parse(&to_toml(fit), Path::new("fitted.toml"))
         .unwrap()
         .remove(0);
     let config = DeviceConfig::for_tissue(&tissue.params).unwrap();
@@ -273,7 +273,7 @@ fn diagnose_runs_on_them_and_never_says_none_over_a_gap() {
 fn a_gap_in_a_recording_is_no_encoder_jump() {
     // 1 kHz at 3 mm/s with 70 ms lost: 210 µm between two rows, more than
     // one period's limit (200 counts) but well within the drive's 100 mm/s.
-    let mut trial = host_tools::trial::Trial::default();
+    let mut trial = needle_io::trial::Trial::default();
     let mut t = 0.0;
     for i in 0..3000 {
         if i == 1500 {
@@ -282,7 +282,7 @@ fn a_gap_in_a_recording_is_no_encoder_jump() {
         trial.push(t, 0.003 * t, 0.0);
         t += 0.001;
     }
-    let found = host_tools::detect::detect_trial(&trial, &DeviceConfig::default());
+    let found = needle_analysis::detect::detect_trial(&trial, &DeviceConfig::default());
     assert!(found.faults.is_empty(), "{:?}", found.faults);
 }
 
@@ -421,8 +421,8 @@ fn a_puncture_drop_spread_over_samples_is_no_exit() {
     // 1.5 N over three samples (a real rig's skin, the book, *What real recordings look like*), then
     // cutting and a friction slowly growing. Before, the drop's tail read
     // as an exit.
-    let skin = host_tools::tissue::resolve(Some("skin_phantom"), None).unwrap();
-    let mut trial = host_tools::trial::Trial::default();
+    let skin = needle_io::tissue::resolve(Some("skin_phantom"), None).unwrap();
+    let mut trial = needle_io::trial::Trial::default();
     let (rate, speed) = (100.0, 0.002);
     let (contact, puncture) = (0.005, 0.015);
     let mut fell = 0;
@@ -442,7 +442,7 @@ fn a_puncture_drop_spread_over_samples_is_no_exit() {
         trial.push(t, x, f);
     }
     let config = DeviceConfig::for_tissue(&skin.params).unwrap();
-    let found = host_tools::detect::detect_trial(&trial, &config);
+    let found = needle_analysis::detect::detect_trial(&trial, &config);
     let kinds: Vec<&str> = found.events.iter().map(|e| e.kind).collect();
     assert_eq!(kinds, ["contact", "puncture"], "{:?}", found.events);
     assert!(found.faults.is_empty(), "{:?}", found.faults);
@@ -516,7 +516,7 @@ fn the_fitted_tissue_finds_every_puncture_in_its_window_and_no_worse_than_the_de
         // The tissue carries the fall the trials made and the spreads the
         // detector takes its margins from.
         let tissue = fit.tissue().unwrap();
-        let truth = host_tools::tissue::resolve(Some("skin_phantom"), None)
+        let truth = needle_io::tissue::resolve(Some("skin_phantom"), None)
             .unwrap()
             .params;
         let fallen_to = tissue.puncture_drop_to_n;

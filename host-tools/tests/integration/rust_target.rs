@@ -7,7 +7,7 @@
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 
-use host_tools::firmware::{ensure_target_using, target_action, TargetAction};
+use needle_qemu::firmware::{ensure_target_using, target_action, TargetAction};
 
 /// One test at a time writes and runs its script: a script written by one
 /// thread while another forks a child is open for writing in that child

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
+use needle_holder::assist::AssistModes;
 use needle_holder::model::params::LIBRARY;
 use needle_holder::protocol::{Command, CommandError, TissueSource};
 use needle_holder::units::Nanometres;
@@ -142,7 +143,7 @@ pub fn command_of(action: &Action) -> Result<Command> {
                 bail!("--depth-mm {depth_mm:?}: must be between 0.1 and 100 mm");
             }
             Command::SetAssist {
-                modes: crate::detect::parse_assist(modes)?,
+                modes: parse_assist(modes)?,
                 target_depth,
             }
         }
@@ -220,4 +221,25 @@ fn print_config(link: &mut Link, port: &str) -> Result<()> {
         }
     }
     bail!("{port}: the device acknowledged but sent no configuration frame")
+}
+
+/// Parse `--assist`.
+pub fn parse_assist(list: &str) -> Result<AssistModes> {
+    // An empty list is no choice: `none` says "no assist" in words.
+    if list.split(',').all(|m| m.trim().is_empty()) {
+        anyhow::bail!("assist: name the modes, or `none` to turn them all off");
+    }
+    list.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty() && *s != "none")
+        .try_fold(AssistModes::NONE, |modes, name| {
+            let known = AssistModes::NAMES.iter().find(|(_, n)| *n == name);
+            match known {
+                Some((mode, _)) => Ok(modes.union(*mode)),
+                None => {
+                    let names: Vec<&str> = AssistModes::NAMES.iter().map(|(_, n)| *n).collect();
+                    anyhow::bail!("unknown assist mode `{name}` (known: {})", names.join(", "))
+                }
+            }
+        })
 }

@@ -12,11 +12,11 @@ use anyhow::{bail, Context, Result};
 use needle_holder::config::DeviceConfig;
 use needle_holder::protocol::{Event, EventKind, Sample};
 
-use crate::decode::{describe, summary_line};
 use crate::firmware::{self, Board, Serial};
-use crate::frames::{Item, Message, StreamDecoder};
-use crate::sim::{self, Plan};
+use needle_analysis::sim::{self, Plan};
 use needle_holder::model::params::LIVER1;
+use needle_io::decode::{describe, summary_line};
+use needle_io::frames::{Item, Message, StreamDecoder};
 
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
@@ -35,7 +35,7 @@ const QEMU_TIMEOUT: Duration = Duration::from_secs(120);
 pub fn run(args: &DemoArgs) -> Result<()> {
     let tissue = LIVER1;
     let plan = Plan::PAPER;
-    crate::out!(
+    needle_io::out!(
         "needle demo: liver 1 of the paper (a1 = {} N/m, a2 = {} N/m², puncture at {:.2} mm), {} mm/s, {} Hz",
         tissue.a1_n_per_m,
         tissue.a2_n_per_m2,
@@ -44,14 +44,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         plan.rate_hz
     )?;
     firmware::ensure_qemu()?;
-    crate::out!("building the firmware for {} …", args.board.target())?;
+    needle_io::out!("building the firmware for {} …", args.board.target())?;
     let elf = firmware::build(args.board)?;
 
     let dir = match &args.out {
         Some(dir) => dir.clone(),
         None => firmware::target_directory()?.join("demo"),
     };
-    crate::input::create_out_dir(&dir)?;
+    needle_io::input::create_out_dir(&dir)?;
     let (trial, truth) = sim::insertion(&tissue, &plan);
     let config = DeviceConfig::default();
     let replay = sim::to_replay(
@@ -63,7 +63,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let replay_path = dir.join("liver1.replay");
     std::fs::write(&replay_path, &replay)
         .with_context(|| format!("{}: cannot write", replay_path.display()))?;
-    crate::out!(
+    needle_io::out!(
         "replay: {} ({} samples, {:.1} s)",
         replay_path.display(),
         trial.len(),
@@ -72,7 +72,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
     let listener = TcpListener::bind("127.0.0.1:0").context("cannot listen on loopback")?;
     let addr = listener.local_addr()?;
-    crate::out!(
+    needle_io::out!(
         "running QEMU {:?}; frames UART → tcp {addr}, decoded as they arrive:",
         args.board
     )?;
@@ -102,13 +102,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     std::fs::write(dir.join("frames.bin"), &capture)?;
     std::fs::write(dir.join("defmt.bin"), &run.defmt)?;
 
-    crate::out!("{}", summary_line(&stats))?;
+    needle_io::out!("{}", summary_line(&stats))?;
     let (Some(contact), Some(puncture), Some(last)) = (seen.contact, seen.puncture, seen.last)
     else {
         bail!("the device did not report both contact and puncture");
     };
     let past_contact_mm = |x: f64| (x - contact.x.as_m()) * 1e3;
-    crate::out!(
+    needle_io::out!(
         "contact at x = {:.3} mm; puncture {:.2} mm past contact at {:.3} N \
          (simulated truth {:.2} mm, {:.3} N; paper 16.65 ± 3.55 mm, 2.30 ± 0.83 N)",
         contact.x.as_m() * 1e3,
@@ -117,13 +117,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         (truth.puncture_x_m - truth.contact_x_m) * 1e3,
         truth.puncture_force_n,
     )?;
-    crate::out!(
+    needle_io::out!(
         "deepest {:.2} mm past contact; final position {:.3} mm; {} faults",
         past_contact_mm(seen.deepest_m),
         last.x.as_m() * 1e3,
         seen.faults
     )?;
-    crate::out!(
+    needle_io::out!(
         "capture {} and defmt log {} kept (decode: needle decode FILE; defmt-print -e {} < LOG)",
         dir.join("frames.bin").display(),
         dir.join("defmt.bin").display(),
@@ -202,10 +202,10 @@ impl Seen {
                     _ => false,
                 };
                 if !quiet {
-                    crate::out!("  {}", describe(&frame, self.rate_hz))?;
+                    needle_io::out!("  {}", describe(&frame, self.rate_hz))?;
                 }
             }
-            other => crate::out!("  {other:?}")?,
+            other => needle_io::out!("  {other:?}")?,
         }
         Ok(())
     }

@@ -7,7 +7,7 @@ use needle_holder::model::params::TissueParams;
 use super::cutting::{CuttingObserver, Odds};
 use super::jumps;
 use super::trial::TrialFit;
-use crate::trial::Trial;
+use needle_io::trial::Trial;
 
 /// The model's force at every sample, by term.
 #[derive(Clone, Debug, Default)]
@@ -603,7 +603,7 @@ impl NeedleVelocity {
         let step = step.max(1);
         let n = self.v_mps.len().div_ceil(step);
         NeedleVelocity {
-            v_mps: crate::trial::every(&self.v_mps, step),
+            v_mps: needle_io::trial::every(&self.v_mps, step),
             uncertain: self
                 .uncertain
                 .iter()

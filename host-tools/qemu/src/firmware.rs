@@ -76,8 +76,10 @@ impl Board {
 
 /// The repository root (host-tools lives one level below it).
 pub fn repo_root() -> PathBuf {
+    // This crate sits at host-tools/qemu.
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
+        .ancestors()
+        .nth(2)
         .map(Path::to_path_buf)
         .unwrap_or_default()
 }
@@ -219,7 +221,7 @@ pub fn ensure_target_using(rustup: &Path, root: &Path, target: &str) -> Result<(
         // No rustup: cargo may still have the target (a distro toolchain);
         // the build says so if not, and this says what to run.
         _ => {
-            crate::note!(
+            needle_io::note!(
                 "needle: cannot ask rustup whether {target} is installed; if the build fails, run `rustup target add {target}`"
             );
             return Ok(());
@@ -228,7 +230,7 @@ pub fn ensure_target_using(rustup: &Path, root: &Path, target: &str) -> Result<(
     if target_action(&installed, target) == TargetAction::Present {
         return Ok(());
     }
-    crate::note!("needle: the Rust target {target} is missing: installing it with `rustup target add {target}`");
+    needle_io::note!("needle: the Rust target {target} is missing: installing it with `rustup target add {target}`");
     let status = Command::new(rustup)
         .current_dir(root)
         .args(["target", "add", target])
@@ -245,7 +247,7 @@ pub fn ensure_qemu() -> Result<()> {
     if which("qemu-system-arm") {
         return Ok(());
     }
-    crate::note!("qemu-system-arm is missing: installing it with apt-get");
+    needle_io::note!("qemu-system-arm is missing: installing it with apt-get");
     let sudo: &[&str] = if is_root() { &[] } else { &["sudo"] };
     for args in [
         &["apt-get", "update"][..],

@@ -10,7 +10,7 @@ use crate::fit::predict::{
     last_loaded_sample, predict_each, predict_parts_at, NeedleVelocity, Parts,
 };
 use crate::fit::TrialFit;
-use crate::trial::Trial;
+use needle_io::trial::Trial;
 
 /// Phases (book, *Names*): outside before contact, up to the
 /// puncture, advancing before the first step back, at rest in tissue,
@@ -142,7 +142,7 @@ impl Prepared {
             let (trial, geometry, velocity) =
                 thinned(&self.trial, &self.geometry, &self.velocity, step);
             let mut p = prepare(self.file.clone(), trial, geometry, &self.params, velocity);
-            p.fitted_n = crate::trial::every(&self.fitted_n, step);
+            p.fitted_n = needle_io::trial::every(&self.fitted_n, step);
             Box::new(p)
         })
     }

@@ -23,8 +23,8 @@ use serde::Serialize;
 use self::effects::Effect;
 use self::forces::{give_way, Added, Bristles, Kinematics, Tent, Walls};
 use self::motion::Segment;
-use crate::trial::Trial;
 pub use needle_holder::model::params::TissueParams;
+use needle_io::trial::Trial;
 
 /// Which physical form the effects take: the one documented in
 /// [`effects`], or another form of the same physics, so that the
@@ -798,7 +798,7 @@ fn previous_simulation(dir: &Path, trials: usize) -> Result<Vec<PathBuf>> {
     let truth = dir.join("truth.json");
     let written: Option<Written> = truth
         .is_file()
-        .then(|| crate::input::read_small_text(&truth).ok())
+        .then(|| needle_io::input::read_small_text(&truth).ok())
         .flatten()
         .and_then(|text| serde_json::from_str(&text).ok());
     // Each listed file with the size it was written at, if kept.
@@ -838,8 +838,8 @@ fn previous_simulation(dir: &Path, trials: usize) -> Result<Vec<PathBuf>> {
         std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?
     {
         let path = entry?.path();
-        let name = crate::trial::name_of(&path);
-        if crate::trial::is_trial_csv(&path) && !listed.contains_key(&name) {
+        let name = needle_io::trial::name_of(&path);
+        if needle_io::trial::is_trial_csv(&path) && !listed.contains_key(&name) {
             return Err(refuse(&path, "trials that are not a simulation's"));
         }
     }
@@ -878,7 +878,7 @@ fn clear_staging(staging: &Path) -> Result<()> {
         .collect::<std::io::Result<_>>()?;
     if let Some(other) = entries
         .iter()
-        .find(|p| !(p.is_file() && simulation_name(&crate::trial::name_of(p))))
+        .find(|p| !(p.is_file() && simulation_name(&needle_io::trial::name_of(p))))
     {
         bail!(
             "{}: left by a stopped simulation, but holds {}, which no simulation writes: move it",
@@ -989,7 +989,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if args.layers > 3 {
         bail!("--layers must be within 0..=3");
     }
-    let tissue = crate::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
+    let tissue = needle_io::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
     let effects = effects::parse_list(&args.effects)?;
     let sensor = Sensor {
         rate_hz: args.rate_hz,
@@ -1014,7 +1014,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         },
     }
     .write(&args.out)?;
-    crate::note!("wrote {written} trials to {}", args.out.display());
+    needle_io::note!("wrote {written} trials to {}", args.out.display());
     Ok(())
 }
 
@@ -1063,8 +1063,8 @@ impl Dataset<'_> {
     /// Write trial CSVs, firmware replays and truth.json into `dir`. Same
     /// seed, same bytes.
     pub fn write(&self, dir: &Path) -> Result<usize> {
-        crate::input::out_dir(dir)?;
-        crate::input::create_out_dir(dir)?;
+        needle_io::input::out_dir(dir)?;
+        needle_io::input::create_out_dir(dir)?;
         // One simulation at a time in a directory (two at once shared the
         // staging and each removed the other's files); the lock goes with
         // the process, however it ends.
@@ -1090,8 +1090,10 @@ impl Dataset<'_> {
             .map(|e| e.map(|e| e.path()))
             .collect::<std::io::Result<_>>()?;
         staged.sort_by_key(|p| p.ends_with("truth.json"));
-        let staged_names: std::collections::BTreeSet<String> =
-            staged.iter().map(|p| crate::trial::name_of(p)).collect();
+        let staged_names: std::collections::BTreeSet<String> = staged
+            .iter()
+            .map(|p| needle_io::trial::name_of(p))
+            .collect();
         for from in staged {
             let to = dir.join(from.file_name().unwrap_or_default());
             std::fs::rename(&from, &to)
@@ -1101,7 +1103,7 @@ impl Dataset<'_> {
             .with_context(|| format!("{}: cannot remove", staging.display()))?;
         for path in previous
             .iter()
-            .filter(|p| !staged_names.contains(&crate::trial::name_of(p)))
+            .filter(|p| !staged_names.contains(&needle_io::trial::name_of(p)))
         {
             std::fs::remove_file(path)
                 .with_context(|| format!("{}: cannot remove", path.display()))?;
@@ -1164,7 +1166,7 @@ impl Dataset<'_> {
                 simulate_trial_in(&varied, &protocol, effects, form, sensor, &mut rng);
             let name = format!("trial_{k:03}");
             let csv = dir.join(format!("{name}.csv"));
-            crate::trial::write(&csv, &trial)?;
+            needle_io::trial::write(&csv, &trial)?;
             let header = ReplayHeader {
                 sample_rate_hz: sensor.rate_hz.round() as u16,
                 tissue: library_index,

@@ -35,14 +35,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::model::params::TissueParams;
-use serde_json::Value;
+use needle_io::trial::{Skipped, Unreadable};
 
 use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram, PerTrial};
 use self::prepare::{prepare, Prepared, DWELL, LOADING, PHASES, WITHDRAWAL};
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
 use crate::fit::{fit_tared, fit_trial, TrialFit};
-use crate::trial::Trial;
+use needle_io::trial::Trial;
 
 /// Least held-out shrink that can name an effect.
 pub const MIN_SHRINK: f64 = 0.03;
@@ -620,21 +620,21 @@ pub fn load(dir: &Path, params: Option<&TissueParams>) -> Result<(TissueParams, 
 pub fn load_reporting(
     dir: &Path,
     params: Option<&TissueParams>,
-) -> Result<(TissueParams, Vec<Prepared>, Vec<Value>)> {
+) -> Result<(TissueParams, Vec<Prepared>, Vec<Skipped>)> {
     let mut trials = Vec::new();
-    let (dataset, unreadable) = crate::trial::read_dataset(dir, "diagnose")?;
-    let mut skipped: Vec<Value> = unreadable.iter().map(|u| u.to_json()).collect();
+    let (dataset, unreadable) = needle_io::trial::read_dataset(dir, "diagnose")?;
+    let mut skipped: Vec<Skipped> = unreadable.iter().map(Unreadable::skipped).collect();
     for (file, mut trial) in dataset {
         // Each trial's own tare, a per-trial nuisance like the rest of its
         // spread.
         match fit_tared(&mut trial) {
             Ok(fit) => trials.push((file, trial, fit)),
             Err(e) => {
-                crate::note!(
+                needle_io::note!(
                     "needle diagnose: {}: cannot find its geometry: {e:#} (left out)",
                     file.display()
                 );
-                skipped.push(crate::trial::skipped(&file, &format!("{e:#}")));
+                skipped.push(Skipped::new(&file, &format!("{e:#}")));
             }
         }
     }
@@ -678,7 +678,7 @@ pub fn load_reporting(
         .into_iter()
         .zip(velocities)
         .map(|((file, trial, fit), v)| {
-            prepare(crate::trial::name_of(&file), trial, fit, &params, v)
+            prepare(needle_io::trial::name_of(&file), trial, fit, &params, v)
         })
         .collect();
     Ok((params, data, skipped))
@@ -1024,7 +1024,7 @@ pub fn heldout_rms_with_displacement(data: &[Prepared], shifts: &[TissueShift]) 
 }
 
 /// `needle fit`'s estimates over per-trial fits, as tissue parameters.
-fn nominal_params(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> Result<TissueParams> {
+fn nominal_params(fits: &[(PathBuf, TrialFit)], skipped: Vec<Skipped>) -> Result<TissueParams> {
     crate::fit::summarise(fits, skipped)
         .tissue()
         .map_err(|e| anyhow::anyhow!("{e}: pass the tissue with --params or --tissue"))
@@ -1512,7 +1512,7 @@ fn residual_tests(data: &[Prepared]) -> ResidualTests {
 fn with_device_model(
     dir: &Path,
     data: Vec<Prepared>,
-    skipped: &mut Vec<Value>,
+    skipped: &mut Vec<Skipped>,
 ) -> Result<Vec<Prepared>> {
     let mut kept = Vec::new();
     for mut p in data {
@@ -1521,17 +1521,18 @@ fn with_device_model(
         // host's tare is not the device's.
         let tare_n = std::mem::take(&mut p.geometry.tare_n);
         p.trial.f_n.iter_mut().for_each(|f| *f += tare_n);
-        let used = crate::trial::read_column_for_analysis(&path, "model_n").and_then(|model_n| {
-            p.use_nominal(model_n)
-                .with_context(|| format!("{}: `model_n`", path.display()))
-        });
+        let used =
+            needle_io::trial::read_column_for_analysis(&path, "model_n").and_then(|model_n| {
+                p.use_nominal(model_n)
+                    .with_context(|| format!("{}: `model_n`", path.display()))
+            });
         match used {
             Ok(()) => kept.push(p),
             Err(e) => {
-                crate::note!(
+                needle_io::note!(
                     "needle diagnose: {e:#} (left out: --device-model needs the device's model_n)"
                 );
-                skipped.push(crate::trial::skipped(&path, &format!("{e:#}")));
+                skipped.push(Skipped::new(&path, &format!("{e:#}")));
             }
         }
     }
@@ -1564,22 +1565,24 @@ fn check_outputs(args: &DiagnoseArgs) -> Result<()> {
         .into_iter()
         .filter_map(|(flag, p)| p.map(|p| (flag, p)))
         .collect();
-    let inputs = crate::input::dataset_inputs(&args.dir, args.params.as_deref());
-    crate::input::check_outputs(&outputs, &inputs)
+    let inputs = needle_io::input::dataset_inputs(&args.dir, args.params.as_deref());
+    needle_io::input::check_outputs(&outputs, &inputs)
 }
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
     check_outputs(args)?;
     let params = match (&args.params, &args.tissue) {
         (None, None) => None,
-        (file, tissue) => Some(crate::tissue::resolve(tissue.as_deref(), file.as_deref())?.params),
+        (file, tissue) => {
+            Some(needle_io::tissue::resolve(tissue.as_deref(), file.as_deref())?.params)
+        }
     };
     // A progress line on stderr once the diagnosis has taken a second.
     let started = std::time::Instant::now();
     let mut progress = |what: &str| {
         let elapsed = started.elapsed().as_secs_f64();
         if elapsed > 1.0 {
-            crate::note!("needle diagnose: {elapsed:5.1} s: {what}");
+            needle_io::note!("needle diagnose: {elapsed:5.1} s: {what}");
         }
     };
     progress("reading and fitting the trials");
@@ -1595,7 +1598,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut out = diagnose_with_progress(&data, nominal, &mut progress);
     out.skipped = Some(skipped);
     progress("done");
-    crate::note!("{}", report::headline(&out));
+    needle_io::note!("{}", report::headline(&out));
     if let Some(path) = &args.residuals {
         write_residuals(path, &data)?;
     }
@@ -1610,7 +1613,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         Some(path) => {
             std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
         }
-        None => crate::stdout::write(&text),
+        None => needle_io::stdout::write(&text),
     }
 }
 

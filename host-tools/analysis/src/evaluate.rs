@@ -118,10 +118,10 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
         crate::sim::check_rate_hz("--rates-hz", rate)?;
         // Faster trials were thinned to 2 kHz by the reader, and their
         // rows labelled with a rate the detectors never ran at.
-        if rate > crate::trial::ANALYSIS_MOST_HZ {
+        if rate > needle_io::trial::ANALYSIS_MOST_HZ {
             bail!(
                 "--rates-hz {rate}: the detectors run at the device's rates, at most {} Hz (the ADS1220's fastest)",
-                crate::trial::ANALYSIS_MOST_HZ
+                needle_io::trial::ANALYSIS_MOST_HZ
             );
         }
     }
@@ -129,9 +129,9 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
         crate::sim::check_noise_n("--noise-n", noise)?;
     }
     if let Some(json) = &args.json {
-        crate::input::check_outputs(&[("--json", json)], &[])?;
+        needle_io::input::check_outputs(&[("--json", json)], &[])?;
     }
-    crate::stdout::write(
+    needle_io::stdout::write(
         "| rate | noise | structures | contact latency mean | puncture | structure | exit |\n\
          |---|---|---|---|---|---|---|\n",
     )?;
@@ -153,7 +153,7 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
                     0 => "–".to_owned(),
                     _ => format!("{:.0} ms", contact.latency_ms_mean),
                 };
-                crate::stdout::write(&format!(
+                needle_io::stdout::write(&format!(
                     "| {rate:.0} Hz | {:.0} mN | {} | {latency} | {} | {} | {} |\n",
                     noise * 1e3,
                     if structures { "yes" } else { "no" },

@@ -484,10 +484,22 @@ pub fn is_trial_csv(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
 }
 
-/// An entry of a command's JSON `skipped` list: the file's name in the
-/// dataset and why it was left out.
-pub fn skipped(file: &Path, reason: &str) -> serde_json::Value {
-    serde_json::json!({ "file": name_of(file), "reason": reason })
+/// An entry of a command's JSON `skipped` list: a trial left out, by its
+/// file's name in the dataset (as the JSON's trials name theirs), and why.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Skipped {
+    pub file: String,
+    pub reason: String,
+}
+
+impl Skipped {
+    /// `file` left out for `reason`.
+    pub fn new(file: &Path, reason: &str) -> Self {
+        Self {
+            file: name_of(file),
+            reason: reason.to_owned(),
+        }
+    }
 }
 
 /// A dataset's trial that could not be read, and why (file and line).
@@ -498,10 +510,9 @@ pub struct Unreadable {
 }
 
 impl Unreadable {
-    /// As it goes into a command's JSON `skipped` list: the file by its
-    /// name in the dataset, as the JSON's trials name theirs.
-    pub fn to_json(&self) -> serde_json::Value {
-        skipped(&self.file, &self.reason)
+    /// As it goes into a command's JSON `skipped` list.
+    pub fn skipped(&self) -> Skipped {
+        Skipped::new(&self.file, &self.reason)
     }
 }
 

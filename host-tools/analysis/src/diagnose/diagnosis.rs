@@ -3,8 +3,8 @@
 
 use std::collections::BTreeMap;
 
+use needle_io::trial::Skipped;
 use serde::Serialize;
-use serde_json::Value;
 
 /// The whole diagnosis of a dataset.
 #[derive(Clone, Debug, Serialize)]
@@ -29,7 +29,7 @@ pub struct Diagnosis {
     /// The files left out and why (`needle diagnose` fills it in; the
     /// library's caller has its own list).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub skipped: Option<Vec<Value>>,
+    pub skipped: Option<Vec<Skipped>>,
 }
 
 /// RMS and share of the squared residual, by phase name (phases with

@@ -179,7 +179,7 @@ mod tests {
 
     #[test]
     fn the_file_the_firmware_compiles_in_loads_to_the_same_values() {
-        let path = crate::firmware::repo_root().join("src/model/tissues.toml");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../src/model/tissues.toml");
         let loaded = load(&path).unwrap();
         let builtin = builtin();
         assert_eq!(loaded.len(), builtin.len());
@@ -192,9 +192,10 @@ mod tests {
     #[test]
     fn bad_files_name_file_line_entry_and_field() {
         let dir = tempfile::tempdir().unwrap();
-        let good =
-            std::fs::read_to_string(crate::firmware::repo_root().join("src/model/tissues.toml"))
-                .unwrap();
+        let good = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../src/model/tissues.toml"),
+        )
+        .unwrap();
         let cases = [
             (
                 good.replacen("dp_n_per_m = 30.4", "dp_n_per_m = -30.4", 1),

@@ -7,7 +7,7 @@
 use anyhow::{bail, Result};
 
 use super::lsq::Lsq;
-use crate::trial::Trial;
+use needle_io::trial::Trial;
 
 /// Estimates from one trial (SI).
 #[derive(Clone, Debug, PartialEq)]

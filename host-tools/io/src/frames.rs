@@ -922,12 +922,14 @@ mod tests {
         use needle_holder::model::params::LIVER1;
         use needle_holder::model::relax::Relaxation;
         use needle_holder::protocol::batch::BatchCheck;
-        let (trial, _) = crate::sim::insertion(&LIVER1, &crate::sim::Plan::PAPER);
+        let (trial, _) =
+            needle_analysis::sim::insertion(&LIVER1, &needle_analysis::sim::Plan::PAPER);
         let config = DeviceConfig {
             relaxation: Relaxation::default(),
             ..DeviceConfig::default()
         };
-        let replay = crate::sim::to_replay(&trial, 500, &config.load_cell, &config.encoder);
+        let replay =
+            needle_analysis::sim::to_replay(&trial, 500, &config.load_cell, &config.encoder);
         let mut stream = Vec::new();
         let mut halt = crate::twin::RecordingPin::default();
         needle_holder::replay::run(&replay[..], config, &mut stream, &mut halt);

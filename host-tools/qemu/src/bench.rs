@@ -21,7 +21,7 @@ use needle_holder::model::params::LIVER1;
 use object::{Object, ObjectSection, ObjectSymbol, SectionKind};
 
 use crate::firmware::{self, Board, Serial};
-use crate::sim::{self, Plan};
+use needle_analysis::sim::{self, Plan};
 
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
@@ -74,7 +74,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         &replay_path,
         sim::to_replay(&trial, 500, &config.load_cell, &config.encoder),
     )?;
-    crate::out!(
+    needle_io::out!(
         "recorded insertion: liver 1, 3 mm/s, {} samples at 500 Hz",
         trial.len()
     )?;
@@ -96,14 +96,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             // samples: what the link must carry.
             let sent = std::fs::metadata(&capture)?.len();
             bytes_per_sample = sent as f64 / counts.per_region.len().max(1) as f64;
-            crate::out!(
+            needle_io::out!(
                 "stream: {sent} bytes for {} samples = {bytes_per_sample:.2} bytes per sample ({:.0} Bd at 500 Hz, {:.0} Bd at 2 kHz, 10 bits a byte)",
                 counts.per_region.len(),
                 bytes_per_sample * 500.0 * 10.0,
                 bytes_per_sample * 2000.0 * 10.0
             )?;
         }
-        crate::out!(
+        needle_io::out!(
             "{core:>9} ({}): {:.1} instructions per sample (max {}, marker overhead {} subtracted), {} samples, counted in {:.0} s",
             board.target(),
             counts.mean(),
@@ -118,7 +118,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     std::fs::write(&relaxing, sim::relaxing_dwell_replay()?.1)?;
     let elf = firmware::build(Board::Lm3s6965)?;
     let counts = count_instructions(Board::Lm3s6965, &elf, &relaxing, &dir.join("skin.frames"))?;
-    crate::out!(
+    needle_io::out!(
         "cortex-m3 with relaxation on (skin_phantom, 20 mm, a 5 s dwell): {:.1} instructions per sample (max {}: the sample that computes the decay factors), {} samples",
         counts.mean(),
         counts.max(),
@@ -126,7 +126,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     )?;
     means.push(("cortex-m3-relaxation", counts.mean().round() as u64));
     let size = image_size(&elf)?;
-    crate::out!(
+    needle_io::out!(
         "CI board image: {} bytes flash, {} bytes static RAM",
         size.flash_bytes,
         size.ram_bytes
@@ -141,7 +141,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         .find(|(k, _)| *k == "cortex-m4f")
         .map_or(0, |m| m.1);
     let load_percent = m4 as f64 * F411_FASTEST_HZ / F411_CLOCK_HZ * 100.0;
-    crate::out!(
+    needle_io::out!(
         "nucleo-f411re at {F411_FASTEST_HZ} Hz: {m4} instructions a sample ≈ {load_percent:.2} % of its {} MHz",
         F411_CLOCK_HZ / 1e6
     )?;
@@ -153,7 +153,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             "ram_bytes": size.ram_bytes,
             "nucleo_f411re_cpu_load_at_2khz_percent": load_percent,
         });
-        crate::out!("{json}")?;
+        needle_io::out!("{json}")?;
     }
     Ok(())
 }

@@ -5,19 +5,20 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use needle_holder::assist::{target_depth_is_valid, AssistModes};
+use needle_holder::assist::target_depth_is_valid;
 use needle_holder::config::DeviceConfig;
 use needle_holder::hal::LoadCellAdc;
 use needle_holder::pipeline::{PipelineState, RawSample};
 use needle_holder::protocol::Sample;
 use needle_holder::replay::ReplayAdc;
 use needle_holder::units::Nanometres;
+use needle_io::trial::{Skipped, Unreadable};
 use serde::{Deserialize, Serialize};
-use serde_json::Value;
 
-use crate::decode::{event_name, halt_reason_name};
 use crate::sim::raw_record;
-use crate::trial::Trial;
+use needle_io::decode::{event_name, halt_reason_name};
+use needle_io::device::parse_assist;
+use needle_io::trial::Trial;
 
 #[derive(Debug, clap::Args)]
 pub struct DetectArgs {
@@ -46,27 +47,6 @@ pub struct DetectArgs {
     /// columns (t_s,x_m,f_n,v_mps,model_n,residual_n,phase).
     #[arg(long, value_name = "OUT_DIR")]
     pub samples: Option<PathBuf>,
-}
-
-/// Parse `--assist`.
-pub fn parse_assist(list: &str) -> Result<AssistModes> {
-    // An empty list is no choice: `none` says "no assist" in words.
-    if list.split(',').all(|m| m.trim().is_empty()) {
-        anyhow::bail!("assist: name the modes, or `none` to turn them all off");
-    }
-    list.split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty() && *s != "none")
-        .try_fold(AssistModes::NONE, |modes, name| {
-            let known = AssistModes::NAMES.iter().find(|(_, n)| *n == name);
-            match known {
-                Some((mode, _)) => Ok(modes.union(*mode)),
-                None => {
-                    let names: Vec<&str> = AssistModes::NAMES.iter().map(|(_, n)| *n).collect();
-                    anyhow::bail!("unknown assist mode `{name}` (known: {})", names.join(", "))
-                }
-            }
-        })
 }
 
 /// One detected event, in SI units.
@@ -293,7 +273,7 @@ pub fn score(truth: &[TrueEvent], found: &[Found], rate_hz: f64, kinds: &[&str])
 }
 
 /// The needle's position at the row at `t_s` (a detection's own row).
-fn needle_x_at(trial: &crate::trial::Trial, t_s: f64) -> f64 {
+fn needle_x_at(trial: &needle_io::trial::Trial, t_s: f64) -> f64 {
     let i = trial.t_s.partition_point(|&t| t < t_s);
     trial
         .x_m
@@ -384,7 +364,7 @@ fn read_truth(dir: &Path) -> Result<Option<Truth>> {
     if !path.exists() {
         return Ok(None);
     }
-    let text = crate::input::read_small_text(&path)?;
+    let text = needle_io::input::read_small_text(&path)?;
     serde_json::from_str(&text).map(Some).map_err(|e| {
         anyhow::anyhow!(
             "{}:{}: {} (a truth.json lists trials, each with its file and events of kind contact, puncture, structure or exit at t_s)",
@@ -400,8 +380,8 @@ fn read_truth(dir: &Path) -> Result<Option<Truth>> {
 pub struct Detection {
     /// Each trial read, in the dataset's order.
     pub trials: Vec<TrialResult>,
-    /// The files left out, each `{"file", "reason"}`.
-    pub skipped: Vec<Value>,
+    /// The files left out.
+    pub skipped: Vec<Skipped>,
     /// Per event kind, with a `truth.json` beside the trials.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<Vec<KindScore>>,
@@ -442,10 +422,10 @@ fn samples_dir(dir: &Path, out: &Path) -> Result<()> {
         anyhow::bail!("{shown}: --samples names a file, not a directory");
     }
     if out.is_dir() {
-        if crate::input::same_file(dir, out) {
+        if needle_io::input::same_file(dir, out) {
             anyhow::bail!("{shown}: --samples names the dataset itself: its trials would be read as trials by the next command; name another directory");
         }
-        let held = crate::trial::dataset_files(out).unwrap_or_default();
+        let held = needle_io::trial::dataset_files(out).unwrap_or_default();
         if let Some(first) = held.first() {
             anyhow::bail!(
                 "{shown}: --samples already holds {} CSV file(s) ({}): name an empty or new directory",
@@ -454,7 +434,7 @@ fn samples_dir(dir: &Path, out: &Path) -> Result<()> {
             );
         }
     }
-    crate::input::create_out_dir(out)
+    needle_io::input::create_out_dir(out)
 }
 
 /// One trial through the device, its samples written to `out/NAME` as
@@ -470,12 +450,12 @@ fn detect_writing_samples(
     let part = out.join(format!("{name}.part"));
     let failed = || format!("{}: cannot write", path.display());
     let mut w = csv::Writer::from_path(&part).with_context(failed)?;
-    let mut result = w.write_record(crate::decode::CSV_HEADER);
+    let mut result = w.write_record(needle_io::decode::CSV_HEADER);
     let detection = detect_trial_samples(trial, config, |i, s| {
         if result.is_ok() {
             // The file's time and coordinates: the device counts positions
             // from its first sample.
-            let row = crate::decode::csv_row_at(s, trial.t_s[i], trial.x_m[0] + s.x.as_m());
+            let row = needle_io::decode::csv_row_at(s, trial.t_s[i], trial.x_m[0] + s.x.as_m());
             result = w.write_record(row);
         }
     });
@@ -504,12 +484,12 @@ pub fn detect_dataset_to(
     let kinds = ["contact", "puncture", "structure", "exit"];
     let mut total: Vec<KindScore> = score(&[], &[], 1.0, &kinds);
     let mut trials = Vec::new();
-    let (dataset, unreadable) = crate::trial::read_dataset(dir, "detect")?;
+    let (dataset, unreadable) = needle_io::trial::read_dataset(dir, "detect")?;
     if let Some(truth) = &truth {
         warn_if_truth_disagrees(dir, truth, &dataset, &unreadable);
     }
     for (file, trial) in dataset {
-        let name = crate::trial::name_of(&file);
+        let name = needle_io::trial::name_of(&file);
         let detection = match samples {
             Some(out) => detect_writing_samples(&trial, config, out, &name)?,
             None => detect_trial(&trial, config),
@@ -549,7 +529,7 @@ pub fn detect_dataset_to(
     }
     Ok(Detection {
         trials,
-        skipped: unreadable.iter().map(|u| u.to_json()).collect(),
+        skipped: unreadable.iter().map(Unreadable::skipped).collect(),
         evaluation: truth.is_some().then_some(total),
     })
 }
@@ -560,8 +540,8 @@ pub fn detect_dataset_to(
 fn warn_if_truth_disagrees(
     dir: &Path,
     truth: &Truth,
-    dataset: &[(std::path::PathBuf, crate::trial::Trial)],
-    unreadable: &[crate::trial::Unreadable],
+    dataset: &[(std::path::PathBuf, needle_io::trial::Trial)],
+    unreadable: &[Unreadable],
 ) {
     let listed: std::collections::BTreeSet<&str> =
         truth.trials.iter().map(|t| t.file.as_str()).collect();
@@ -569,7 +549,7 @@ fn warn_if_truth_disagrees(
         .iter()
         .map(|(f, _)| f)
         .chain(unreadable.iter().map(|u| &u.file))
-        .map(|f| crate::trial::name_of(f))
+        .map(|f| needle_io::trial::name_of(f))
         .collect();
     let untold: Vec<&String> = present
         .iter()
@@ -577,7 +557,7 @@ fn warn_if_truth_disagrees(
         .collect();
     let missing: Vec<&&str> = listed.iter().filter(|f| !present.contains(**f)).collect();
     if !untold.is_empty() || !missing.is_empty() {
-        crate::note!(
+        needle_io::note!(
             "needle detect: {}: truth.json and the CSVs disagree: no truth for {untold:?}, no CSV for {missing:?}; scoring only the trials both have",
             dir.display()
         );
@@ -586,10 +566,10 @@ fn warn_if_truth_disagrees(
 
 pub fn run(args: &DetectArgs) -> Result<()> {
     if let Some(json) = &args.json {
-        let inputs = crate::input::dataset_inputs(&args.dir, args.params.as_deref());
-        crate::input::check_outputs(&[("--json", json)], &inputs)?;
+        let inputs = needle_io::input::dataset_inputs(&args.dir, args.params.as_deref());
+        needle_io::input::check_outputs(&[("--json", json)], &inputs)?;
     }
-    let tissue = crate::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
+    let tissue = needle_io::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
     let mut config = DeviceConfig::for_tissue(&tissue.params)
         .map_err(|e| anyhow::anyhow!("tissue `{}`: {e}", tissue.name))?
         .with_assist(parse_assist(&args.assist)?);
@@ -605,10 +585,10 @@ pub fn run(args: &DetectArgs) -> Result<()> {
     config.assist.target_depth = depth;
     let out = detect_dataset_to(&args.dir, &config, args.samples.as_deref())?;
     if let Some(eval) = &out.evaluation {
-        crate::note!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");
-        crate::note!("|---|---|---|---|---|---|---|");
+        needle_io::note!("| kind | true | detected | misses | false alarms | latency mean (samples / ms) | latency max (samples / ms) |");
+        needle_io::note!("|---|---|---|---|---|---|---|");
         for k in eval {
-            crate::note!(
+            needle_io::note!(
                 "| {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} |",
                 k.kind,
                 k.true_events,
@@ -627,6 +607,6 @@ pub fn run(args: &DetectArgs) -> Result<()> {
         Some(path) => {
             std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
         }
-        None => crate::stdout::write(&text),
+        None => needle_io::stdout::write(&text),
     }
 }

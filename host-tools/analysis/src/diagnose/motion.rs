@@ -102,7 +102,7 @@ impl TissueShift {
     }
 
     /// The trial's positions in the tissue's frame.
-    pub fn apply(&self, trial: &crate::trial::Trial) -> crate::trial::Trial {
+    pub fn apply(&self, trial: &needle_io::trial::Trial) -> needle_io::trial::Trial {
         let mut moved = trial.clone();
         for (x, &t) in moved.x_m.iter_mut().zip(&trial.t_s) {
             *x -= self.at(t).0;

@@ -20,7 +20,7 @@ pub use self::report::{Estimate, FitReport};
 use self::report::{PunctureMargins, StiffnessLaws, TrialGeometry};
 pub use self::tissue::FittedTissue;
 pub use self::trial::{fit_tared, fit_trial, TrialFit, RELAXATION_PRIOR};
-use crate::trial::Trial;
+use needle_io::trial::{Skipped, Trial};
 
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
@@ -108,22 +108,22 @@ fn static_estimate(
 /// Fit every trial of a dataset and aggregate. Files that cannot be
 /// fitted are reported in `skipped` and left out.
 pub fn fit_dataset(dir: &Path) -> Result<FitReport> {
-    let (mut trials, unreadable) = crate::trial::read_dataset(dir, "fit")?;
+    let (mut trials, unreadable) = needle_io::trial::read_dataset(dir, "fit")?;
     let total = trials.len() + unreadable.len();
     let mut fits = Vec::new();
-    let mut skipped: Vec<Value> = unreadable
+    let mut skipped: Vec<Skipped> = unreadable
         .iter()
-        .map(crate::trial::Unreadable::to_json)
+        .map(needle_io::trial::Unreadable::skipped)
         .collect();
-    let mut progress = crate::trial::Progress::new("fit");
+    let mut progress = needle_io::trial::Progress::new("fit");
     let count = trials.len();
     for (k, (file, trial)) in trials.iter_mut().enumerate() {
         progress.say(|| format!("fitting trial {} of {count}: {}", k + 1, file.display()));
         match fit_tared(trial).with_context(|| format!("{}: cannot fit", file.display())) {
             Ok(fit) => fits.push((file.clone(), fit)),
             Err(err) => {
-                crate::note!("needle fit: {err:#} (left out)");
-                skipped.push(crate::trial::skipped(file, &format!("{err:#}")));
+                needle_io::note!("needle fit: {err:#} (left out)");
+                skipped.push(Skipped::new(file, &format!("{err:#}")));
             }
         }
     }
@@ -218,7 +218,7 @@ fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> Pu
 
 /// Mean ± sd of per-trial fits, with the per-trial geometry and the trials
 /// left out: `needle fit`'s JSON.
-pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport {
+pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Skipped>) -> FitReport {
     let all: Vec<&TrialFit> = fits.iter().map(|(_, f)| f).collect();
     let col = |get: fn(&TrialFit) -> f64| all.iter().map(|t| get(t)).collect::<Vec<f64>>();
     let stiffness_fit = stiffness_laws(&all);
@@ -262,7 +262,7 @@ pub fn summarise(fits: &[(PathBuf, TrialFit)], skipped: Vec<Value>) -> FitReport
         per_trial: fits
             .iter()
             .map(|(file, t)| TrialGeometry {
-                file: crate::trial::name_of(file),
+                file: needle_io::trial::name_of(file),
                 contact_x_m: t.contact_x_m,
                 puncture_x_m: t.puncture_x_m,
                 puncture_force_n: t.puncture_force_n,
@@ -482,7 +482,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         .iter()
         .filter_map(|(flag, p)| p.as_deref().map(|p| (*flag, p)))
         .collect();
-    crate::input::check_outputs(&outputs, &crate::input::dataset_inputs(&args.dir, None))?;
+    needle_io::input::check_outputs(&outputs, &needle_io::input::dataset_inputs(&args.dir, None))?;
     let fit = fit_dataset(&args.dir)?;
     let fitted = fit.fitted();
     // Never a file its own loader refuses; said before any output.
@@ -494,10 +494,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
     match &args.json {
         Some(path) => std::fs::write(path, text + "\n")
             .with_context(|| format!("{}: cannot write", path.display()))?,
-        None => crate::stdout::write(&(text + "\n"))?,
+        None => needle_io::stdout::write(&(text + "\n"))?,
     }
     for (_, note) in &fitted.notes {
-        crate::note!("needle fit: note: {note}");
+        needle_io::note!("needle fit: note: {note}");
     }
     if let Some(path) = &args.toml {
         std::fs::write(path, fitted.to_toml())
@@ -517,7 +517,7 @@ fn plot_first_trial(dir: &Path, fit: &FitReport, params: TissueParams, path: &Pa
         .first()
         .context("no fitted trial to plot")?
         .file;
-    let trial = crate::trial::read_for_analysis(&dir.join(first), None)?.trial;
+    let trial = needle_io::trial::read_for_analysis(&dir.join(first), None)?.trial;
     let geometry = fit_trial(&trial)?;
     // As the diagnosis draws it: the force settles the samples the
     // encoder cannot place (beside a jump, at a rest's edges).

@@ -1,8 +1,8 @@
 //! What `needle fit` found over a dataset, as types: [`FitReport`] is its
 //! JSON (`--json`) and what the tissue it writes (`--toml`) is read from.
 
+use needle_io::trial::Skipped;
 use serde::ser::{Serialize, SerializeMap, Serializer};
-use serde_json::Value;
 
 /// One quantity estimated over the trials: its value (`None`: not
 /// identified) and what qualifies it. Serialised as a bare number when
@@ -218,8 +218,8 @@ pub struct FitReport {
     pub layers: Vec<LayerSummary>,
     pub noise_n: Estimate,
     pub per_trial: Vec<TrialGeometry>,
-    /// The files left out, each `{"file", "reason"}`.
-    pub skipped: Vec<Value>,
+    /// The files left out.
+    pub skipped: Vec<Skipped>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub puncture_detection: Option<PunctureMargins>,
 }
