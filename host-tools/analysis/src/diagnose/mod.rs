@@ -921,7 +921,7 @@ fn backfit_rounds<'c>(
         };
         // A round that makes the withheld trials worse is not kept: the
         // refitted nominal took up what the effect should have.
-        if next.rms() > scored.rms() {
+        if worse(next.rms(), scored.rms()) {
             return ((scored, current, forces), true);
         }
         if let Some(last) = forces.last_mut().filter(|_| regrid) {
@@ -977,8 +977,7 @@ fn kept_rounds<T>(most: usize, mut round: impl FnMut(Option<&T>) -> Option<(f64,
             break;
         };
         let before = last.as_ref().map(|l| l.0);
-        let no_worse = |b: f64| rms.partial_cmp(&b).is_some_and(|o| o.is_le());
-        if before.is_some_and(|b| !no_worse(b)) {
+        if before.is_some_and(|b| worse(rms, b)) {
             break;
         }
         let settled = before.is_some_and(|b| b - rms < BACKFIT_TOL * b);
@@ -988,6 +987,13 @@ fn kept_rounds<T>(most: usize, mut round: impl FnMut(Option<&T>) -> Option<(f64,
         }
     }
     last.map(|l| l.1)
+}
+
+/// Whether a round's held-out RMS `next` is worse than `before`, the
+/// rule of [`backfit_rounds`] and [`kept_rounds`]: higher, or not a
+/// number where `before` is one (a number is never worse than NaN).
+fn worse(next: f64, before: f64) -> bool {
+    next > before || (next.is_nan() && !before.is_nan())
 }
 
 /// Each trial moved into the tissue's frame by its `shifts`, and the
@@ -1651,6 +1657,15 @@ mod tests {
         assert_eq!(run(&[Some(10.0), None, Some(1.0)]), (2, Some(0)));
         assert_eq!(run(&[Some(10.0), Some(f64::NAN), Some(1.0)]), (2, Some(0)));
         assert_eq!(run(&[None, Some(1.0)]), (1, None));
+        // A number after a first round that was none is kept.
+        assert_eq!(run(&[Some(f64::NAN), Some(5.0), Some(5.0)]), (3, Some(2)));
+    }
+
+    #[test]
+    fn not_a_number_is_worse_than_any_number_and_no_number_is_worse_than_it() {
+        assert!(worse(6.0, 5.0) && !worse(5.0, 5.0) && !worse(4.0, 5.0));
+        assert!(worse(f64::NAN, 5.0));
+        assert!(!worse(5.0, f64::NAN) && !worse(f64::NAN, f64::NAN));
     }
 
     #[test]
