@@ -34,6 +34,15 @@ impl Board {
         }
     }
 
+    /// Its image's name (the firmware crate's binary).
+    pub fn image(self) -> &'static str {
+        match self {
+            Board::Lm3s6965 | Board::Lm3s6965M0 => "lm3s6965",
+            Board::Mps2An386 => "mps2-an386",
+            Board::NucleoF411re => "nucleo-f411re",
+        }
+    }
+
     fn features(self) -> &'static [&'static str] {
         match self {
             Board::Mps2An386 => &["--features", "board-mps2"],
@@ -87,7 +96,12 @@ pub fn repo_root() -> PathBuf {
 /// Build the firmware image for `board`; returns the ELF path. Installs the
 /// board's Rust target first when the toolchain lacks it.
 pub fn build(board: Board) -> Result<PathBuf> {
-    build_image(board.target(), board.features(), board.target_subdir())
+    build_image(
+        board.target(),
+        board.image(),
+        board.features(),
+        board.target_subdir(),
+    )
 }
 
 /// The real board's image (Nucleo-F411RE, feature `board-f411`, what
@@ -97,6 +111,7 @@ pub fn build(board: Board) -> Result<PathBuf> {
 pub fn build_nucleo_f411re() -> Result<PathBuf> {
     build_image(
         "thumbv7em-none-eabihf",
+        Board::NucleoF411re.image(),
         &["--features", "board-f411"],
         Some("f411"),
     )
@@ -145,7 +160,12 @@ fn ask_cargo_for_target_directory(root: &Path) -> Result<PathBuf> {
     Ok(meta.target_directory)
 }
 
-fn build_image(target: &str, features: &[&str], subdir: Option<&str>) -> Result<PathBuf> {
+fn build_image(
+    target: &str,
+    image: &str,
+    features: &[&str],
+    subdir: Option<&str>,
+) -> Result<PathBuf> {
     let root = repo_root();
     ensure_target(&root, target)?;
     let base = target_directory()?;
@@ -161,7 +181,7 @@ fn build_image(target: &str, features: &[&str], subdir: Option<&str>) -> Result<
             "-p",
             "needle-holder-firmware",
             "--bin",
-            "needle-holder",
+            image,
             "--target",
             target,
         ])
@@ -174,10 +194,7 @@ fn build_image(target: &str, features: &[&str], subdir: Option<&str>) -> Result<
     if !status.success() {
         bail!("firmware build for {target} {features:?} failed ({status})");
     }
-    let elf = target_dir
-        .join(target)
-        .join("firmware")
-        .join("needle-holder");
+    let elf = target_dir.join(target).join("firmware").join(image);
     if !elf.exists() {
         bail!("firmware build succeeded but {} is missing", elf.display());
     }

@@ -415,9 +415,7 @@ fn needle_demo_builds_and_runs_the_image_where_cargo_target_dir_points() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(stdout.contains("0 faults"), "{stdout}");
-    let image = target
-        .path()
-        .join("thumbv7m-none-eabi/firmware/needle-holder");
+    let image = target.path().join("thumbv7m-none-eabi/firmware/lm3s6965");
     assert!(image.exists(), "no image at {}", image.display());
     assert!(stdout.contains(&image.display().to_string()), "{stdout}");
     assert!(target.path().join("demo/frames.bin").exists());

@@ -1,19 +1,11 @@
-//! Firmware image: boots the board, feeds the replay source to the core's
-//! device loop, and exits QEMU with the result.
-//!
-//! Only meaningful for `target_os = "none"`; on the host this file builds
-//! to a stub that says how to build the real thing. All logic lives in the
-//! library; everything here is wiring, and all register access lives in
-//! `hardware/`.
-#![cfg_attr(target_os = "none", no_std)]
-#![cfg_attr(target_os = "none", no_main)]
+//! The QEMU boards' boot loop: feeds the replay source to the core's
+//! device loop sample by sample, answers the host between samples, and
+//! exits QEMU with the result. (The real board's entry point is its RTIC
+//! application, `hardware/nucleo_f411re/app.rs`.) Wiring only: all logic
+//! lives in the core, all register access in `hardware/`.
 
-#[cfg(target_os = "none")]
-mod hardware;
+use crate::hardware;
 
-// The real board's entry point is its RTIC application
-// (`hardware/nucleo_f411re/app.rs`); the QEMU boards' is this loop.
-#[cfg(all(target_os = "none", not(feature = "board-f411")))]
 #[cortex_m_rt::entry]
 fn main() -> ! {
     use heapless::spsc::Queue;
@@ -73,7 +65,6 @@ fn main() -> ! {
 }
 
 /// Log the run's counters and leave QEMU.
-#[cfg(all(target_os = "none", not(feature = "board-f411")))]
 fn report(summary: &needle_holder::device::Summary) -> ! {
     defmt::info!(
         "replay done: {=u32} samples, {=u32} frames dropped, faults {=u16:#06x}, halt {=bool}",
@@ -87,7 +78,6 @@ fn report(summary: &needle_holder::device::Summary) -> ! {
 
 /// A live run starts when the host's first command has arrived whole (up
 /// to its zero): what the device must answer first.
-#[cfg(all(target_os = "none", not(feature = "board-f411")))]
 fn first_command(uart: &mut hardware::Uart0) -> heapless::Vec<u8, 256> {
     let mut got = heapless::Vec::<u8, 256>::new();
     loop {
@@ -105,13 +95,4 @@ fn first_command(uart: &mut hardware::Uart0) -> heapless::Vec<u8, 256> {
         }
         let _ = got.push(byte[0]);
     }
-}
-
-#[cfg(not(target_os = "none"))]
-fn main() {
-    eprintln!(
-        "needle-holder is the firmware image: build it with `cargo fw-m3` (or fw-m0, fw-m4) \
-         and run it with `cargo run --release -p host-tools --bin needle -- demo`"
-    );
-    std::process::exit(2);
 }
