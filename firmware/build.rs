@@ -23,6 +23,9 @@ MEMORY
 ";
 
 fn main() {
+    // The map depends on the features alone; the linker reads memory.x.
+    println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-changed=../memory.x");
     let out = std::path::PathBuf::from(std::env::var("OUT_DIR").unwrap());
     let board = if std::env::var_os("CARGO_FEATURE_BOARD_F411").is_some() {
         F411_MEMORY

@@ -36,7 +36,7 @@ impl ReplayFile {
             .last()
             .filter(|_| semihost::words(line).count() > 1)
         else {
-            defmt::error!("usage: needle-holder [--live] REPLAY_FILE");
+            defmt::error!("usage: IMAGE [--live] REPLAY_FILE");
             exit(exit_code::NO_REPLAY)
         };
         let mut cpath = [0u8; MAX_LINE + 1];

@@ -83,9 +83,9 @@ impl Board {
     }
 }
 
-/// The repository root (host-tools lives one level below it).
+/// The repository root (this crate lives at `host-tools/qemu`, two
+/// levels below it).
 pub fn repo_root() -> PathBuf {
-    // This crate sits at host-tools/qemu.
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .ancestors()
         .nth(2)

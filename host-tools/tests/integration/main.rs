@@ -1,5 +1,5 @@
 //! `needle`'s integration tests, one binary for all (each module links
-//! the library and the binary once, not fifteen times). A module per
+//! the three libraries and the binary once, not fifteen times). A module per
 //! behaviour; `cargo test -p host-tools --test integration MODULE::` runs
 //! one, e.g. `diagnose::` or `apart_validation::the_diagnosis`.
 //!

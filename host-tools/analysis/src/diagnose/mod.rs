@@ -879,7 +879,7 @@ fn backfitting<'c>(
         Some((_, moved)) => {
             let columns = as_columns();
             let in_frame = score(&moved, &forces, None);
-            if in_frame.rms() > columns.0.rms() {
+            if worse(in_frame.rms(), columns.0.rms()) {
                 return Backfitting::settled(columns);
             }
             (in_frame, moved)
@@ -977,7 +977,8 @@ fn kept_rounds<T>(most: usize, mut round: impl FnMut(Option<&T>) -> Option<(f64,
             break;
         };
         let before = last.as_ref().map(|l| l.0);
-        if before.is_some_and(|b| worse(rms, b)) {
+        // Before the first round, anything but a number is worse.
+        if worse(rms, before.unwrap_or(f64::INFINITY)) {
             break;
         }
         let settled = before.is_some_and(|b| b - rms < BACKFIT_TOL * b);
@@ -1657,8 +1658,8 @@ mod tests {
         assert_eq!(run(&[Some(10.0), None, Some(1.0)]), (2, Some(0)));
         assert_eq!(run(&[Some(10.0), Some(f64::NAN), Some(1.0)]), (2, Some(0)));
         assert_eq!(run(&[None, Some(1.0)]), (1, None));
-        // A number after a first round that was none is kept.
-        assert_eq!(run(&[Some(f64::NAN), Some(5.0), Some(5.0)]), (3, Some(2)));
+        // Not even a first round that is not a number.
+        assert_eq!(run(&[Some(f64::NAN), Some(5.0)]), (1, None));
     }
 
     #[test]
