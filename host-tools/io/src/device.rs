@@ -198,7 +198,7 @@ fn print_config(link: &mut Link, port: &str) -> Result<()> {
             if let Item::Frame(Message::Config(c)) = item {
                 let rate = c.config.velocity.sample_rate_hz;
                 crate::out!("{}", describe(&Message::Config(c.clone()), Some(rate)))?;
-                let modes: Vec<&str> = needle_holder::assist::AssistModes::NAMES
+                let modes: Vec<&str> = AssistModes::NAMES
                     .iter()
                     .filter(|(m, _)| c.config.assist.modes.contains(*m))
                     .map(|(_, n)| *n)
