@@ -38,8 +38,8 @@ cargo fmt --all -- --check
 
 step "lints (host, and firmware for each board)"
 cargo clippy --workspace --all-targets -- -D warnings
-cargo clippy --target thumbv7m-none-eabi -p needle-holder -p needle-holder-firmware -- -D warnings
-cargo clippy --target thumbv7em-none-eabihf -p needle-holder -p needle-holder-firmware --features needle-holder-firmware/board-mps2 -- -D warnings
+cargo clippy --target thumbv7m-none-eabi -p needle-wire -p needle-holder -p needle-holder-firmware -- -D warnings
+cargo clippy --target thumbv7em-none-eabihf -p needle-wire -p needle-holder -p needle-holder-firmware --features needle-holder-firmware/board-mps2 -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf -p needle-holder-firmware --features board-f411 --target-dir "$target_dir/f411" -- -D warnings
 cargo clippy --target thumbv7em-none-eabihf -p needle-holder-firmware --features f411-replay --target-dir "$target_dir/f411-replay" -- -D warnings
 

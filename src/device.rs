@@ -5,19 +5,21 @@
 use embedded_hal::digital::OutputPin;
 use embedded_io::Write;
 
+use crate::assist::AssistModes;
 use crate::calibration::ZeroTracker;
 use crate::config::{DeviceConfig, TissueModel, DEFAULT_TISSUE, LIBRARY_MODELS};
 use crate::faults::Faults;
 use crate::hal::{EncoderCounter, LoadCellAdc};
+use crate::insertion::{Event, EventKind, Halt, HaltReason, Phase, Sample};
 use crate::model::params::LIBRARY;
 use crate::persist::{Loaded, Settings};
 use crate::pipeline::{PipelineState, RawSample};
-use crate::protocol::batch::{samples_per_batch, BatchCheck, BatchWriter};
+use crate::protocol::batch::{self, samples_per_batch, BatchCheck, BatchWriter};
 use crate::protocol::command::{self, CommandReader};
 use crate::protocol::{
-    BoardCounters, BoardFindings, Command, CommandError, CommandFrame, ConfigFrame, Event,
-    EventKind, Frame, FrameEncoder, Halt, HaltReason, Header, Phase, Reply, Sample, SelfTest,
-    Snapshot, Status, TissueSource, PROTOCOL_VERSION, SCHEMA_KEY, STATUS_PERIOD_SAMPLES,
+    BoardCounters, BoardFindings, Command, CommandError, CommandFrame, ConfigFrame, Frame,
+    FrameEncoder, Reply, SelfTest, Snapshot, Status, TissueSource, PROTOCOL_VERSION, SCHEMA_KEY,
+    STATUS_PERIOD_SAMPLES,
 };
 use crate::units::{MicroNewtons, Nanometres};
 
@@ -152,7 +154,9 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         if faults.is_empty() && device.halt.set_low().is_err() {
             device.faults = device.faults.union(Faults::HALT_OUTPUT);
         }
-        device.send(&Frame::Header(Header::new(config.velocity.sample_rate_hz)));
+        device.send(&Frame::Header(crate::protocol::header(
+            config.velocity.sample_rate_hz,
+        )));
         device.send_config();
         device.send_snapshot();
         device.raise(faults);
@@ -175,11 +179,11 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             self.zero.add(adc.counts);
         }
         self.last = Some((out.sample, out.faults));
-        if self.streaming && self.batch.push(raw, &out.sample) {
+        if self.streaming && batch::push(&mut self.batch, raw, &out.sample) {
             self.flush_batch();
         }
         if let Some(event) = out.event {
-            self.send(&Frame::Event(event));
+            self.send(&Frame::Event(event.into()));
         }
         if let Some(halt) = out.halt {
             self.assert_halt(halt);
@@ -205,7 +209,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         let report = SelfTest {
             board,
             halt: self.halt_asserted,
-            faults: self.faults,
+            faults: self.faults.into(),
             counters: self.board,
         };
         self.send(&Frame::SelfTest(report));
@@ -327,6 +331,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
                 modes,
                 target_depth,
             } => {
+                let (modes, target_depth) = (AssistModes::from(modes), target_depth.into());
                 if !modes.is_known() {
                     return Err(CommandError::out_of_range("modes"));
                 }
@@ -391,7 +396,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
                 ..self.config.load_cell
             };
             return Err(CommandError::LoadOnNeedle {
-                force: at_zero.force(zero),
+                force: at_zero.force(zero).into(),
             });
         }
         self.config.load_cell.tare_counts = zero;
@@ -417,24 +422,24 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         }
         if self.raised_outside_at.is_some() {
             return Err(CommandError::HaltCausePersists {
-                reason: HaltReason::Fault,
+                reason: HaltReason::Fault.into(),
             });
         }
         if let Some((sample, faults)) = self.last {
             if !faults.is_empty() {
                 return Err(CommandError::HaltCausePersists {
-                    reason: HaltReason::Fault,
+                    reason: HaltReason::Fault.into(),
                 });
             }
             if let Some(halt) = self.config.assist.check(self.state.phase(), &sample, None) {
                 return Err(CommandError::HaltCausePersists {
-                    reason: halt.reason,
+                    reason: halt.reason.into(),
                 });
             }
         }
         if self.halt.set_low().is_err() {
             return Err(CommandError::HaltCausePersists {
-                reason: HaltReason::Fault,
+                reason: HaltReason::Fault.into(),
             });
         }
         self.halt_asserted = false;
@@ -463,13 +468,14 @@ impl<W: Write, H: OutputPin> Device<W, H> {
     #[inline(never)]
     fn latch(&mut self, new: Faults, at: (u32, Nanometres, MicroNewtons)) {
         self.faults = self.faults.union(new);
-        self.send(&Frame::Event(Event {
+        let fault = Event {
             index: at.0,
             kind: EventKind::Fault,
             x: at.1,
             force: at.2,
             confidence_permille: 1000,
-        }));
+        };
+        self.send(&Frame::Event(fault.into()));
         self.assert_halt(Halt {
             index: at.0,
             reason: HaltReason::Fault,
@@ -488,7 +494,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
         if self.halt.set_high().is_err() {
             self.faults = self.faults.union(Faults::HALT_OUTPUT);
         }
-        self.send(&Frame::Halt(why));
+        self.send(&Frame::Halt(why.into()));
     }
 
     fn send_status(&mut self) {
@@ -497,7 +503,7 @@ impl<W: Write, H: OutputPin> Device<W, H> {
             sample_rate_hz: self.config.velocity.sample_rate_hz,
             samples: self.samples,
             frames_dropped: self.frames_dropped,
-            faults: self.faults,
+            faults: self.faults.into(),
             halt: self.halt_asserted,
             streaming: self.streaming,
             next_command_seq: self.last_command.0.saturating_add(1),

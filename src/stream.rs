@@ -10,9 +10,10 @@
 //! either the device's own or reported missing, never guessed.
 
 use crate::config::DeviceConfig;
+use crate::insertion::Sample;
 use crate::pipeline::PipelineState;
 use crate::protocol::batch::{self, Batch, BatchCheck, MAX_BATCH_SAMPLES};
-use crate::protocol::{ConfigFrame, Sample, Snapshot};
+use crate::protocol::{ConfigFrame, Snapshot};
 
 /// Why a batch's samples could not be given.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -84,9 +85,9 @@ impl Reconstructor {
         let mut samples = heapless::Vec::<Sample, MAX_BATCH_SAMPLES>::new();
         let mut check = self.seed;
         let mut overflow = false;
-        let decoded = batch::read_raw(batch, |raw| {
+        let decoded = batch::read_raw_samples(batch, |raw| {
             let out = config.step(&mut trial, raw);
-            check.add(&out.sample);
+            check.add(batch::checked_words(&out.sample));
             overflow |= samples.push(out.sample).is_err();
         });
         if decoded.is_err() || overflow {

@@ -16,11 +16,10 @@ use std::time::{Duration, Instant};
 use needle_analysis::sim::{self, Plan};
 use needle_holder::assist::AssistModes;
 use needle_holder::config::{DeviceConfig, TissueModel};
+use needle_holder::insertion::HaltReason;
 use needle_holder::model::params::{LIBRARY, LIVER1};
 use needle_holder::protocol::wire::{Encoder, FRAME_CRC};
-use needle_holder::protocol::{
-    Command, CommandError, ConfigFrame, HaltReason, Status, TissueSource,
-};
+use needle_holder::protocol::{command, Command, CommandError, ConfigFrame, Status, TissueSource};
 use needle_holder::units::Nanometres;
 use needle_io::frames::{Item, Message};
 use needle_io::link::Link;
@@ -138,10 +137,7 @@ fn every_command_over_a_pty_is_answered_and_takes_effect() {
     assert_eq!(tared.config.model, boot.config.model);
 
     // Stop on contact (6.7 s into the replay: set it early).
-    let stop = Command::SetAssist {
-        modes: AssistModes::STOP_ON_CONTACT,
-        target_depth: Nanometres::from_m(0.03),
-    };
+    let stop = command::set_assist(AssistModes::STOP_ON_CONTACT, Nanometres::from_m(0.03));
     assert_eq!(link.command(stop).unwrap(), Ok(()));
     assert_eq!(
         next_config(&mut link).config.assist.modes,
@@ -181,18 +177,12 @@ fn every_command_over_a_pty_is_answered_and_takes_effect() {
             library_len: LIBRARY.len() as u8
         })
     );
-    let too_deep = Command::SetAssist {
-        modes: AssistModes::TARGET_DEPTH,
-        target_depth: Nanometres::from_m(0.5),
-    };
+    let too_deep = command::set_assist(AssistModes::TARGET_DEPTH, Nanometres::from_m(0.5));
     assert!(matches!(
         link.command(too_deep).unwrap(),
         Err(CommandError::OutOfRange { .. })
     ));
-    let unknown_mode = Command::SetAssist {
-        modes: AssistModes(0x80),
-        target_depth: Nanometres::from_m(0.01),
-    };
+    let unknown_mode = command::set_assist(AssistModes(0x80), Nanometres::from_m(0.01));
     assert!(matches!(
         link.command(unknown_mode).unwrap(),
         Err(CommandError::OutOfRange { .. })
@@ -292,10 +282,7 @@ fn every_command_over_a_pty_is_answered_and_takes_effect() {
     assert_eq!(halt.reason, HaltReason::Contact);
     assert!(next_status(&mut link).halt);
     // Stop at 1 mm past the surface: re-arming deeper than that is refused.
-    let depth = Command::SetAssist {
-        modes: AssistModes::TARGET_DEPTH,
-        target_depth: Nanometres::from_m(0.001),
-    };
+    let depth = command::set_assist(AssistModes::TARGET_DEPTH, Nanometres::from_m(0.001));
     assert_eq!(link.command(depth).unwrap(), Ok(()));
     // Wait for the needle to be 1.5 mm past where it halted (the surface
     // the device found, or deeper): past the 1 mm target.
@@ -312,14 +299,11 @@ fn every_command_over_a_pty_is_answered_and_takes_effect() {
     assert_eq!(
         link.command(Command::Rearm).unwrap(),
         Err(CommandError::HaltCausePersists {
-            reason: HaltReason::TargetDepth
+            reason: HaltReason::TargetDepth.into()
         })
     );
     assert!(next_status(&mut link).halt, "still halted");
-    let none = Command::SetAssist {
-        modes: AssistModes::NONE,
-        target_depth: Nanometres::from_m(0.03),
-    };
+    let none = command::set_assist(AssistModes::NONE, Nanometres::from_m(0.03));
     assert_eq!(link.command(none).unwrap(), Ok(()));
     assert_eq!(link.command(Command::Rearm).unwrap(), Ok(()));
     // The first status after the reply says released (an older heartbeat
@@ -574,7 +558,7 @@ fn a_recording_begun_inside_an_insertion_writes_no_fragment_as_a_trial() {
         let mut link = Link::open(&device.port, 115_200).unwrap();
         assert_eq!(link.command(Command::Stream(true)).unwrap(), Ok(()));
         wait_for(&mut link, Duration::from_secs(20), "loading", |i| match i {
-            Item::Sample(s) if s.phase == needle_holder::protocol::Phase::Loading => Some(()),
+            Item::Sample(s) if s.phase == needle_holder::insertion::Phase::Loading => Some(()),
             _ => None,
         });
     }

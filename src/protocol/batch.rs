@@ -1,329 +1,86 @@
-//! The compact sample stream: raw readings, batched and delta-coded.
-//!
-//! The device sends what its sensors gave (ADC counts, encoder count), not
-//! what it computed from them: the host runs the same core on the same
-//! readings from the same state and configuration and gets the same
-//! force, position, velocity, model, residual and phase, bit for bit.
-//! Each batch carries a [`BatchCheck`] of the samples the device computed,
-//! so a host whose core, configuration or state differs from the device's
-//! sees it at the first batch instead of misreading the stream.
-//!
-//! **Coding of one sample** (LEB128 varints, ZigZag for signed values):
-//! the ADC token is the ZigZag of the counts' wrapping difference from the
-//! previous sample's (from 0 for a batch's first sample, so each batch
-//! decodes alone), then the encoder token, the ZigZag of the 16-bit count's
-//! wrapping difference. A sample the converter flagged takes an escape
-//! first: the varint `2^32 + flags` (never a difference's ZigZag, which is
-//! below 2^32), then the counts' token unless the flags say there are none.
-//!
-//! Sizes: a still needle with a quiet bridge takes 2 bytes a sample; the
-//! bench's liver insertion at its noise about 4 (the ADC noise sets it).
+//! The compact sample stream ([`needle_wire::batch`]: raw readings,
+//! batched and delta-coded) as the core fills and reads it: its readings
+//! in the wire's form and back, and what of a computed sample the batch's
+//! check covers.
 
-use postcard::experimental::max_size::MaxSize;
-use postcard_schema::Schema;
-use serde::{Deserialize, Serialize};
-
-use super::wire::varint_len;
+pub use needle_wire::batch::*;
 
 use crate::hal::AdcSample;
+use crate::insertion::Sample;
 use crate::pipeline::RawSample;
-use crate::protocol::Sample;
 
-/// Bytes of coded samples one batch holds at most.
-pub const BATCH_BYTES: usize = 512;
-/// Samples one batch holds at most.
-pub const MAX_BATCH_SAMPLES: usize = 100;
-/// Bytes one sample takes at most: escape, counts, encoder.
-const MAX_SAMPLE_BYTES: usize = 5 + 5 + 3;
-
-/// Escape flags: the converter returned an error (no counts follow).
-pub const FLAG_ERROR: u8 = 1 << 0;
-/// Escape flags: the reading is at full scale.
-pub const FLAG_SATURATED: u8 = 1 << 1;
-/// Escape flags: the reading came late (overrun).
-pub const FLAG_OVERRUN: u8 = 1 << 2;
-const ESCAPE: u64 = 1 << 32;
-
-/// Samples per batch at a rate: 50 ms of them (25 at 500 Hz, 100 at
-/// 2 kHz), so a host shows the stream with a constant 50 ms delay, and
-/// the per-batch bytes (about 12) stay under half a byte a sample.
-pub const fn samples_per_batch(sample_rate_hz: u16) -> u8 {
-    let n = sample_rate_hz as usize / 20;
-    if n < 1 {
-        1
-    } else if n > MAX_BATCH_SAMPLES {
-        MAX_BATCH_SAMPLES as u8
-    } else {
-        n as u8
-    }
+/// The words of `s` a batch's check folds in: position, velocity, force,
+/// model and phase (the residual is force − model; the index is the
+/// batch's).
+#[inline(always)]
+pub fn checked_words(s: &Sample) -> CheckedWords {
+    [s.x.0, s.v.0, s.force.0, s.model.0, s.phase as i32]
 }
 
-/// A check over the samples of a batch, as the device computed them:
-/// FNV-1a over the words of position, velocity, force, model and phase
-/// (residual is force − model). Not a cryptographic hash: it catches a
-/// host that computes differently, which then differs in many samples.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct BatchCheck(pub u32);
-
-impl Default for BatchCheck {
-    fn default() -> Self {
-        Self(0x811C_9DC5)
-    }
-}
-
-impl BatchCheck {
-    /// The check a batch starts from after the config frame `wire_bytes`
-    /// (as sent, COBS-encoded, without the closing zero): FNV-1a over them,
-    /// so a host computing with another configuration fails every batch,
-    /// even those whose samples would agree. The bytes of a config frame
-    /// depend only on the configuration, so a lost repeat costs nothing.
-    pub fn seed(wire_bytes: &[u8]) -> Self {
-        Self(wire_bytes.iter().fold(Self::default().0, |h, &b| {
-            (h ^ u32::from(b)).wrapping_mul(0x0100_0193)
-        }))
-    }
-
-    /// Fold one sample in.
+impl From<AdcSample> for AdcReading {
     #[inline(always)]
-    pub fn add(&mut self, s: &Sample) {
-        let mut h = self.0;
-        for word in [s.x.0, s.v.0, s.force.0, s.model.0, s.phase as i32] {
-            h = (h ^ word as u32).wrapping_mul(0x0100_0193);
-        }
-        self.0 = h;
-    }
-}
-
-/// A batch being filled on the device.
-#[derive(Clone, Debug)]
-pub struct BatchWriter {
-    bytes: [u8; BATCH_BYTES],
-    len: usize,
-    samples: u8,
-    capacity: u8,
-    first_index: u32,
-    previous_counts: i32,
-    previous_encoder: u16,
-    check: BatchCheck,
-    seed: BatchCheck,
-}
-
-/// A batch as it goes on the wire.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Schema)]
-pub struct Batch<'a> {
-    /// Index of the batch's first sample.
-    pub first_index: u32,
-    /// Samples in it.
-    pub samples: u8,
-    /// [`BatchCheck`] of the samples, little-endian.
-    pub check: [u8; 4],
-    /// The coded readings.
-    #[serde(borrow, serialize_with = "as_bytes")]
-    pub raw: &'a [u8],
-}
-
-/// A byte slice as postcard's bytes — a length and the bytes, as a
-/// sequence of `u8` is written, so neither the wire nor the schema
-/// changes — which postcard hands to its flavor in one call, where a
-/// sequence costs a call a byte.
-fn as_bytes<S: serde::Serializer>(raw: &&[u8], serializer: S) -> Result<S::Ok, S::Error> {
-    serializer.serialize_bytes(raw)
-}
-
-/// Written out: its readings are a borrowed slice, of at most
-/// [`BATCH_BYTES`].
-impl MaxSize for Batch<'_> {
-    const POSTCARD_MAX_SIZE: usize = u32::POSTCARD_MAX_SIZE
-        + u8::POSTCARD_MAX_SIZE
-        + <[u8; 4]>::POSTCARD_MAX_SIZE
-        + varint_len(BATCH_BYTES)
-        + BATCH_BYTES;
-}
-
-impl BatchWriter {
-    /// An empty batch of up to `capacity` samples (at least 1, at most
-    /// [`MAX_BATCH_SAMPLES`]).
-    pub fn new(capacity: u8) -> Self {
+    fn from(a: AdcSample) -> Self {
         Self {
-            bytes: [0; BATCH_BYTES],
-            len: 0,
-            samples: 0,
-            capacity: capacity.clamp(1, MAX_BATCH_SAMPLES as u8),
-            first_index: 0,
-            previous_counts: 0,
-            previous_encoder: 0,
-            check: BatchCheck::default(),
-            seed: BatchCheck::default(),
+            counts: a.counts,
+            saturated: a.saturated,
+            overrun: a.overrun,
         }
-    }
-
-    /// Start every batch's check from `seed` (see [`BatchCheck::seed`]);
-    /// call on an empty batch.
-    pub fn set_seed(&mut self, seed: BatchCheck) {
-        self.seed = seed;
-        self.check = seed;
-    }
-
-    /// No sample in it.
-    pub fn is_empty(&self) -> bool {
-        self.samples == 0
-    }
-
-    /// Add a sample's readings and its computed values; `true` when the
-    /// batch is full and must be sent (and then [`Self::clear`]ed).
-    /// Never inlined, as [`crate::config::DeviceConfig::step`].
-    #[inline(never)]
-    pub fn push(&mut self, raw: RawSample, sample: &Sample) -> bool {
-        if self.samples == 0 {
-            self.first_index = sample.index;
-        }
-        match raw.adc {
-            Some(AdcSample {
-                counts,
-                saturated: false,
-                overrun: false,
-            }) => self.counts(counts),
-            Some(a) => {
-                let flags = if a.saturated { FLAG_SATURATED } else { 0 }
-                    | if a.overrun { FLAG_OVERRUN } else { 0 };
-                self.varint(ESCAPE | flags as u64);
-                self.counts(a.counts);
-            }
-            None => self.varint(ESCAPE | FLAG_ERROR as u64),
-        }
-        let delta = raw.encoder_count.wrapping_sub(self.previous_encoder) as i16;
-        self.previous_encoder = raw.encoder_count;
-        self.varint(u64::from(((delta << 1) ^ (delta >> 15)) as u16));
-        self.check.add(sample);
-        self.samples += 1;
-        self.samples >= self.capacity || self.len + MAX_SAMPLE_BYTES > BATCH_BYTES
-    }
-
-    #[inline(always)]
-    fn counts(&mut self, counts: i32) {
-        let delta = counts.wrapping_sub(self.previous_counts);
-        self.previous_counts = counts;
-        self.varint32(((delta << 1) ^ (delta >> 31)) as u32);
-    }
-
-    /// The common case in 32-bit arithmetic (64-bit shifts cost on M0/M3).
-    #[inline(always)]
-    fn varint32(&mut self, mut value: u32) {
-        while value >= 0x80 {
-            self.put(value as u8 | 0x80);
-            value >>= 7;
-        }
-        self.put(value as u8);
-    }
-
-    fn varint(&mut self, value: u64) {
-        match u32::try_from(value) {
-            Ok(v) => self.varint32(v),
-            Err(_) => {
-                let mut value = value;
-                while value >= 0x80 {
-                    self.put(value as u8 | 0x80);
-                    value >>= 7;
-                }
-                self.put(value as u8);
-            }
-        }
-    }
-
-    #[inline(always)]
-    fn put(&mut self, byte: u8) {
-        // Cannot miss: `push` reports full while a whole sample still fits.
-        if let Some(slot) = self.bytes.get_mut(self.len) {
-            *slot = byte;
-            self.len += 1;
-        }
-    }
-
-    /// The batch as it goes on the wire.
-    pub fn frame(&self) -> Batch<'_> {
-        Batch {
-            first_index: self.first_index,
-            samples: self.samples,
-            check: self.check.0.to_le_bytes(),
-            raw: self.bytes.get(..self.len).unwrap_or(&[]),
-        }
-    }
-
-    /// Start the next batch.
-    pub fn clear(&mut self) {
-        self.len = 0;
-        self.samples = 0;
-        self.previous_counts = 0;
-        self.previous_encoder = 0;
-        self.check = self.seed;
     }
 }
 
-/// Why a batch's bytes did not decode to its count of samples.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct MalformedBatch;
+impl From<AdcReading> for AdcSample {
+    #[inline(always)]
+    fn from(a: AdcReading) -> Self {
+        Self {
+            counts: a.counts,
+            saturated: a.saturated,
+            overrun: a.overrun,
+        }
+    }
+}
+
+impl From<RawSample> for Reading {
+    #[inline(always)]
+    fn from(raw: RawSample) -> Self {
+        Self {
+            adc: raw.adc.map(AdcReading::from),
+            encoder_count: raw.encoder_count,
+        }
+    }
+}
+
+impl From<Reading> for RawSample {
+    #[inline(always)]
+    fn from(raw: Reading) -> Self {
+        Self {
+            adc: raw.adc.map(AdcSample::from),
+            encoder_count: raw.encoder_count,
+        }
+    }
+}
+
+/// Add `sample` and the readings it came from to `writer`; `true` when the
+/// batch is full (see [`BatchWriter::push`]). Never inlined, as
+/// [`crate::config::DeviceConfig::step`]: it is built with the core, for
+/// speed, not with the board's crate that calls it.
+#[inline(never)]
+pub fn push(writer: &mut BatchWriter, raw: RawSample, sample: &Sample) -> bool {
+    writer.push(raw.into(), sample.index, checked_words(sample))
+}
 
 /// Decode a batch's readings, calling `each` for every sample in order.
-pub fn read_raw(batch: &Batch<'_>, mut each: impl FnMut(RawSample)) -> Result<(), MalformedBatch> {
-    let mut bytes = batch.raw;
-    let mut counts: i32 = 0;
-    let mut encoder: u16 = 0;
-    for _ in 0..batch.samples {
-        let mut token = take_varint(&mut bytes)?;
-        let mut flags = 0u8;
-        if token >= ESCAPE {
-            flags = u8::try_from(token - ESCAPE).map_err(|_| MalformedBatch)?;
-            if flags == 0 || flags & !(FLAG_ERROR | FLAG_SATURATED | FLAG_OVERRUN) != 0 {
-                return Err(MalformedBatch);
-            }
-            if flags & FLAG_ERROR == 0 {
-                token = take_varint(&mut bytes)?;
-            }
-        }
-        let adc = if flags & FLAG_ERROR != 0 {
-            None
-        } else {
-            let zz = u32::try_from(token).map_err(|_| MalformedBatch)?;
-            counts = counts.wrapping_add(((zz >> 1) as i32) ^ -((zz & 1) as i32));
-            Some(AdcSample {
-                counts,
-                saturated: flags & FLAG_SATURATED != 0,
-                overrun: flags & FLAG_OVERRUN != 0,
-            })
-        };
-        let zz = u16::try_from(take_varint(&mut bytes)?).map_err(|_| MalformedBatch)?;
-        encoder = encoder.wrapping_add((((zz >> 1) as i16) ^ -((zz & 1) as i16)) as u16);
-        each(RawSample {
-            adc,
-            encoder_count: encoder,
-        });
-    }
-    if bytes.is_empty() {
-        Ok(())
-    } else {
-        Err(MalformedBatch)
-    }
-}
-
-fn take_varint(bytes: &mut &[u8]) -> Result<u64, MalformedBatch> {
-    let mut value = 0u64;
-    for shift in (0..64).step_by(7) {
-        let (&byte, rest) = bytes.split_first().ok_or(MalformedBatch)?;
-        *bytes = rest;
-        value |= u64::from(byte & 0x7F) << shift;
-        if byte & 0x80 == 0 {
-            return Ok(value);
-        }
-    }
-    Err(MalformedBatch)
+pub fn read_raw_samples(
+    batch: &Batch<'_>,
+    mut each: impl FnMut(RawSample),
+) -> Result<(), MalformedBatch> {
+    read_raw(batch, |reading| each(reading.into()))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::Phase;
+    use crate::insertion::Phase;
     use crate::units::{MicroNewtons, Nanometres, NanometresPerSecond};
-    use proptest::prelude::*;
 
     fn sample(index: u32) -> Sample {
         Sample {
@@ -337,70 +94,12 @@ mod tests {
         }
     }
 
-    fn adc_strategy() -> impl Strategy<Value = Option<AdcSample>> {
-        prop_oneof![
-            8 => any::<i32>().prop_map(|counts| Some(AdcSample { counts, saturated: false, overrun: false })),
-            4 => (-100i32..100).prop_map(|counts| Some(AdcSample { counts, saturated: false, overrun: false })),
-            2 => (any::<i32>(), any::<bool>(), any::<bool>()).prop_map(|(counts, saturated, overrun)| Some(AdcSample { counts, saturated, overrun })),
-            1 => Just(None),
-        ]
-    }
-
-    proptest! {
-        #[test]
-        fn any_readings_round_trip(raws in proptest::collection::vec((adc_strategy(), any::<u16>()), 1..150)) {
-            let mut writer = BatchWriter::new(MAX_BATCH_SAMPLES as u8);
-            let mut decoded = std::vec::Vec::new();
-            let mut sent = std::vec::Vec::new();
-            for (i, (adc, encoder_count)) in raws.iter().enumerate() {
-                let raw = RawSample { adc: *adc, encoder_count: *encoder_count };
-                sent.push(raw);
-                if writer.push(raw, &sample(i as u32)) {
-                    read_raw(&writer.frame(), |r| decoded.push(r)).unwrap();
-                    writer.clear();
-                }
-            }
-            if !writer.is_empty() {
-                read_raw(&writer.frame(), |r| decoded.push(r)).unwrap();
-            }
-            prop_assert_eq!(decoded, sent);
-        }
-    }
-
-    #[test]
-    fn a_quiet_sample_takes_two_bytes_and_a_truncated_batch_is_refused() {
-        let mut writer = BatchWriter::new(25);
-        let raw = RawSample {
-            adc: Some(AdcSample {
-                counts: 10,
-                saturated: false,
-                overrun: false,
-            }),
-            encoder_count: 3,
-        };
-        writer.push(raw, &sample(0));
-        let first = writer.frame().raw.len();
-        writer.push(raw, &sample(1));
-        assert_eq!(writer.frame().raw.len() - first, 2);
-        let batch = writer.frame();
-        let short = Batch {
-            raw: &batch.raw[..batch.raw.len() - 1],
-            ..batch
-        };
-        assert_eq!(read_raw(&short, |_| {}), Err(MalformedBatch));
-        let more = Batch {
-            samples: 3,
-            ..batch
-        };
-        assert_eq!(read_raw(&more, |_| {}), Err(MalformedBatch));
-    }
-
     #[test]
     fn the_check_sees_every_field_but_the_index() {
         let base = sample(7);
         let check = |s: &Sample| {
             let mut c = BatchCheck::default();
-            c.add(s);
+            c.add(checked_words(s));
             c.0
         };
         for changed in [

@@ -9,11 +9,10 @@
 
 use super::command::{CommandFrame, MAX_ENCODED_COMMAND};
 use super::*;
-use crate::assist::AssistModes;
 use crate::config::{DEFAULT, LIBRARY_MODELS};
 use crate::hal::AdcSample;
 use crate::pipeline::RawSample;
-use crate::units::{MicroNewtons, Nanometres};
+use needle_wire::{AssistBits, MicroNewtons, Nanometres};
 
 /// The pipeline's state after a loading ramp: every counter and filter
 /// away from its start.
@@ -42,7 +41,7 @@ fn frames() -> std::vec::Vec<(&'static str, Frame<'static>)> {
         sample_rate_hz: 500,
         samples: 1234,
         frames_dropped: 1,
-        faults: Faults(0x0010),
+        faults: FaultBits(0x0010),
         halt: false,
         streaming: true,
         next_command_seq: 7,
@@ -53,7 +52,7 @@ fn frames() -> std::vec::Vec<(&'static str, Frame<'static>)> {
         schema_key: SCHEMA_KEY,
     };
     std::vec![
-        ("header", Frame::Header(Header::new(500)),),
+        ("header", Frame::Header(header(500)),),
         (
             "config",
             Frame::Config(ConfigFrame {
@@ -118,7 +117,7 @@ fn frames() -> std::vec::Vec<(&'static str, Frame<'static>)> {
                     encoder_count: Some(40),
                 },
                 halt: true,
-                faults: Faults(0),
+                faults: FaultBits(0),
                 counters: status.board,
             }),
         ),
@@ -217,7 +216,7 @@ fn commands() -> std::vec::Vec<(&'static str, Command)> {
         (
             "set_assist",
             Command::SetAssist {
-                modes: AssistModes(0b101),
+                modes: AssistBits(0b101),
                 target_depth: Nanometres(20_000_000),
             },
         ),

@@ -52,7 +52,7 @@ fn chunks(bytes: &[u8]) -> Vec<(Frame<'static>, &[u8])> {
 }
 
 /// The samples of a stream, through the core's reconstruction.
-fn samples(bytes: &[u8]) -> Vec<protocol::Sample> {
+fn samples(bytes: &[u8]) -> Vec<needle_holder::insertion::Sample> {
     let mut reconstructor = needle_holder::stream::Reconstructor::default();
     let mut out = Vec::new();
     for (frame, chunk) in chunks(bytes) {
@@ -112,7 +112,7 @@ fn a_fault_sends_an_event_a_halt_and_a_status_right_away() {
         matches!(frames[5], Frame::Halt(h) if h.reason == protocol::HaltReason::Fault && h.index == 0)
     );
     assert!(
-        matches!(frames[6], Frame::Status(s) if s.halt && s.faults.contains(Faults::ADC_SATURATED))
+        matches!(frames[6], Frame::Status(s) if s.halt && Faults::from(s.faults).contains(Faults::ADC_SATURATED))
     );
 }
 
@@ -298,8 +298,9 @@ fn stop_on_puncture_halts_in_the_same_sample_and_asks_for_the_back_off() {
         Frame::Event(e) if e.kind == EventKind::Contact => Some(*e),
         _ => None,
     });
-    let (x_s1, x_s2) = (contact.unwrap().x.as_m(), puncture.x.as_m());
-    let back_off = halt.x.as_m() - halt.hold_x.as_m();
+    let m = |x: needle_wire::Nanometres| needle_holder::units::Nanometres::from(x).as_m();
+    let (x_s1, x_s2) = (m(contact.unwrap().x), m(puncture.x));
+    let back_off = m(halt.x) - m(halt.hold_x);
     let expected = (1.0 - LIVER1.relaxation) * (x_s2 - x_s1);
     assert!(
         (back_off - expected).abs() < 1e-6,
@@ -329,8 +330,8 @@ fn settings_changed_by_a_command_are_handed_out_once_and_restore_the_same_config
     device.receive(&command_bytes(
         2,
         protocol::Command::SetAssist {
-            modes: AssistModes::STOP_ON_PUNCTURE,
-            target_depth: Nanometres(12_000_000),
+            modes: AssistModes::STOP_ON_PUNCTURE.into(),
+            target_depth: Nanometres(12_000_000).into(),
         },
     ));
     // A refused command changes nothing to keep.
@@ -486,8 +487,8 @@ fn any_command(which: u8, value: i32, entry: usize, at: usize, byte: u8) -> prot
         1 => Command::SelectTissue(value as u8),
         2 => Command::UploadTissue(tissue),
         3 => Command::SetAssist {
-            modes: needle_holder::assist::AssistModes(value as u8),
-            target_depth: needle_holder::units::Nanometres(value),
+            modes: needle_wire::AssistBits(value as u8),
+            target_depth: needle_wire::Nanometres(value),
         },
         4 => Command::Rearm,
         5 => Command::Stream(value % 2 == 0),

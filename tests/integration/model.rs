@@ -3,11 +3,11 @@
 
 use needle_holder::config::DeviceConfig;
 use needle_holder::hal::AdcSample;
+use needle_holder::insertion::Phase;
 use needle_holder::model::friction::{Friction, FrictionState};
 use needle_holder::model::params::{StiffnessLaw, TissueParams, LIBRARY, LIVER1};
 use needle_holder::model::stiffness::Stiffness;
 use needle_holder::pipeline::{PipelineState, RawSample};
-use needle_holder::protocol::Phase;
 use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 use proptest::prelude::*;
 

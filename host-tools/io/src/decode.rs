@@ -9,8 +9,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::faults::Faults;
+use needle_holder::insertion::{EventKind, HaltReason, Phase, Sample};
 use needle_holder::protocol::command::NO_READING_YET;
-use needle_holder::protocol::{CommandError, EventKind, HaltReason, Phase, Sample, TissueSource};
+use needle_holder::protocol::{CommandError, TissueSource};
+use needle_holder::units::MicroNewtons;
 
 use crate::frames::{Item, Message, Missing, StreamDecoder, StreamStats};
 
@@ -762,11 +764,11 @@ pub fn command_error(e: &CommandError) -> String {
         }
         CommandError::LoadOnNeedle { force } => format!(
             "{:.3} N on the load cell is a load, not an offset (over 0.5 N)",
-            force.as_n()
+            MicroNewtons::from(*force).as_n()
         ),
         CommandError::HaltCausePersists { reason } => format!(
             "the halt's cause ({}) is still there",
-            halt_reason_name(*reason)
+            halt_reason_name((*reason).into())
         ),
     }
 }
@@ -817,7 +819,7 @@ pub fn describe(frame: &Message, rate_hz: Option<u16>) -> String {
             } else {
                 String::new()
             },
-            fault_names(s.faults),
+            fault_names(s.faults.into()),
             if s.halt { "ASSERTED" } else { "released" },
             if s.streaming { "" } else { ", stream stopped" }
         ),
@@ -860,7 +862,7 @@ mod tests {
             sample_rate_hz: 2000,
             samples: 10,
             frames_dropped: 0,
-            faults: Faults::WATCHDOG_RESET.union(Faults::SETTINGS_STORE),
+            faults: Faults::WATCHDOG_RESET.union(Faults::SETTINGS_STORE).into(),
             halt: true,
             streaming: true,
             next_command_seq: 1,

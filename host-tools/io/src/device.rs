@@ -142,10 +142,7 @@ pub fn command_of(action: &Action) -> Result<Command> {
             {
                 bail!("--depth-mm {depth_mm:?}: must be between 0.1 and 100 mm");
             }
-            Command::SetAssist {
-                modes: parse_assist(modes)?,
-                target_depth,
-            }
+            needle_holder::protocol::command::set_assist(parse_assist(modes)?, target_depth)
         }
         Action::Rearm => Command::Rearm,
         Action::Stream { state } => Command::Stream(state == "on"),

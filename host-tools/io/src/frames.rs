@@ -12,18 +12,19 @@
 //! knows no CRC and does not say how many bytes it threw away; this decoder
 //! counts every skipped byte.
 
+use needle_holder::insertion::{Event, Halt, Sample};
 use needle_holder::protocol::wire::{self, DecodeError, FRAME_CRC};
 use needle_holder::protocol::{
-    self, ConfigFrame, Event, Frame, Halt, Header, Reply, Sample, SelfTest, Snapshot, Status,
-    MAX_ENCODED_FRAME, PROTOCOL_VERSION,
+    self, ConfigFrame, Frame, Header, Reply, SelfTest, Snapshot, Status, MAX_ENCODED_FRAME,
+    PROTOCOL_VERSION,
 };
 use needle_holder::stream::{Reconstructor, Withheld};
 
 /// Frames of protocol version 2 (23-byte samples, one frame each): the
 /// types as they were, so old captures still decode.
 mod v2 {
-    use needle_holder::faults::Faults;
-    use needle_holder::protocol::{Event, Halt, Sample};
+    use needle_holder::insertion::Sample;
+    use needle_holder::protocol::{Event, FaultBits as Faults, Halt};
     use serde::{Deserialize, Serialize};
 
     #[derive(Serialize, Deserialize)]
@@ -495,8 +496,8 @@ impl StreamDecoder {
                 self.batch(&batch, on_item);
                 return Ok(());
             }
-            Frame::Event(e) => Message::Event(e),
-            Frame::Halt(h) => Message::Halt(h),
+            Frame::Event(e) => Message::Event(e.into()),
+            Frame::Halt(h) => Message::Halt(h.into()),
             Frame::Reply(r) => Message::Reply(r),
             Frame::SelfTest(t) => Message::SelfTest(t),
         };
@@ -561,8 +562,8 @@ impl StreamDecoder {
                 self.sample(s, on_item);
                 return Ok(());
             }
-            v2::Frame::Event(e) => Message::Event(e),
-            v2::Frame::Halt(h) => Message::Halt(h),
+            v2::Frame::Event(e) => Message::Event(e.into()),
+            v2::Frame::Halt(h) => Message::Halt(h.into()),
         };
         self.message(message, on_item);
         Ok(())
@@ -642,7 +643,8 @@ mod tests {
     use super::*;
     use needle_holder::config::DeviceConfig;
     use needle_holder::device::Device;
-    use needle_holder::protocol::{FrameEncoder, Phase};
+    use needle_holder::insertion::Phase;
+    use needle_holder::protocol::FrameEncoder;
     use needle_holder::replay::{ReplayAdc, ReplayEncoder};
     use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
 
@@ -872,13 +874,13 @@ mod tests {
         // 7's. Two do not yet decide it.
         let frame = Frame::Header(Header {
             protocol_version: 7,
-            ..Header::new(500)
+            ..needle_holder::protocol::header(500)
         });
         let two: Vec<u8> = (0..2).flat_map(|_| bytes_of_version(&frame, 7)).collect();
         assert!(decode_all(&two).is_ok());
         // This build's own frame between them: not three in a row.
         let own = FrameEncoder::default()
-            .encode(&Frame::Header(Header::new(500)))
+            .encode(&Frame::Header(needle_holder::protocol::header(500)))
             .to_vec();
         let broken: Vec<u8> = [two.clone(), own, bytes_of_version(&frame, 7)].concat();
         assert!(decode_all(&broken).is_ok());
@@ -977,7 +979,7 @@ mod tests {
                     let mut check = seed;
                     let first = batch.first_index as usize;
                     for s in &expected[first..first + usize::from(batch.samples)] {
-                        check.add(s);
+                        check.add(needle_holder::protocol::batch::checked_words(s));
                     }
                     let rechecked = Frame::Batch(protocol::Batch {
                         check: check.0.to_le_bytes(),
@@ -999,7 +1001,7 @@ mod tests {
 
     #[test]
     fn a_stream_of_this_version_but_another_schema_is_refused_by_its_key() {
-        let mut other = Header::new(500);
+        let mut other = needle_holder::protocol::header(500);
         other.schema_key[0] ^= 1;
         let err = decode_all(FrameEncoder::default().encode(&Frame::Header(other))).unwrap_err();
         assert_eq!(err.schema_key, Some(other.schema_key));
@@ -1008,9 +1010,10 @@ mod tests {
         assert!(text.contains(&hex(&protocol::SCHEMA_KEY)), "{text}");
         assert!(text.contains(protocol::SCHEMA_PATH), "{text}");
         // This build's own key passes.
-        assert!(
-            decode_all(FrameEncoder::default().encode(&Frame::Header(Header::new(500)))).is_ok()
-        );
+        assert!(decode_all(
+            FrameEncoder::default().encode(&Frame::Header(needle_holder::protocol::header(500)))
+        )
+        .is_ok());
         // A host that joined after the header reads the key in a status.
         let status = Status {
             protocol_version: PROTOCOL_VERSION,
@@ -1033,7 +1036,7 @@ mod tests {
         let header = |v| {
             Frame::Header(Header {
                 protocol_version: v,
-                ..Header::new(500)
+                ..needle_holder::protocol::header(500)
             })
         };
         let err = decode_all(FrameEncoder::default().encode(&header(9))).unwrap_err();

@@ -15,7 +15,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use needle_holder::protocol::{BoardCounters, Command, Phase, Sample};
+use needle_holder::insertion::{Phase, Sample};
+use needle_holder::protocol::{BoardCounters, Command};
 
 use crate::decode::{command_error, create_csv, csv_row, describe, missing_name};
 use crate::frames::{Item, Message};

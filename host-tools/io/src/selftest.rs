@@ -69,7 +69,7 @@ pub fn checks(t: &SelfTest) -> Vec<Check> {
             if t.faults.is_empty() {
                 "no fault".to_string()
             } else {
-                format!("faults {}", crate::decode::fault_names(t.faults))
+                format!("faults {}", crate::decode::fault_names(t.faults.into()))
             }
         ),
         // Asserted for an assist's stop, with no fault: information.
@@ -131,7 +131,7 @@ mod tests {
                 encoder_count: Some(7),
             },
             halt: false,
-            faults: Faults::NONE,
+            faults: Faults::NONE.into(),
             counters: BoardCounters::default(),
         }
     }

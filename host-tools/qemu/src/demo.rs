@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use needle_holder::config::DeviceConfig;
-use needle_holder::protocol::{Event, EventKind, Sample};
+use needle_holder::insertion::{Event, EventKind, Sample};
 
 use crate::firmware::{self, Board, Serial};
 use needle_analysis::sim::{self, Plan};

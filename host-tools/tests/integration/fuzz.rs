@@ -12,11 +12,11 @@ use std::sync::OnceLock;
 
 use needle_analysis::sim::{self, Plan};
 use needle_holder::config::{DeviceConfig, LIBRARY_MODELS};
+use needle_holder::insertion::Sample;
 use needle_holder::model::params::LIVER1;
 use needle_holder::protocol::command::{CommandReader, MAX_ENCODED_COMMAND};
 use needle_holder::protocol::wire::Encoder;
-use needle_holder::protocol::{Command, CommandFrame, Sample};
-use needle_holder::units::Nanometres;
+use needle_holder::protocol::{Command, CommandFrame};
 use needle_io::frames::{decode_all, Item};
 use proptest::prelude::*;
 
@@ -110,7 +110,7 @@ proptest! {
             0 => Command::Tare,
             1 => Command::SelectTissue(value as u8),
             2 => Command::UploadTissue(tissue),
-            3 => Command::SetAssist { modes: needle_holder::assist::AssistModes(value as u8), target_depth: Nanometres(value) },
+            3 => Command::SetAssist { modes: needle_wire::AssistBits(value as u8), target_depth: needle_wire::Nanometres(value) },
             4 => Command::Rearm,
             5 => Command::Stream(value % 2 == 0),
             6 => Command::SetLoadCellGain(value),

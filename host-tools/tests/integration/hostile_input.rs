@@ -448,8 +448,8 @@ fn a_capture_of_another_schema_under_this_version_is_refused_naming_both_keys() 
     // A device built with a frame type changed and no new version: its
     // header carries another schema key, and its frames would decode
     // into garbage.
-    use needle_holder::protocol::{Frame, FrameEncoder, Header, SCHEMA_KEY};
-    let mut other = Header::new(500);
+    use needle_holder::protocol::{Frame, FrameEncoder, SCHEMA_KEY};
+    let mut other = needle_holder::protocol::header(500);
     other.schema_key = [0xab; 8];
     let mut bytes = FrameEncoder::default()
         .encode(&Frame::Header(other))
@@ -988,9 +988,9 @@ fn decode_takes_the_streams_rate_over_rate_hz_and_never_writes_to_its_stdout() {
     assert!(err.contains("--csv names standard output"), "{err}");
     // A header of 65 535 Hz before a 500 Hz device's
     // configuration and status compressed the times without a word.
-    use needle_holder::protocol::{Frame, FrameEncoder, Header};
+    use needle_holder::protocol::{Frame, FrameEncoder};
     let mut lying = FrameEncoder::default()
-        .encode(&Frame::Header(Header::new(65_535)))
+        .encode(&Frame::Header(needle_holder::protocol::header(65_535)))
         .to_vec();
     lying.extend(twin_capture(1.0));
     std::fs::write(&cap, lying).unwrap();

@@ -27,3 +27,4 @@ mod hostile_input;
 mod qemu_twin;
 mod real_rig;
 mod rust_target;
+mod workspace;

@@ -10,8 +10,9 @@ use std::time::Duration;
 use needle_analysis::sim::{self, Plan};
 use needle_holder::config::DeviceConfig;
 use needle_holder::faults::Faults;
+use needle_holder::insertion::{EventKind, HaltReason};
 use needle_holder::model::params::LIVER1;
-use needle_holder::protocol::{EventKind, HaltReason, Status};
+use needle_holder::protocol::Status;
 use needle_holder::replay::{Record, ReplayHeader, OVERRUN_MARK};
 use needle_holder::units::MicroNewtons;
 use needle_io::frames::decode_all;
@@ -196,9 +197,9 @@ fn a_relaxing_tissue_held_still_matches_the_host_twin_on_every_board() {
         );
         let (items, _) = decode_all(&qemu.frames).unwrap();
         let samples = needle_io::frames::samples(&items);
-        let mut best: &[needle_holder::protocol::Sample] = &[];
+        let mut best: &[needle_holder::insertion::Sample] = &[];
         for run in
-            samples.split(|s| s.v.0 != 0 || s.phase != needle_holder::protocol::Phase::Inserted)
+            samples.split(|s| s.v.0 != 0 || s.phase != needle_holder::insertion::Phase::Inserted)
         {
             if run.len() > best.len() {
                 best = run;
@@ -254,7 +255,7 @@ fn assert_fault(replay: &[u8], name: &str, fault: Faults) {
     );
     let status = last_status(&qemu.frames);
     assert!(
-        status.faults.contains(fault),
+        Faults::from(status.faults).contains(fault),
         "{name}: faults {:?}",
         status.faults
     );

@@ -154,7 +154,7 @@ pub fn fit_dataset(dir: &Path) -> Result<FitReport> {
 /// peak, with its margin to being missed.
 fn puncture_margins(params: &TissueParams, fitted: &[(&Trial, &TrialFit)]) -> PunctureMargins {
     use needle_holder::detect::{puncture, DetectConfig, DetectInput};
-    use needle_holder::protocol::Phase;
+    use needle_holder::insertion::Phase;
     use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
     let base = DetectConfig::for_tissue(params);
     let n = |m: MicroNewtons| f64::from(m.0) * 1e-6;

@@ -18,7 +18,7 @@ use postcard::experimental::max_size::MaxSize;
 use postcard_schema::Schema;
 use serde::{Deserialize, Serialize};
 
-use super::PROTOCOL_VERSION;
+use crate::PROTOCOL_VERSION;
 
 /// The frame check: CRC-16/IBM-SDLC (the X.25/HDLC CRC). The host checks
 /// frames with the `crc` crate through this; the device computes the same
