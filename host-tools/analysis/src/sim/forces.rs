@@ -1,5 +1,5 @@
 //! The unmodelled effects as the simulator steps them, one struct or
-//! function each, beside the tissue's own force (`simulate_trial_in`), as
+//! function each, beside the tissue's own force (`needle.rs`), as
 //! the core's pipeline keeps one state per stage. Each acts in the form
 //! asked for ([`Form`]): the standard form, an alternate one of the same
 //! effect, or one from the literature.

@@ -8,6 +8,7 @@
 pub mod effects;
 mod forces;
 pub mod motion;
+mod needle;
 
 use std::path::{Path, PathBuf};
 
@@ -21,7 +22,8 @@ use rand_distr::{Distribution, Normal};
 use serde::Serialize;
 
 use self::effects::Effect;
-use self::forces::{give_way, Added, Bristles, Kinematics, Tent, Walls};
+use self::forces::Kinematics;
+use self::needle::Needle;
 use self::motion::Segment;
 pub use needle_holder::model::params::TissueParams;
 use needle_io::trial::Trial;
@@ -309,13 +311,6 @@ pub fn jittered_times(rate_hz: f64, duration_s: f64, rng: &mut impl Rng) -> Vec<
     times
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Contact {
-    Out,
-    Loading,
-    Inserted,
-}
-
 /// Least distance between one wall's rupture and the next wall (m).
 const WALL_GAP_M: f64 = 0.001;
 
@@ -350,34 +345,22 @@ pub fn simulate_trial_in(
         Some(times) => motion::sample_at(&protocol.segments, 0.0, times),
         None => motion::sample(&protocol.segments, 0.0, sensor.rate_hz),
     };
-    let s1 = protocol.surface_x_m;
     let noise = Normal::new(0.0, sensor.noise_n.max(0.0)).unwrap_or(Normal::new(0.0, 0.0).unwrap());
     let cell = needle_holder::calibration::LoadCell::TEN_NEWTON_24_BIT;
     let full_scale_n = cell.force(cell.full_scale_counts).as_n();
     let deepest_planned = m.x_m.iter().copied().fold(0.0, f64::max);
+    let mut structures = place_walls(tissue, protocol, effects, deepest_planned, rng);
+    structures.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut truth = TrialTruth {
         protocol: protocol.clone(),
         puncture_x_m: None,
         puncture_force_n: None,
         relaxed_surface_x_m: None,
-        structures: Vec::new(),
+        structures,
         events: Vec::new(),
     };
-    truth.structures = place_walls(tissue, protocol, effects, deepest_planned, rng);
-    truth.structures.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut walls = Walls::new(truth.structures.len());
-    let mut layers_ruptured = vec![false; protocol.layers.len()];
-
+    let mut needle = Needle::new(tissue, protocol, (effects, form), truth.structures.len());
     let mut trial = Trial::default();
-    let (mut phase, mut x_s3, mut deepest) = (Contact::Out, 0.0, 0.0);
-    let mut last_sliding = 0.0;
-    let mut last_cutting_n = 0.0;
-    let (mut bristles, mut tent, mut added) =
-        (Bristles::default(), Tent::default(), Added::default());
-    let mut prev_p = 0.0;
-    // The puncture whose fall comes at the next sample (its peak is the
-    // sample the capsule gave way at).
-    let mut falls_next: Option<usize> = None;
     for i in 0..m.t_s.len() {
         let (t, x, v, a) = (m.t_s[i], m.x_m[i], m.v_mps[i], m.a_mps2[i]);
         let dt = if i == 0 {
@@ -385,9 +368,6 @@ pub fn simulate_trial_in(
         } else {
             t - m.t_s[i - 1]
         };
-        if let Some(k) = falls_next.take() {
-            truth.events[k].t_s = t;
-        }
         // Position and velocity relative to the tissue.
         let (mut p, mut vr) = (x, v);
         forces::move_with_tissue(effects, form, breath_phase, t, (&mut p, &mut vr));
@@ -397,105 +377,7 @@ pub fn simulate_trial_in(
             vr_mps: vr,
             a_mps2: a,
         };
-        let mut f = 0.0;
-        if phase == Contact::Out && p >= s1 && x_s3 == 0.0 {
-            phase = Contact::Loading;
-            truth.events.push(TruthEvent {
-                kind: "contact",
-                t_s: t,
-                peak_t_s: t,
-                x_m: x,
-            });
-        }
-        if phase == Contact::Loading {
-            let d = p - s1;
-            if d < 0.0 {
-                phase = Contact::Out;
-            } else {
-                f = tissue.stiffness_n(d);
-                if d >= tissue.puncture_depth_m {
-                    phase = Contact::Inserted;
-                    x_s3 = s1 + tissue.relaxation * d;
-                    deepest = p;
-                    truth.puncture_x_m = Some(x);
-                    truth.puncture_force_n = Some(f);
-                    truth.relaxed_surface_x_m = Some(x_s3);
-                    falls_next = Some(truth.events.len());
-                    truth.events.push(TruthEvent {
-                        kind: "puncture",
-                        t_s: t,
-                        peak_t_s: t,
-                        x_m: x,
-                    });
-                }
-            }
-        } else if phase == Contact::Inserted {
-            let far = protocol.far_surface_x_m.unwrap_or(f64::INFINITY);
-            // A withdrawing needle draws the tissue out with it.
-            let exit_m = if protocol.drag_m > 0.0 && vr < 0.0 {
-                s1 - protocol.drag_m
-            } else {
-                x_s3
-            };
-            let l = p.min(far) - exit_m;
-            if p >= far && deepest < far {
-                truth.events.push(TruthEvent {
-                    kind: "exit",
-                    t_s: t,
-                    peak_t_s: t,
-                    x_m: x,
-                });
-            }
-            if l <= 0.0 {
-                phase = Contact::Out;
-            } else {
-                let target = friction_target(tissue, effects, form, vr, l, &mut last_sliding);
-                let friction = bristles.follow(effects, form, target, (p - prev_p).abs());
-                let cutting = tissue.cutting_n(vr, p >= deepest && p < far);
-                let cutting = forces::deeper_cutting(effects, form, p - s1, cutting);
-                deepest = deepest.max(p);
-                f = friction + cutting;
-                // At rest the static band holds the force the needle was
-                // applied with when it stopped, the tip's cutting force
-                // with the shaft's friction (the paper's Karnopp law,
-                // max(D_n, min(F_a, D_p)) of the applied force F_a): the
-                // tissue ahead of a stopped tip stays compressed.
-                if vr.abs() >= tissue.half_band_mps {
-                    last_cutting_n = cutting;
-                } else {
-                    f += last_cutting_n.min((tissue.dp_n_per_m * l - friction).max(0.0));
-                }
-                f = tent.step(protocol, tissue, &k, (p, l), f);
-                for (n, layer) in protocol.layers.iter().enumerate() {
-                    let stretch = p - (s1 + layer.depth_m);
-                    if layers_ruptured[n] || stretch <= 0.0 {
-                        continue;
-                    }
-                    f += give_way(
-                        layer.k_n_per_m * stretch,
-                        layer.rupture_n,
-                        &mut layers_ruptured[n],
-                        &mut truth.events,
-                        (t, t - dt, x),
-                    );
-                }
-                let at = (t, t - dt, x);
-                walls.add(
-                    (effects, form),
-                    &truth.structures,
-                    p,
-                    &mut f,
-                    &mut truth.events,
-                    at,
-                );
-            }
-        }
-        if phase == Contact::Out {
-            bristles.release();
-        }
-        added.add((effects, form), &k, phase != Contact::Out, &mut f);
-        f += protocol.tare_n;
-        prev_p = p;
+        let f = needle.step(&k, x, p, &mut truth);
         let x_counts = (x / sensor.encoder_m).round() * sensor.encoder_m;
         // The load cell reads no more than its full scale: the trial's
         // replay says saturated there.
