@@ -133,161 +133,260 @@ pub fn predict_each(
     each: &mut dyn FnMut(usize, &SampleParts),
 ) -> usize {
     let puncture = last_loaded_sample(geometry, trial);
-    let mut deepest = geometry.puncture_x_m;
-    let mut last_sliding = 0.0;
-    let mut last_basis = [0.0; 4];
-    let mut held_cut_n = 0.0_f64;
-    // Cutting goes on from the puncture, and again only once the tip is
-    // past its deepest point by more than the encoder's jitter: a stroke
-    // that turns round exactly at the deepest point (the paper's
-    // oscillations) cuts nothing, though its encoder reading ties it. By
-    // the same jitter it stays on: in a moving tissue the tip can advance
-    // by less than an encoder step a sample, and its reading, relative to
-    // the tissue, then dithers about the deepest point.
-    let front_m = 3.0 * v.encoder_step_m;
-    let mut cutting = true;
-    let n = trial.len();
-    debug_assert_eq!(x_m.len(), n, "a position for every sample");
-    // In a moving tissue, with the force's noise known, the cutting state
-    // is followed from the force ([`CuttingObserver`]).
-    let observed = v.sd_mps > 0.0 && v.tissue_sd_m > 0.0 && v.force_sd_n > 0.0;
-    let mut observer =
-        CuttingObserver::at_puncture(trial.t_s.get(puncture).copied().unwrap_or(0.0));
-    // The samples next to a jump, in order, met by a cursor (a search of
-    // the whole list at every sample was a tenth of the model's time).
-    let mut uncertain = v.uncertain.clone();
-    uncertain.sort_by_key(|u| u.0);
-    let mut next_uncertain = 0;
-    for (i, &x) in x_m.iter().enumerate().take(n) {
-        let mut s = SampleParts::default();
-        if i <= puncture {
-            // A rational law fitted to a bent loading curve can reach its
-            // pole; the capsule holds no more than its puncture force.
-            let f = params.stiffness_n(x - geometry.contact_x_m);
-            s.stiffness_n = if f.is_finite() {
-                f
-            } else {
-                params.puncture_force_n
-            };
-            each(i, &s);
-            continue;
+    debug_assert_eq!(x_m.len(), trial.len(), "a position for every sample");
+    let mut model = Inside::at_puncture(params, geometry, v, trial.t_s.get(puncture).copied());
+    for (i, &x) in x_m.iter().enumerate().take(trial.len()) {
+        let s = if i <= puncture {
+            loading(params, geometry, x)
+        } else {
+            model.step(i, x, (trial.t_s[i], trial.f_n[i]))
+        };
+        each(i, &s);
+    }
+    puncture
+}
+
+/// The capsule's force with the tip at `x_m`, up to the puncture.
+fn loading(params: &TissueParams, geometry: &TrialFit, x_m: f64) -> SampleParts {
+    // A rational law fitted to a bent loading curve can reach its pole;
+    // the capsule holds no more than its puncture force.
+    let f = params.stiffness_n(x_m - geometry.contact_x_m);
+    SampleParts {
+        stiffness_n: if f.is_finite() {
+            f
+        } else {
+            params.puncture_force_n
+        },
+        ..SampleParts::default()
+    }
+}
+
+/// The model past the puncture, a sample at a time: what the force law
+/// remembers from one sample to the next (the friction's last sliding
+/// side, where the tip has cut to, whether it cuts, what it holds at
+/// rest).
+struct Inside<'a> {
+    params: &'a TissueParams,
+    geometry: &'a TrialFit,
+    v: &'a NeedleVelocity,
+    /// How far past the deepest point the tip must be to cut again: the
+    /// encoder's jitter (see [`Inside::at_puncture`]).
+    front_m: f64,
+    /// The cutting state is followed from the force ([`CuttingObserver`]).
+    observed: bool,
+    observer: CuttingObserver,
+    deepest_m: f64,
+    last_sliding: f64,
+    last_basis: [f64; 4],
+    held_cut_n: f64,
+    cutting: bool,
+    /// The samples next to a jump, in order, met by a cursor (a search of
+    /// the whole list at every sample was a tenth of the model's time).
+    uncertain: Vec<(usize, f64, f64)>,
+    next_uncertain: usize,
+}
+
+impl<'a> Inside<'a> {
+    /// The tip just through the capsule at `t_s`.
+    ///
+    /// Cutting goes on from the puncture, and again only once the tip is
+    /// past its deepest point by more than the encoder's jitter: a stroke
+    /// that turns round exactly at the deepest point (the paper's
+    /// oscillations) cuts nothing, though its encoder reading ties it. By
+    /// the same jitter it stays on: in a moving tissue the tip can advance
+    /// by less than an encoder step a sample, and its reading, relative to
+    /// the tissue, then dithers about the deepest point. In a moving
+    /// tissue, with the force's noise known, the cutting state is followed
+    /// from the force.
+    fn at_puncture(
+        params: &'a TissueParams,
+        geometry: &'a TrialFit,
+        v: &'a NeedleVelocity,
+        t_s: Option<f64>,
+    ) -> Self {
+        let mut uncertain = v.uncertain.clone();
+        uncertain.sort_by_key(|u| u.0);
+        Self {
+            params,
+            geometry,
+            v,
+            front_m: 3.0 * v.encoder_step_m,
+            observed: v.sd_mps > 0.0 && v.tissue_sd_m > 0.0 && v.force_sd_n > 0.0,
+            observer: CuttingObserver::at_puncture(t_s.unwrap_or(0.0)),
+            deepest_m: geometry.puncture_x_m,
+            last_sliding: 0.0,
+            last_basis: [0.0; 4],
+            held_cut_n: 0.0,
+            cutting: true,
+            uncertain,
+            next_uncertain: 0,
         }
+    }
+
+    /// Sample `i`, the tip at `x_m`, at time `t_s` with `f_n` measured.
+    fn step(&mut self, i: usize, x_m: f64, (t_s, f_n): (f64, f64)) -> SampleParts {
+        let (params, v) = (self.params, self.v);
+        let mut s = SampleParts::default();
         // A withdrawing needle holds the tissue until it lets go, which a
         // dragged tissue does before x_s3 (even before x_s1).
-        let exit_m = match geometry.let_go_x_m {
-            Some(let_go) if v.v_mps[i] < -params.half_band_mps => let_go.min(geometry.relaxed_x_m),
-            _ => geometry.relaxed_x_m,
+        let exit_m = match self.geometry.let_go_x_m {
+            Some(let_go) if v.v_mps[i] < -params.half_band_mps => {
+                let_go.min(self.geometry.relaxed_x_m)
+            }
+            _ => self.geometry.relaxed_x_m,
         };
-        let l = x - exit_m;
+        let l = x_m - exit_m;
         if l <= 0.0 {
-            each(i, &s);
-            continue;
+            return s;
         }
-        let here = Sliding::at(params, v.v_mps[i], l, last_sliding, last_basis);
-        let t = trial.t_s[i];
-        let past_sd_m = observer.past_sd_m(t, front_m, v.sd_mps, v.tissue_sd_m);
-        let odds_at = |vi: f64| Odds {
-            v_over_band_mps: vi - params.half_band_mps,
-            v_sd_mps: v.sd_mps,
-            past_m: x - deepest,
-            past_sd_m,
+        let at = Here {
+            x_m,
+            l_m: l,
+            past_sd_m: (self.observer).past_sd_m(t_s, self.front_m, v.sd_mps, v.tissue_sd_m),
         };
-        let ahead = |on: bool| {
-            if on {
-                x >= deepest - front_m
-            } else {
-                x > deepest + front_m
-            }
-        };
-        let cut = |vi: f64, on: bool| {
-            if observed {
-                params.cutting_force_n * observer.predict(odds_at(vi))
-            } else if v.sd_mps > 0.0 && ahead(on) {
-                // Known only to sd_mps, the velocity cuts as likely as it
-                // is above the band: a tissue moving along with the
-                // needle holds it near there for many samples.
-                let above = jumps::normal_cdf((vi - params.half_band_mps) / v.sd_mps);
-                params.cutting_force_n * above
-            } else {
-                params.cutting_n(vi, ahead(on))
-            }
-        };
-        // At rest the static band holds the force the needle was applied
-        // with when it stopped, the tip's cutting force with the shaft's
-        // friction (the paper's Karnopp law, max(D_n, min(F_a, D_p)) of
-        // the applied force F_a): the tissue ahead of a stopped tip stays
-        // compressed. Each part is held in its own term.
-        let tip = |vi: f64, friction_n: f64| {
-            if vi.abs() < params.half_band_mps {
-                held_cut_n.min((params.dp_n_per_m * l - friction_n).max(0.0))
-            } else {
-                cut(vi, cutting)
-            }
-        };
+        let here = Sliding::at(params, v.v_mps[i], l, self.last_sliding, self.last_basis);
         let at_rest = v.v_mps[i].abs() < params.half_band_mps;
-        let cutting_n = tip(v.v_mps[i], here.friction_n);
+        let cutting_n = self.tip_n(&at, v.v_mps[i], here.friction_n);
         (s.friction_n, s.friction_basis, s.cutting_n) = (here.friction_n, here.basis, cutting_n);
-        // Next to a jump placed to within a fraction of a sample, the
-        // sample may be on its other side: the force law there is the
-        // expected one over both.
-        while uncertain.get(next_uncertain).is_some_and(|u| u.0 < i) {
-            next_uncertain += 1;
-        }
-        if let Some(&(_, v_other, prior)) = uncertain.get(next_uncertain).filter(|u| u.0 == i) {
-            let other = Sliding::at(params, v_other, l, last_sliding, last_basis);
-            let other_cutting_n = tip(v_other, other.friction_n);
-            let w = other_side_odds(
-                prior,
-                trial.f_n[i],
-                [
-                    here.friction_n + cutting_n,
-                    other.friction_n + other_cutting_n,
-                ],
-                v.force_sd_n,
-            );
-            let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
-            s.friction_n = mix(here.friction_n, other.friction_n);
-            for (k, b) in s.friction_basis.iter_mut().enumerate() {
-                *b = mix(*b, other.basis[k]);
-            }
-            s.cutting_n = mix(cutting_n, other_cutting_n);
-            s.other_side = Some(w);
-        }
-        let on = if observed {
-            // What the tip holds at rest is not cutting.
-            let (moving_n, held_n) = if at_rest {
-                (cut(v.v_mps[i], cutting), s.cutting_n)
-            } else {
-                (s.cutting_n, 0.0)
-            };
-            let predicted = moving_n / params.cutting_force_n.max(f64::MIN_POSITIVE);
-            observer.correct(
-                odds_at(v.v_mps[i]),
-                predicted,
-                trial.f_n[i] - held_n,
-                [s.friction_n, s.friction_n + params.cutting_force_n],
-                v.force_sd_n,
-            )
-        } else {
-            ahead(cutting) && v.v_mps[i] >= params.half_band_mps
-        };
-        (last_basis, last_sliding, cutting) = (here.basis, here.last_sliding, on);
+        self.other_side(i, &at, f_n, &here, &mut s);
+        let on = self.cuts(i, &at, at_rest, f_n, &s);
+        (self.last_basis, self.last_sliding, self.cutting) = (here.basis, here.last_sliding, on);
         if !at_rest {
-            held_cut_n = s.cutting_n;
+            self.held_cut_n = s.cutting_n;
         }
         s.length_m = l;
-        each(i, &s);
         // The front follows the tip while it cuts and while it is not
         // advancing (a stop at speed lands between samples, and the rest
         // reading is the true deepest point), but not while it creeps
         // forward uncut by less than the jitter a sample: it would never
         // get past the front (a tissue moving along with the needle).
-        if (on || v.v_mps[i] <= 0.0) && x > deepest {
-            deepest = x;
-            observer.advanced(t);
+        if (on || v.v_mps[i] <= 0.0) && x_m > self.deepest_m {
+            self.deepest_m = x_m;
+            self.observer.advanced(t_s);
+        }
+        s
+    }
+
+    fn odds(&self, at: &Here, v_mps: f64) -> Odds {
+        Odds {
+            v_over_band_mps: v_mps - self.params.half_band_mps,
+            v_sd_mps: self.v.sd_mps,
+            past_m: at.x_m - self.deepest_m,
+            past_sd_m: at.past_sd_m,
         }
     }
-    puncture
+
+    /// Whether the tip is ahead of where it has cut to (by the jitter,
+    /// the way that keeps the state `on` it is in).
+    fn ahead(&self, at: &Here, on: bool) -> bool {
+        if on {
+            at.x_m >= self.deepest_m - self.front_m
+        } else {
+            at.x_m > self.deepest_m + self.front_m
+        }
+    }
+
+    /// The cutting force at velocity `v_mps`, the tip cutting (`on`) or
+    /// not at the sample before.
+    fn cut_n(&self, at: &Here, v_mps: f64, on: bool) -> f64 {
+        let params = self.params;
+        if self.observed {
+            params.cutting_force_n * self.observer.predict(self.odds(at, v_mps))
+        } else if self.v.sd_mps > 0.0 && self.ahead(at, on) {
+            // Known only to sd_mps, the velocity cuts as likely as it is
+            // above the band: a tissue moving along with the needle holds
+            // it near there for many samples.
+            let above = jumps::normal_cdf((v_mps - params.half_band_mps) / self.v.sd_mps);
+            params.cutting_force_n * above
+        } else {
+            params.cutting_n(v_mps, self.ahead(at, on))
+        }
+    }
+
+    /// The tip's force. At rest the static band holds the force the
+    /// needle was applied with when it stopped, the tip's cutting force
+    /// with the shaft's friction (the paper's Karnopp law,
+    /// max(D_n, min(F_a, D_p)) of the applied force F_a): the tissue ahead
+    /// of a stopped tip stays compressed. Each part is held in its own
+    /// term.
+    fn tip_n(&self, at: &Here, v_mps: f64, friction_n: f64) -> f64 {
+        let params = self.params;
+        if v_mps.abs() < params.half_band_mps {
+            self.held_cut_n
+                .min((params.dp_n_per_m * at.l_m - friction_n).max(0.0))
+        } else {
+            self.cut_n(at, v_mps, self.cutting)
+        }
+    }
+
+    /// Next to a jump placed to within a fraction of a sample, the sample
+    /// may be on its other side: the force law there is the expected one
+    /// over both.
+    fn other_side(&mut self, i: usize, at: &Here, f_n: f64, here: &Sliding, s: &mut SampleParts) {
+        while self
+            .uncertain
+            .get(self.next_uncertain)
+            .is_some_and(|u| u.0 < i)
+        {
+            self.next_uncertain += 1;
+        }
+        let Some(&(_, v_other, prior)) =
+            self.uncertain.get(self.next_uncertain).filter(|u| u.0 == i)
+        else {
+            return;
+        };
+        let other = Sliding::at(
+            self.params,
+            v_other,
+            at.l_m,
+            self.last_sliding,
+            self.last_basis,
+        );
+        let other_cutting_n = self.tip_n(at, v_other, other.friction_n);
+        let model_n = [
+            here.friction_n + s.cutting_n,
+            other.friction_n + other_cutting_n,
+        ];
+        let w = other_side_odds(prior, f_n, model_n, self.v.force_sd_n);
+        let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
+        s.friction_n = mix(here.friction_n, other.friction_n);
+        for (k, b) in s.friction_basis.iter_mut().enumerate() {
+            *b = mix(*b, other.basis[k]);
+        }
+        s.cutting_n = mix(s.cutting_n, other_cutting_n);
+        s.other_side = Some(w);
+    }
+
+    /// Whether the tip cuts at this sample, for the next.
+    fn cuts(&mut self, i: usize, at: &Here, at_rest: bool, f_n: f64, s: &SampleParts) -> bool {
+        let (params, v) = (self.params, self.v);
+        if !self.observed {
+            return self.ahead(at, self.cutting) && v.v_mps[i] >= params.half_band_mps;
+        }
+        // What the tip holds at rest is not cutting.
+        let (moving_n, held_n) = if at_rest {
+            (self.cut_n(at, v.v_mps[i], self.cutting), s.cutting_n)
+        } else {
+            (s.cutting_n, 0.0)
+        };
+        let predicted = moving_n / params.cutting_force_n.max(f64::MIN_POSITIVE);
+        let odds = self.odds(at, v.v_mps[i]);
+        self.observer.correct(
+            odds,
+            predicted,
+            f_n - held_n,
+            [s.friction_n, s.friction_n + params.cutting_force_n],
+            v.force_sd_n,
+        )
+    }
+}
+
+/// Where the tip is at one sample: its position, the length in tissue,
+/// and how uncertain its distance past the deepest point is.
+struct Here {
+    x_m: f64,
+    l_m: f64,
+    past_sd_m: f64,
 }
 
 /// How likely a sample next to a jump lies on its other side, given the

@@ -23,8 +23,8 @@ use serde::Serialize;
 
 use self::effects::Effect;
 use self::forces::Kinematics;
-use self::needle::Needle;
 use self::motion::Segment;
+use self::needle::Needle;
 pub use needle_holder::model::params::TissueParams;
 use needle_io::trial::Trial;
 

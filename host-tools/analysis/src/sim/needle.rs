@@ -161,8 +161,14 @@ impl<'a> Needle<'a> {
             );
         }
         let effects = (self.effects, self.form);
-        self.walls
-            .add(effects, &truth.structures, p_m, &mut f, &mut truth.events, at);
+        self.walls.add(
+            effects,
+            &truth.structures,
+            p_m,
+            &mut f,
+            &mut truth.events,
+            at,
+        );
         f
     }
 
