@@ -398,38 +398,17 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         bail!("no capsule puncture (no peak followed by a sharp drop)");
     };
 
-    // Loading curve: the rise into the peak, above the noise.
-    let thr = loading_threshold_n(f[ip], noise_n);
-    let rise = loading_samples(f, ip, noise_n);
-    if rise < MIN_LOADING_SAMPLES {
-        bail!("too few samples on the loading curve before the puncture");
-    }
-    let j0 = ip - rise;
-    // What the load cell reads before contact, over every sample before
-    // the rise (on a trial `tare` has tared, what the tare left): a
-    // withdrawal's snap returns to it. Not the tare itself
-    // (`unloaded_zero_n`), which keeps clear of the loading curve's toe.
-    let before_contact_n = median(f[..j0].to_vec());
+    let (before_contact_n, loading) = loading_curve(trial, ip, noise_n)?;
     let Loading {
         contact_x_m,
         polynomial,
         rational,
-    } = fit_loading(x, f, (j0, ip), thr)?;
-
-    let rate = trial.rate_hz();
-    let after = |s: f64| ip.saturating_add((s * rate) as usize).min(trial.len() - 1);
-    // A flat top can stand 20 samples before the fall: the level is read
-    // over 100 ms past whichever comes later, the peak's window or the
-    // fall's first sharp step (what find_puncture took for fallen can be
-    // a later event where the capsule's own fall was small).
-    let step_n = (10.0 * noise_n).max(0.05 * f[ip]);
-    let fall_start = (ip + 1..=fallen)
-        .find(|&i| f[i - 1] - f[i] > step_n)
-        .unwrap_or(fallen);
-    let fall_end = fall_start
-        .saturating_add((0.1 * rate) as usize)
-        .min(trial.len() - 1);
-    let puncture_drop_to_n = fall_level(&f[ip..=after(0.1).max(fall_end)]);
+    } = loading;
+    let (fall_start, puncture_drop_to_n) = puncture_fall(trial, (ip, fallen), noise_n);
+    let after = |s: f64| {
+        ip.saturating_add((s * trial.rate_hz()) as usize)
+            .min(trial.len() - 1)
+    };
 
     // Friction and x_s3: strokes inside the cut track, plus the samples
     // after the needle left (which must read zero): grid over ρ.
@@ -469,16 +448,13 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
 
     // Static band: the force held at rest, per length, against the sliding
     // force just before the stop.
-    let (dp, mut dn) = static_band(trial, &v, (&rests, start), relaxed_x_m, noise_n);
-    // The withdrawal's stick gives way where the tent's pull reaches the
-    // static band, D_n·l, l from where the withdrawing needle lets go.
-    let exit_m = friction.let_go_x_m.map(|g| g.min(relaxed_x_m));
-    if let (Some(last), Some(exit_m)) = (stuck.clone().last(), exit_m) {
-        let l = x[last] - exit_m;
-        if l >= 0.002 {
-            dn = stronger(dn, (f[last] / l, true), -1.0);
-        }
-    }
+    let (dp, dn) = static_band(trial, &v, (&rests, start), relaxed_x_m, noise_n);
+    let dn = with_the_stick(
+        trial,
+        dn,
+        stuck,
+        friction.let_go_x_m.map(|g| g.min(relaxed_x_m)),
+    );
 
     Ok(TrialFit {
         noise_n,
@@ -510,6 +486,63 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         layers: layers_after(trial, &v, ip, noise_n),
         tare_n: 0.0,
     })
+}
+
+/// The loading curve, the rise into the peak at `ip` above the noise:
+/// what the load cell read before contact, over every sample before the
+/// rise (on a trial `tare` has tared, what the tare left: a withdrawal's
+/// snap returns to it; not the tare itself, `unloaded_zero_n`, which keeps
+/// clear of the loading curve's toe), and the fit of the curve.
+fn loading_curve(trial: &Trial, ip: usize, noise_n: f64) -> Result<(f64, Loading)> {
+    let (x, f) = (&trial.x_m, &trial.f_n);
+    let thr = loading_threshold_n(f[ip], noise_n);
+    let rise = loading_samples(f, ip, noise_n);
+    if rise < MIN_LOADING_SAMPLES {
+        bail!("too few samples on the loading curve before the puncture");
+    }
+    let j0 = ip - rise;
+    let before_contact_n = median(f[..j0].to_vec());
+    Ok((before_contact_n, fit_loading(x, f, (j0, ip), thr)?))
+}
+
+/// Where the force starts to fall after the peak at `ip` (`fallen` is
+/// where [`find_puncture`] saw it down) and the level it falls to. A flat
+/// top can stand 20 samples before the fall: the level is read over
+/// 100 ms past whichever comes later, the peak's window or the fall's
+/// first sharp step (what `find_puncture` took for fallen can be a later
+/// event where the capsule's own fall was small).
+fn puncture_fall(trial: &Trial, (ip, fallen): (usize, usize), noise_n: f64) -> (usize, f64) {
+    let (f, rate, last) = (&trial.f_n, trial.rate_hz(), trial.len() - 1);
+    let step_n = (10.0 * noise_n).max(0.05 * f[ip]);
+    let fall_start = (ip + 1..=fallen)
+        .find(|&i| f[i - 1] - f[i] > step_n)
+        .unwrap_or(fallen);
+    let fall_end = fall_start.saturating_add((0.1 * rate) as usize).min(last);
+    let peak_window_end = ip.saturating_add((0.1 * rate) as usize).min(last);
+    (
+        fall_start,
+        fall_level(&f[ip..=peak_window_end.max(fall_end)]),
+    )
+}
+
+/// The static band D_n with the withdrawal's stick: it gives way where
+/// the tent's pull reaches D_n·l, l from `exit_m`, where the withdrawing
+/// needle lets go (the last `stuck` sample's force over its length).
+fn with_the_stick(
+    trial: &Trial,
+    dn: Option<(f64, bool)>,
+    stuck: impl IntoIterator<Item = usize>,
+    exit_m: Option<f64>,
+) -> Option<(f64, bool)> {
+    let (Some(last), Some(exit_m)) = (stuck.into_iter().last(), exit_m) else {
+        return dn;
+    };
+    let l = trial.x_m[last] - exit_m;
+    if l >= 0.002 {
+        stronger(dn, (trial.f_n[last] / l, true), -1.0)
+    } else {
+        dn
+    }
 }
 
 /// Samples a stroke needs to count.
