@@ -27,6 +27,8 @@ enum Command {
     Device(device::DeviceArgs),
     /// Record insertions from a device to trial CSVs, one per insertion.
     Record(record::RecordArgs),
+    /// Watch an insertion live in a browser (a page on 127.0.0.1).
+    Live(needle_live::LiveArgs),
     /// Build the firmware, replay one liver insertion in QEMU, decode it live.
     Demo(demo::DemoArgs),
     /// Count instructions per sample under QEMU; measure flash and RAM.
@@ -54,6 +56,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => demo::run(args),
         Command::Device(args) => device::run(args),
         Command::Record(args) => record::run(args),
+        Command::Live(args) => needle_live::run_command(args),
         Command::Bench(args) => bench::run(args),
         Command::Simulate(args) => sim::run(args),
         Command::Fit(args) => fit::run(args),

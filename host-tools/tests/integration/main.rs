@@ -24,6 +24,7 @@ mod firmware_image;
 mod fit;
 mod fuzz;
 mod hostile_input;
+mod live;
 mod qemu_twin;
 mod real_rig;
 mod rust_target;

@@ -65,6 +65,7 @@ fn the_wire_format_depends_on_no_crate_of_the_workspace_and_nothing_depends_upwa
         "needle-io",
         "needle-analysis",
         "needle-qemu",
+        "needle-live",
         "xtask",
         "host-tools",
     ];

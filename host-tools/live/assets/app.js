@@ -1,0 +1,227 @@
+// needle live: the page's side. The server sends a snapshot of the view
+// when the page opens ("snapshot") and what changed ten times a second
+// ("update"); a page that fell behind is told to start afresh ("lagged").
+// Plots are uPlot (bundled, MIT: /assets/uPlot-LICENSE).
+"use strict";
+
+// A point is [t_s, x_mm, force_n, model_n, residual_n, phase].
+const T = 0, X = 1, F = 2, MODEL = 3, RESIDUAL = 4, PHASE = 5;
+const INSERTIONS_KEPT = 5;
+const POINTS_PER_INSERTION = 12000;
+const EVENTS_KEPT = 200;
+const PHASE_FILL = [null, "rgba(255, 200, 0, 0.15)", "rgba(0, 140, 255, 0.12)", "rgba(150, 60, 255, 0.12)"];
+const EVENT_COLOUR = { contact: "#2a7", puncture: "#d22", structure: "#e80", exit: "#27d", fault: "#000" };
+
+let view = { device: {}, insertions: [], events: [] };
+let plots = null;
+let drawing = false;
+
+function width() {
+  return Math.max(400, Math.min(1200, document.body.clientWidth - 40));
+}
+
+// Lines in the points' own order (a needle goes in and comes out: x is
+// not sorted), for uPlot's x-y mode.
+function inOrder(u, seriesIdx, idx0, idx1) {
+  const [xs, ys] = u.data[seriesIdx];
+  const stroke = new Path2D();
+  const sx = u.series[seriesIdx].facets[0].scale, sy = u.series[seriesIdx].facets[1].scale;
+  for (let i = 0; i < xs.length; i++) {
+    const px = u.valToPos(xs[i], sx, true), py = u.valToPos(ys[i], sy, true);
+    if (i === 0) stroke.moveTo(px, py); else stroke.lineTo(px, py);
+  }
+  return { stroke, fill: null, clip: null, band: null, gaps: null, flags: 0 };
+}
+
+function byPositionSeries() {
+  const series = [{}];
+  for (let k = 0; k < INSERTIONS_KEPT; k++) {
+    const newest = k === INSERTIONS_KEPT - 1;
+    const alpha = newest ? 1 : 0.15 + 0.12 * k;
+    series.push({
+      label: newest ? "measured, this insertion" : `measured, ${INSERTIONS_KEPT - 1 - k} before`,
+      stroke: `rgba(20, 60, 200, ${alpha})`, width: newest ? 2 : 1,
+      paths: inOrder, points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }],
+    });
+  }
+  series.push({
+    label: "model, this insertion", stroke: "#d22", width: 1.5, dash: [6, 4],
+    paths: inOrder, points: { show: false }, facets: [{ scale: "x", auto: true }, { scale: "y", auto: true }],
+  });
+  return series;
+}
+
+function makePlots() {
+  const byPosition = new uPlot({
+    mode: 2, width: width(), height: 300,
+    scales: { x: { time: false, auto: true }, y: { auto: true } },
+    axes: [{ label: "position (mm)" }, { label: "force (N)" }],
+    legend: { live: false },
+    series: byPositionSeries(),
+  }, [null, ...Array(INSERTIONS_KEPT + 1).fill([[], []])], document.getElementById("by-position"));
+
+  const byTime = new uPlot({
+    width: width(), height: 260,
+    scales: { x: { time: false } },
+    axes: [{ label: "time (s)" }, { label: "force (N)" }],
+    series: [{ label: "time (s)" },
+      { label: "measured", stroke: "rgb(20, 60, 200)", width: 1.5 },
+      { label: "model", stroke: "#d22", width: 1.5, dash: [6, 4] }],
+    hooks: { drawClear: [shadePhases], draw: [markEvents] },
+  }, [[], [], []], document.getElementById("by-time"));
+
+  const residual = new uPlot({
+    width: width(), height: 160,
+    scales: { x: { time: false } },
+    axes: [{ label: "time (s)" }, { label: "residual (N)" }],
+    series: [{ label: "time (s)" }, { label: "measured − model", stroke: "#555", width: 1 }],
+    hooks: { drawClear: [shadePhases] },
+  }, [[], []], document.getElementById("residual"));
+  return { byPosition, byTime, residual };
+}
+
+function current() {
+  return view.insertions[view.insertions.length - 1] || { number: 0, points: [] };
+}
+
+function shadePhases(u) {
+  const pts = current().points;
+  if (pts.length < 2) return;
+  const ctx = u.ctx, top = u.bbox.top, height = u.bbox.height;
+  let start = 0;
+  for (let i = 1; i <= pts.length; i++) {
+    if (i < pts.length && pts[i][PHASE] === pts[start][PHASE]) continue;
+    const fill = PHASE_FILL[pts[start][PHASE]];
+    if (fill) {
+      const x0 = u.valToPos(pts[start][T], "x", true);
+      const x1 = u.valToPos(pts[i - 1][T], "x", true);
+      ctx.fillStyle = fill;
+      ctx.fillRect(x0, top, Math.max(1, x1 - x0), height);
+    }
+    start = i;
+  }
+}
+
+function markEvents(u) {
+  const number = current().number, ctx = u.ctx;
+  ctx.save();
+  ctx.font = `${12 * devicePixelRatio}px sans-serif`;
+  for (const e of view.events) {
+    if (e.insertion !== number) continue;
+    const x = u.valToPos(e.t_s, "x", true);
+    ctx.strokeStyle = ctx.fillStyle = EVENT_COLOUR[e.kind] || "#000";
+    ctx.beginPath();
+    ctx.moveTo(x, u.bbox.top);
+    ctx.lineTo(x, u.bbox.top + u.bbox.height);
+    ctx.stroke();
+    ctx.fillText(`${e.kind} ${e.force_n.toFixed(2)} N`, x + 4, u.bbox.top + 14 * devicePixelRatio);
+  }
+  ctx.restore();
+}
+
+function column(points, i) {
+  return points.map(p => p[i]);
+}
+
+function draw() {
+  drawing = false;
+  if (!plots) plots = makePlots();
+  const kept = view.insertions.slice(-INSERTIONS_KEPT);
+  const facets = [];
+  for (let k = 0; k < INSERTIONS_KEPT; k++) {
+    const ins = kept[k - (INSERTIONS_KEPT - kept.length)];
+    facets.push(ins ? [column(ins.points, X), column(ins.points, F)] : [[], []]);
+  }
+  const pts = current().points;
+  facets.push([column(pts, X), column(pts, MODEL)]);
+  plots.byPosition.setData([null, ...facets]);
+  const t = column(pts, T);
+  plots.byTime.setData([t, column(pts, F), column(pts, MODEL)]);
+  plots.residual.setData([t, column(pts, RESIDUAL)]);
+  drawDevice();
+  drawEvents();
+}
+
+function later() {
+  if (!drawing) {
+    drawing = true;
+    requestAnimationFrame(draw);
+  }
+}
+
+function text(id, value) {
+  document.getElementById(id).textContent = value;
+}
+
+function drawDevice() {
+  const d = view.device;
+  text("source", d.source || "–");
+  text("tissue", d.tissue || "–");
+  text("assist", d.assist == null ? "–" : `${d.assist}; target depth ${d.target_depth_mm.toFixed(1)} mm`);
+  text("phase", d.phase || "–");
+  text("faults", d.faults || "–");
+  text("rate", d.samples_per_s == null ? "–" : `${d.samples_per_s} (device rate ${d.sample_rate_hz ?? "?"} Hz)`);
+  text("dropped", d.frames_dropped ?? "–");
+  text("missing", `${d.samples_lost ?? 0} / ${d.samples_withheld ?? 0}`);
+  const halt = document.getElementById("halt");
+  halt.textContent = d.halt ? `HALT: ${d.halt_reason || "asserted"}` : "halt line released";
+  halt.className = d.halt ? "bad" : "ok";
+  if (d.connected === false) connection(false, d.problem ? `device not read: ${d.problem}` : "device gone");
+}
+
+function drawEvents() {
+  const body = document.getElementById("events");
+  body.replaceChildren(...view.events.slice().reverse().map(e => {
+    const row = document.createElement("tr");
+    row.className = e.kind;
+    for (const v of [e.insertion, e.kind, e.t_s.toFixed(3), e.x_mm.toFixed(2), e.force_n.toFixed(3), e.confidence_percent.toFixed(1)]) {
+      const cell = document.createElement("td");
+      cell.textContent = v;
+      row.appendChild(cell);
+    }
+    return row;
+  }));
+}
+
+function connection(ok, what) {
+  const c = document.getElementById("connection");
+  c.textContent = what;
+  c.className = ok ? "ok" : "bad";
+}
+
+function applyUpdate(u) {
+  for (const [number, point] of u.points) {
+    let ins = view.insertions[view.insertions.length - 1];
+    if (!ins || ins.number !== number) {
+      ins = { number, points: [] };
+      view.insertions.push(ins);
+      if (view.insertions.length > INSERTIONS_KEPT) view.insertions.shift();
+    }
+    ins.points.push(point);
+    if (ins.points.length > POINTS_PER_INSERTION) ins.points.shift();
+  }
+  for (const e of u.events) {
+    view.events.push(e);
+    if (view.events.length > EVENTS_KEPT) view.events.shift();
+  }
+  if (u.device) view.device = u.device;
+  later();
+}
+
+function connect() {
+  const source = new EventSource("/events");
+  source.addEventListener("snapshot", e => {
+    view = JSON.parse(e.data);
+    connection(true, "live");
+    later();
+  });
+  source.addEventListener("update", e => applyUpdate(JSON.parse(e.data)));
+  source.addEventListener("lagged", () => {
+    source.close();
+    connect();
+  });
+  // The browser reconnects by itself; the server then sends a snapshot.
+  source.onerror = () => connection(false, "server not reachable: retrying");
+}
+
+connect();

@@ -1,0 +1,209 @@
+//! `needle live`: the insertion as it happens, in a browser. A web page
+//! served on `127.0.0.1` shows force against position and against time,
+//! measured and the device's model, the residual, the phases, the events
+//! as they fire, the halt line, faults, the tissue and the stream's
+//! health — from any device link (a serial port, or the firmware in QEMU
+//! on a pseudo-terminal, which the `needle` binary starts).
+//!
+//! `needle live --port P` watches a device; `needle live --replay FILE`
+//! runs the firmware in QEMU on a replay behind the same page, so anyone
+//! can try it without hardware.
+//!
+//! Three parts, dependencies one way: [`view`] (what the page shows,
+//! bounded, updated item by item: no I/O), the device thread here (owns
+//! the link, feeds the view, publishes an update every
+//! [`UPDATE_PERIOD`]), and [`server`] (axum: the page, its bundled
+//! plotting library, and the updates as server-sent events).
+
+pub mod server;
+pub mod view;
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use needle_holder::protocol::Command;
+use needle_io::decode::command_error;
+use needle_io::link::Link;
+use tokio::sync::broadcast;
+
+use crate::view::View;
+
+#[derive(Debug, clap::Args)]
+pub struct LiveArgs {
+    /// The device's serial port (e.g. /dev/ttyACM0).
+    #[arg(long, required_unless_present = "replay", conflicts_with = "replay")]
+    pub port: Option<String>,
+    /// Serial baud rate.
+    #[arg(long, default_value_t = 115_200)]
+    pub baud: u32,
+    /// No device: run the firmware in QEMU on this replay file, in real
+    /// time, behind the same page (`needle simulate` writes replays, one a
+    /// trial; `needle demo` one of liver 1 in the target directory).
+    #[arg(long)]
+    pub replay: Option<PathBuf>,
+    /// Where to serve the page. Loopback on a free port unless asked:
+    /// the page sends the device commands.
+    #[arg(long, default_value = "127.0.0.1:0")]
+    pub listen: SocketAddr,
+}
+
+/// `needle live`.
+pub fn run_command(args: &LiveArgs) -> Result<()> {
+    match (&args.replay, &args.port) {
+        (Some(replay), _) => {
+            if !replay.is_file() {
+                anyhow::bail!("{}: no such replay file", replay.display());
+            }
+            let board = needle_qemu::firmware::Board::Lm3s6965;
+            needle_qemu::firmware::ensure_qemu()?;
+            let elf = needle_qemu::firmware::build(board)?;
+            // Kept to the end: dropping it stops QEMU.
+            let qemu = needle_qemu::firmware::QemuLive::start(board, &elf, replay)?;
+            let link = Link::open(&qemu.port, args.baud)?;
+            let source = format!("the firmware in QEMU, replaying {}", replay.display());
+            run(link, &source, args.listen)
+        }
+        (None, Some(port)) => run(Link::open(port, args.baud)?, port, args.listen),
+        (None, None) => anyhow::bail!("give --port (a device) or --replay (QEMU)"),
+    }
+}
+
+/// How often the pages get what changed: 10 a second.
+pub const UPDATE_PERIOD: Duration = Duration::from_millis(100);
+
+/// Updates a page may fall behind by before it is told to start afresh
+/// (a minute of them).
+const UPDATES_QUEUED: usize = 600;
+
+/// What the device thread and the pages share: the view, and the channel
+/// its updates go out on (sent while the view is held, so a page that
+/// takes the snapshot and subscribes under the same hold misses none).
+pub struct Shared {
+    view: Mutex<View>,
+    updates: broadcast::Sender<Arc<str>>,
+}
+
+impl Shared {
+    /// A view of `source`, nothing seen yet.
+    pub fn new(source: &str) -> Arc<Self> {
+        Arc::new(Self {
+            view: Mutex::new(View::new(source)),
+            updates: broadcast::channel(UPDATES_QUEUED).0,
+        })
+    }
+
+    /// The view now, as JSON, and the updates from then on.
+    pub fn subscribe(&self) -> (String, broadcast::Receiver<Arc<str>>) {
+        let view = self.lock();
+        let snapshot = serde_json::to_string(&view.snapshot()).unwrap_or_else(|_| "{}".into());
+        (snapshot, self.updates.subscribe())
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, View> {
+        // A thread that panicked while holding it left a view that is
+        // still whole (every change is one assignment or push).
+        self.view.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// Start `link`'s stream and serve the live view on `listen` until the
+/// process is stopped; `source` names the device on the page. Prints the
+/// address to open.
+pub fn run(mut link: Link, source: &str, listen: SocketAddr) -> Result<()> {
+    if let Err(e) = link.command(Command::Stream(true))? {
+        anyhow::bail!(
+            "{source}: the device refused to stream: {}",
+            command_error(&e)
+        );
+    }
+    let listener = std::net::TcpListener::bind(listen)
+        .with_context(|| format!("cannot listen on {listen}"))?;
+    listener.set_nonblocking(true)?;
+    let address = listener.local_addr()?;
+    needle_io::out!("live view at http://{address}/ (Ctrl-C stops)")?;
+    let shared = Shared::new(source);
+    let feeding = shared.clone();
+    std::thread::spawn(move || feed(link, &feeding));
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the web server's runtime")?;
+    runtime.block_on(async {
+        let listener = tokio::net::TcpListener::from_std(listener)?;
+        server::serve(listener, shared).await
+    })
+}
+
+/// Read the device until its link closes, feeding the view and
+/// publishing what changed every [`UPDATE_PERIOD`]. The link is this
+/// thread's alone: nothing a page does can hold up reading it.
+fn feed(mut link: Link, shared: &Shared) {
+    let mut last_update = Instant::now();
+    let mut samples_then = 0u64;
+    let mut rate = RateOverASecond::default();
+    loop {
+        let (items, problem) = match link.poll() {
+            Ok(items) => (items, None),
+            Err(e) => (Vec::new(), Some(format!("{e:#}"))),
+        };
+        let closed = link.closed() || problem.is_some();
+        let mut view = shared.lock();
+        for item in &items {
+            view.apply(item);
+        }
+        if closed {
+            if let Some(problem) = &problem {
+                needle_io::note!("needle live: {problem}");
+            }
+            view.disconnected(problem);
+        }
+        if closed || last_update.elapsed() >= UPDATE_PERIOD {
+            let stats = link.decoder().stats();
+            let now = Instant::now();
+            let per_s = rate.add(now, stats.samples - samples_then);
+            samples_then = stats.samples;
+            last_update = now;
+            let update = view.take_update(&stats, per_s);
+            if let Ok(json) = serde_json::to_string(&update) {
+                // No page open is not an error.
+                let _ = shared.updates.send(json.into());
+            }
+        }
+        drop(view);
+        if closed {
+            return;
+        }
+    }
+}
+
+/// Samples a second over the last second, from counts at update times.
+#[derive(Default)]
+struct RateOverASecond {
+    counts: std::collections::VecDeque<(Instant, u64)>,
+}
+
+impl RateOverASecond {
+    fn add(&mut self, now: Instant, samples: u64) -> f64 {
+        self.counts.push_back((now, samples));
+        while self
+            .counts
+            .front()
+            .is_some_and(|(t, _)| now.duration_since(*t) > Duration::from_secs(1))
+        {
+            self.counts.pop_front();
+        }
+        let span = self
+            .counts
+            .front()
+            .map_or(0.0, |(t, _)| now.duration_since(*t).as_secs_f64());
+        let total: u64 = self.counts.iter().skip(1).map(|(_, n)| n).sum();
+        if span > 0.0 {
+            (total as f64 / span).round()
+        } else {
+            0.0
+        }
+    }
+}

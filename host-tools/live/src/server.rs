@@ -1,0 +1,91 @@
+//! The web side: the page, its assets (bundled into the binary: the rig
+//! may be offline), and the view's updates as server-sent events. Each
+//! page gets the whole view when it opens, then what changed; any number
+//! of pages see the same.
+
+use std::convert::Infallible;
+use std::sync::Arc;
+
+use anyhow::{Context, Result};
+use axum::extract::{Path, State};
+use axum::http::{header, StatusCode};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::get;
+use axum::Router;
+use tokio_stream::wrappers::BroadcastStream;
+use tokio_stream::{Stream, StreamExt};
+
+use crate::Shared;
+
+const INDEX: &str = include_str!("../assets/index.html");
+
+/// The page's files: name, type, contents.
+const ASSETS: [(&str, &str, &str); 5] = [
+    (
+        "app.js",
+        "text/javascript",
+        include_str!("../assets/app.js"),
+    ),
+    ("style.css", "text/css", include_str!("../assets/style.css")),
+    // uPlot 1.6.32 (MIT, uPlot-LICENSE beside it), as published on npm.
+    (
+        "uPlot.iife.min.js",
+        "text/javascript",
+        include_str!("../assets/uPlot.iife.min.js"),
+    ),
+    (
+        "uPlot.min.css",
+        "text/css",
+        include_str!("../assets/uPlot.min.css"),
+    ),
+    (
+        "uPlot-LICENSE",
+        "text/plain",
+        include_str!("../assets/uPlot-LICENSE"),
+    ),
+];
+
+/// Serve the live view on `listener` until the process stops.
+pub async fn serve(listener: tokio::net::TcpListener, shared: Arc<Shared>) -> Result<()> {
+    axum::serve(listener, router(shared))
+        .await
+        .context("the web server stopped")
+}
+
+/// The routes: `/` (the page), `/assets/NAME`, `/events` (the updates).
+pub fn router(shared: Arc<Shared>) -> Router {
+    Router::new()
+        .route("/", get(|| async { Html(INDEX) }))
+        .route("/assets/{name}", get(asset))
+        .route("/events", get(events))
+        .fallback(|| async { not_found("no such page: the live view is at /") })
+        .with_state(shared)
+}
+
+async fn asset(Path(name): Path<String>) -> Response {
+    match ASSETS.iter().find(|(file, _, _)| *file == name) {
+        Some((_, kind, body)) => ([(header::CONTENT_TYPE, *kind)], *body).into_response(),
+        None => not_found(&format!("no asset named {name:?}")),
+    }
+}
+
+fn not_found(why: &str) -> Response {
+    (StatusCode::NOT_FOUND, why.to_string()).into_response()
+}
+
+async fn events(
+    State(shared): State<Arc<Shared>>,
+) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
+    let (snapshot, updates) = shared.subscribe();
+    let first = tokio_stream::once(Ok(Event::default().event("snapshot").data(snapshot)));
+    let rest = BroadcastStream::new(updates).map(|update| {
+        Ok(match update {
+            Ok(json) => Event::default().event("update").data(&*json),
+            // Fell behind by more than the channel holds: the page starts
+            // afresh from a new snapshot.
+            Err(_) => Event::default().event("lagged").data("{}"),
+        })
+    });
+    Sse::new(first.chain(rest)).keep_alive(KeepAlive::default())
+}

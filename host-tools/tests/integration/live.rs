@@ -1,0 +1,130 @@
+//! `needle live` over HTTP, as a browser meets it, against the firmware
+//! in QEMU replaying a liver insertion in real time: the page and its
+//! bundled plotting library, a clear 404, and the puncture reported to a
+//! page as it happens and to a page opened after it.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use needle_analysis::sim::{self, Plan};
+use needle_holder::config::DeviceConfig;
+use needle_holder::model::params::LIVER1;
+
+/// `needle live` killed when the test ends, however it ends.
+struct Live(Child);
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn request(address: &str, path: &str) -> TcpStream {
+    let mut stream = TcpStream::connect(address).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(60)))
+        .unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    stream
+}
+
+fn get(address: &str, path: &str) -> String {
+    let mut body = Vec::new();
+    request(address, path).read_to_end(&mut body).unwrap();
+    String::from_utf8_lossy(&body).into_owned()
+}
+
+/// The `data:` lines of server-sent events from `/events` until one holds
+/// `needle` (or a minute passes).
+fn events_until(address: &str, needle: &str) -> Vec<String> {
+    let mut lines = BufReader::new(request(address, "/events")).lines();
+    let mut data = Vec::new();
+    let until = Instant::now() + Duration::from_secs(60);
+    while Instant::now() < until {
+        let Some(Ok(line)) = lines.next() else { break };
+        if let Some(json) = line.strip_prefix("data: ") {
+            data.push(json.to_string());
+            if json.contains(needle) {
+                break;
+            }
+        }
+    }
+    data
+}
+
+#[test]
+fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
+    let dir = tempfile::tempdir().unwrap();
+    let (trial, truth) = sim::insertion(&LIVER1, &Plan::PAPER);
+    let config = DeviceConfig::default();
+    let replay = dir.path().join("liver1.replay");
+    std::fs::write(
+        &replay,
+        sim::to_replay(&trial, 500, &config.load_cell, &config.encoder),
+    )
+    .unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["live", "--replay", replay.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let _live = Live(child);
+    let mut first = String::new();
+    BufReader::new(stdout).read_line(&mut first).unwrap();
+    let address = first
+        .split("http://")
+        .nth(1)
+        .and_then(|rest| rest.split('/').next())
+        .unwrap_or_else(|| panic!("no address in {first:?}"))
+        .to_string();
+    assert!(
+        address.starts_with("127.0.0.1:"),
+        "loopback unless asked: {first}"
+    );
+
+    let page = get(&address, "/");
+    assert!(page.starts_with("HTTP/1.1 200"), "{page}");
+    assert!(page.contains("/assets/uPlot.iife.min.js") && page.contains("/assets/app.js"));
+    let uplot = get(&address, "/assets/uPlot.iife.min.js");
+    assert!(uplot.starts_with("HTTP/1.1 200") && uplot.len() > 40_000);
+    let missing = get(&address, "/assets/nothing.js");
+    assert!(missing.starts_with("HTTP/1.1 404") && missing.contains("no asset named"));
+
+    let seen = events_until(&address, "\"kind\":\"puncture\"");
+    let puncture = seen.last().expect("events from the page's stream");
+    assert!(
+        puncture.contains("\"kind\":\"puncture\""),
+        "no puncture within a minute: {:?}",
+        &seen[seen.len().saturating_sub(3)..]
+    );
+    assert!(
+        seen[0].contains("\"source\":\"the firmware in QEMU"),
+        "a snapshot first"
+    );
+    let update: serde_json::Value = serde_json::from_str(puncture).unwrap();
+    let event = update["events"]
+        .as_array()
+        .and_then(|events| events.iter().find(|e| e["kind"] == "puncture"))
+        .unwrap();
+    let force_n = event["force_n"].as_f64().unwrap();
+    let expected_n = truth.puncture_force_n;
+    assert!(
+        (force_n - expected_n).abs() < 0.05 * expected_n,
+        "{force_n} N against the simulation's {expected_n} N"
+    );
+
+    // A page opened after the puncture has it from its first message.
+    let later = events_until(&address, "\"kind\":\"puncture\"");
+    assert!(later
+        .first()
+        .is_some_and(|snapshot| snapshot.contains("\"kind\":\"puncture\"")));
+}
