@@ -136,19 +136,27 @@ pub fn command_of(action: &Action) -> Result<Command> {
         Action::Tissue { tissue, name } => tissue_command(tissue, name.as_deref())?,
         Action::Tissues => bail!("`tissues` sends nothing"),
         Action::Calibrate(_) => bail!("`calibrate` is a dialogue, not one command"),
-        Action::Assist { modes, depth_mm } => {
-            let target_depth = Nanometres::from_m(depth_mm / 1e3);
-            if !(depth_mm.is_finite() && needle_holder::assist::target_depth_is_valid(target_depth))
-            {
-                bail!("--depth-mm {depth_mm:?}: must be between 0.1 and 100 mm");
-            }
-            needle_holder::protocol::command::set_assist(parse_assist(modes)?, target_depth)
-        }
+        Action::Assist { modes, depth_mm } => assist_command(modes, *depth_mm, "--depth-mm")?,
         Action::Rearm => Command::Rearm,
         Action::Stream { state } => Command::Stream(state == "on"),
         Action::Config => Command::ReadConfig,
         Action::Selftest => Command::SelfTest,
     })
+}
+
+/// The assist modes named in `modes` (comma-separated) with a target
+/// depth of `depth_mm` past the surface (`depth_name` names it in an
+/// error: the flag, or the page's field).
+pub fn assist_command(modes: &str, depth_mm: f64, depth_name: &str) -> Result<Command> {
+    let target_depth = Nanometres::from_m(depth_mm / 1e3);
+    if !(depth_mm.is_finite() && needle_holder::assist::target_depth_is_valid(target_depth)) {
+        bail!("{depth_name} {depth_mm:?}: must be between 0.1 and 100 mm");
+    }
+    let modes = parse_assist(modes)?;
+    Ok(needle_holder::protocol::command::set_assist(
+        modes,
+        target_depth,
+    ))
 }
 
 /// A library name selects on the device; a file's entry is uploaded.
@@ -170,20 +178,29 @@ fn tissue_command(tissue: &str, name: Option<&str>) -> Result<Command> {
         );
     }
     let library = crate::tissue::load(&path)?;
-    let entry = match name {
-        Some(n) => crate::tissue::named(&library, n, &path.display().to_string())?,
-        None if library.len() > 1 => bail!(
-            "{}: holds {} tissues ({}): say which with --name",
-            path.display(),
+    upload_command(&library, name, &path.display().to_string())
+}
+
+/// The upload of the tissue named `name` in `library` (read from
+/// `from`), or of its one tissue when `name` is `None`.
+pub fn upload_command(
+    library: &[crate::tissue::Tissue],
+    name: Option<&str>,
+    from: &str,
+) -> Result<Command> {
+    let entry = match (name, library) {
+        (Some(n), _) => crate::tissue::named(library, n, from)?,
+        (None, [one]) => one.clone(),
+        (None, _) => bail!(
+            "{from}: holds {} tissues ({}): say which with --name",
             library.len(),
-            crate::tissue::names(&library)
+            crate::tissue::names(library)
         ),
-        None => library[0].clone(),
     };
     // The device takes tissues in fixed point: the conversion (and its
     // check) runs here, with the core's own code.
     let model = needle_holder::config::TissueModel::from_params(&entry.params)
-        .map_err(|e| anyhow::anyhow!("{}: [{}] {e}", path.display(), entry.name))?;
+        .map_err(|e| anyhow::anyhow!("{from}: [{}] {e}", entry.name))?;
     Ok(Command::UploadTissue(model))
 }
 

@@ -208,17 +208,78 @@ function applyUpdate(u) {
   later();
 }
 
+// The controls: each sends one request and logs the answer, the device's
+// or the server's, in the page.
+async function send(request) {
+  let answer;
+  try {
+    const response = await fetch("/command", {
+      method: "POST", headers: { "content-type": "application/json" }, body: JSON.stringify(request),
+    });
+    answer = await response.json();
+  } catch (e) {
+    answer = { ok: false, said: `${request.command}: the server did not answer (${e})` };
+  }
+  const line = document.createElement("li");
+  line.className = answer.ok ? "done" : "refused";
+  line.textContent = `${new Date().toLocaleTimeString()}  ${answer.said}`;
+  document.getElementById("replies").prepend(line);
+}
+
+function offerControls(library, modes) {
+  const select = document.getElementById("tissue-name");
+  if (select.options.length === 0) {
+    for (const name of library) select.add(new Option(name, name));
+  }
+  const boxes = document.getElementById("assist-modes");
+  if (boxes.childElementCount === 0) {
+    for (const mode of modes) {
+      const label = document.createElement("label");
+      const box = document.createElement("input");
+      box.type = "checkbox";
+      box.value = mode;
+      label.append(box, ` ${mode} `);
+      boxes.appendChild(label);
+    }
+  }
+}
+
+function wireControls() {
+  const click = (id, request) => document.getElementById(id).addEventListener("click", () => send(request()));
+  click("tare", () => ({ command: "tare" }));
+  click("rearm", () => ({ command: "rearm" }));
+  click("stream-on", () => ({ command: "stream", on: true }));
+  click("stream-off", () => ({ command: "stream", on: false }));
+  click("select-tissue", () => ({ command: "tissue", name: document.getElementById("tissue-name").value }));
+  click("set-assist", () => ({
+    command: "assist",
+    modes: [...document.querySelectorAll("#assist-modes input:checked")].map(b => b.value).join(",") || "none",
+    depth_mm: Number(document.getElementById("depth-mm").value),
+  }));
+  document.getElementById("upload-tissue").addEventListener("click", async () => {
+    const file = document.getElementById("tissue-file").files[0];
+    if (!file) {
+      send({ command: "upload", file_name: "(no file chosen)", toml: "", entry: null });
+      return;
+    }
+    const entry = document.getElementById("tissue-entry").value.trim();
+    send({ command: "upload", file_name: file.name, toml: await file.text(), entry: entry || null });
+  });
+}
+
 function connect() {
   const source = new EventSource("/events");
   source.addEventListener("snapshot", e => {
     view = JSON.parse(e.data);
+    offerControls(view.library, view.assist_modes);
     connection(true, "live");
     later();
   });
   source.addEventListener("update", e => applyUpdate(JSON.parse(e.data)));
   source.addEventListener("lagged", () => {
     source.close();
-    connect();
+    wireControls();
+connect();
   });
   // The browser reconnects by itself; the server then sends a snapshot.
   source.onerror = () => connection(false, "server not reachable: retrying");

@@ -9,12 +9,15 @@
 //! runs the firmware in QEMU on a replay behind the same page, so anyone
 //! can try it without hardware.
 //!
-//! Three parts, dependencies one way: [`view`] (what the page shows,
-//! bounded, updated item by item: no I/O), the device thread here (owns
-//! the link, feeds the view, publishes an update every
-//! [`UPDATE_PERIOD`]), and [`server`] (axum: the page, its bundled
-//! plotting library, and the updates as server-sent events).
+//! Four parts, dependencies one way: [`view`] (what the page shows,
+//! bounded, updated item by item: no I/O), [`commands`] (what the page
+//! may ask and the command each sends), the device thread here (owns the
+//! link, feeds the view, publishes an update every [`UPDATE_PERIOD`],
+//! sends the pages' commands between reads), and [`server`] (axum: the
+//! page, its bundled plotting library, the updates as server-sent
+//! events, the commands as `POST /command`).
 
+pub mod commands;
 pub mod server;
 pub mod view;
 
@@ -27,8 +30,9 @@ use anyhow::{Context, Result};
 use needle_holder::protocol::Command;
 use needle_io::decode::command_error;
 use needle_io::link::Link;
-use tokio::sync::broadcast;
+use tokio::sync::{broadcast, oneshot};
 
+use crate::commands::Answer;
 use crate::view::View;
 
 #[derive(Debug, clap::Args)]
@@ -84,15 +88,35 @@ const UPDATES_QUEUED: usize = 600;
 pub struct Shared {
     view: Mutex<View>,
     updates: broadcast::Sender<Arc<str>>,
+    /// Commands for the device thread, which alone writes to the link.
+    commands: std::sync::mpsc::Sender<Asked>,
+}
+
+/// A command the page asked for, and where its answer goes.
+pub struct Asked {
+    pub command: Command,
+    /// What was asked, in the page's words.
+    pub what: String,
+    pub answer: oneshot::Sender<Answer>,
 }
 
 impl Shared {
-    /// A view of `source`, nothing seen yet.
-    pub fn new(source: &str) -> Arc<Self> {
-        Arc::new(Self {
+    /// A view of `source`, nothing seen yet, and where the device thread
+    /// takes the page's commands from.
+    pub fn new(source: &str) -> (Arc<Self>, std::sync::mpsc::Receiver<Asked>) {
+        let (commands, asked) = std::sync::mpsc::channel();
+        let shared = Arc::new(Self {
             view: Mutex::new(View::new(source)),
             updates: broadcast::channel(UPDATES_QUEUED).0,
-        })
+            commands,
+        });
+        (shared, asked)
+    }
+
+    /// Hand `asked` to the device thread; `false` when it has stopped
+    /// (the device is gone).
+    pub fn ask(&self, asked: Asked) -> bool {
+        self.commands.send(asked).is_ok()
     }
 
     /// The view now, as JSON, and the updates from then on.
@@ -124,9 +148,9 @@ pub fn run(mut link: Link, source: &str, listen: SocketAddr) -> Result<()> {
     listener.set_nonblocking(true)?;
     let address = listener.local_addr()?;
     needle_io::out!("live view at http://{address}/ (Ctrl-C stops)")?;
-    let shared = Shared::new(source);
+    let (shared, asked) = Shared::new(source);
     let feeding = shared.clone();
-    std::thread::spawn(move || feed(link, &feeding));
+    std::thread::spawn(move || feed(link, &feeding, &asked));
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -137,10 +161,12 @@ pub fn run(mut link: Link, source: &str, listen: SocketAddr) -> Result<()> {
     })
 }
 
-/// Read the device until its link closes, feeding the view and
-/// publishing what changed every [`UPDATE_PERIOD`]. The link is this
-/// thread's alone: nothing a page does can hold up reading it.
-fn feed(mut link: Link, shared: &Shared) {
+/// Read the device until its link closes, feeding the view, publishing
+/// what changed every [`UPDATE_PERIOD`] and sending the pages' commands
+/// between reads. The link is this thread's alone: a page cannot hold up
+/// reading it, and the frames read while a command waits for its reply
+/// are published with the next update.
+fn feed(mut link: Link, shared: &Shared, asked: &std::sync::mpsc::Receiver<Asked>) {
     let mut last_update = Instant::now();
     let mut samples_then = 0u64;
     let mut rate = RateOverASecond::default();
@@ -175,6 +201,18 @@ fn feed(mut link: Link, shared: &Shared) {
         drop(view);
         if closed {
             return;
+        }
+        while let Ok(asked) = asked.try_recv() {
+            let answer = match link.command(asked.command) {
+                Ok(Ok(())) => Answer::done(&asked.what),
+                Ok(Err(why)) => Answer::not(
+                    &asked.what,
+                    format!("the device refused: {}", command_error(&why)),
+                ),
+                Err(e) => Answer::not(&asked.what, format!("{e:#}")),
+            };
+            // A page that closed before the answer came is not an error.
+            let _ = asked.answer.send(answer);
         }
     }
 }

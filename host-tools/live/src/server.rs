@@ -7,16 +7,18 @@ use std::convert::Infallible;
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
-use axum::extract::{Path, State};
+use axum::extract::rejection::JsonRejection;
+use axum::extract::{Json, Path, State};
 use axum::http::{header, StatusCode};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{Html, IntoResponse, Response};
-use axum::routing::get;
+use axum::routing::{get, post};
 use axum::Router;
 use tokio_stream::wrappers::BroadcastStream;
 use tokio_stream::{Stream, StreamExt};
 
-use crate::Shared;
+use crate::commands::{Answer, Request};
+use crate::{Asked, Shared};
 
 const INDEX: &str = include_str!("../assets/index.html");
 
@@ -53,12 +55,14 @@ pub async fn serve(listener: tokio::net::TcpListener, shared: Arc<Shared>) -> Re
         .context("the web server stopped")
 }
 
-/// The routes: `/` (the page), `/assets/NAME`, `/events` (the updates).
+/// The routes: `/` (the page), `/assets/NAME`, `/events` (the updates),
+/// `POST /command` (a [`Request`] as JSON; the [`Answer`] as JSON).
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/", get(|| async { Html(INDEX) }))
         .route("/assets/{name}", get(asset))
         .route("/events", get(events))
+        .route("/command", post(command))
         .fallback(|| async { not_found("no such page: the live view is at /") })
         .with_state(shared)
 }
@@ -72,6 +76,48 @@ async fn asset(Path(name): Path<String>) -> Response {
 
 fn not_found(why: &str) -> Response {
     (StatusCode::NOT_FOUND, why.to_string()).into_response()
+}
+
+async fn command(
+    State(shared): State<Arc<Shared>>,
+    request: Result<Json<Request>, JsonRejection>,
+) -> (StatusCode, Json<Answer>) {
+    let Json(request) = match request {
+        Ok(request) => request,
+        Err(e) => {
+            return bad(Answer::not(
+                "the request",
+                format!("not a command: {}", e.body_text()),
+            ))
+        }
+    };
+    let what = request.what();
+    let command = match request.command() {
+        Ok(command) => command,
+        Err(e) => return bad(Answer::not(&what, format!("{e:#}"))),
+    };
+    let (answer, answered) = tokio::sync::oneshot::channel();
+    let gone = || {
+        (
+            StatusCode::SERVICE_UNAVAILABLE,
+            Json(Answer::not(&what, "the device is gone")),
+        )
+    };
+    if !shared.ask(Asked {
+        command,
+        what: what.clone(),
+        answer,
+    }) {
+        return gone();
+    }
+    match answered.await {
+        Ok(answer) => (StatusCode::OK, Json(answer)),
+        Err(_) => gone(),
+    }
+}
+
+fn bad(answer: Answer) -> (StatusCode, Json<Answer>) {
+    (StatusCode::BAD_REQUEST, Json(answer))
 }
 
 async fn events(

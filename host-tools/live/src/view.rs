@@ -87,6 +87,10 @@ pub struct Device {
 /// Everything a page needs to start: sent to each page as it opens.
 #[derive(Debug, Serialize)]
 pub struct Snapshot<'a> {
+    /// The device's tissue library, by name, and its assist modes: what
+    /// the page's controls offer.
+    pub library: Vec<&'static str>,
+    pub assist_modes: Vec<&'static str>,
     pub device: &'a Device,
     pub insertions: &'a VecDeque<Insertion>,
     pub events: &'a VecDeque<EventLine>,
@@ -137,6 +141,11 @@ impl View {
     /// The whole view, for a page that opens now.
     pub fn snapshot(&self) -> Snapshot<'_> {
         Snapshot {
+            library: needle_holder::model::params::LIBRARY
+                .iter()
+                .map(|(name, _)| *name)
+                .collect(),
+            assist_modes: AssistModes::NAMES.iter().map(|(_, name)| *name).collect(),
             device: &self.device,
             insertions: &self.insertions,
             events: &self.events,

@@ -41,6 +41,22 @@ fn get(address: &str, path: &str) -> String {
     String::from_utf8_lossy(&body).into_owned()
 }
 
+fn post(address: &str, body: &str) -> String {
+    let mut stream = TcpStream::connect(address).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(30)))
+        .unwrap();
+    write!(
+        stream,
+        "POST /command HTTP/1.1\r\nHost: {address}\r\nContent-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .unwrap();
+    let mut reply = Vec::new();
+    stream.read_to_end(&mut reply).unwrap();
+    String::from_utf8_lossy(&reply).into_owned()
+}
+
 /// The `data:` lines of server-sent events from `/events` until one holds
 /// `needle` (or a minute passes).
 fn events_until(address: &str, needle: &str) -> Vec<String> {
@@ -98,6 +114,34 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     assert!(uplot.starts_with("HTTP/1.1 200") && uplot.len() > 40_000);
     let missing = get(&address, "/assets/nothing.js");
     assert!(missing.starts_with("HTTP/1.1 404") && missing.contains("no asset named"));
+
+    // Commands from the page reach the device and come back answered;
+    // a request that is no command, or names what is not there, is
+    // answered with what was wrong, and the server goes on.
+    let tare = post(&address, r#"{"command":"tare"}"#);
+    assert!(
+        tare.starts_with("HTTP/1.1 200") && tare.contains(r#""ok":true"#),
+        "{tare}"
+    );
+    assert!(tare.contains("tare: done"), "{tare}");
+    let garbage = post(&address, "{not json");
+    assert!(
+        garbage.starts_with("HTTP/1.1 400") && garbage.contains("not a command"),
+        "{garbage}"
+    );
+    let spleen = post(&address, r#"{"command":"tissue","name":"spleen"}"#);
+    assert!(
+        spleen.starts_with("HTTP/1.1 400") && spleen.contains("no tissue `spleen`"),
+        "{spleen}"
+    );
+    let not_a_tissue = post(
+        &address,
+        r#"{"command":"upload","file_name":"fit.toml","toml":"[fitted]\na1_n_per_m = \"soft\"\n","entry":null}"#,
+    );
+    assert!(
+        not_a_tissue.starts_with("HTTP/1.1 400") && not_a_tissue.contains("fit.toml:2"),
+        "{not_a_tissue}"
+    );
 
     let seen = events_until(&address, "\"kind\":\"puncture\"");
     let puncture = seen.last().expect("events from the page's stream");
