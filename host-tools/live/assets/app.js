@@ -159,6 +159,7 @@ function drawDevice() {
   text("tissue", d.tissue || "–");
   text("assist", d.assist == null ? "–" : `${d.assist}; target depth ${d.target_depth_mm.toFixed(1)} mm`);
   text("phase", d.phase || "–");
+  text("zero", d.tare_counts == null ? "–" : `${d.tare_counts} counts`);
   text("faults", d.faults || "–");
   text("rate", d.samples_per_s == null ? "–" : `${d.samples_per_s} (device rate ${d.sample_rate_hz ?? "?"} Hz)`);
   text("dropped", d.frames_dropped ?? "–");

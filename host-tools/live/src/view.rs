@@ -68,6 +68,8 @@ pub struct Device {
     pub tissue: Option<String>,
     pub assist: Option<String>,
     pub target_depth_mm: Option<f64>,
+    /// The load cell's zero, counts (a tare moves it).
+    pub tare_counts: Option<i32>,
     pub halt: bool,
     /// Why the halt line went up last, while it is up.
     pub halt_reason: Option<&'static str>,
@@ -250,6 +252,7 @@ impl View {
                 self.device.tissue = Some(tissue_name(c.tissue));
                 self.device.assist = Some(assist_names(c.config.assist.modes));
                 self.device.target_depth_mm = Some(c.config.assist.target_depth.as_m() * 1e3);
+                self.device.tare_counts = Some(c.config.load_cell.tare_counts);
             }
             Message::Status(s) => {
                 self.device.halt = s.halt;
