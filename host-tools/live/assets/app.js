@@ -279,11 +279,11 @@ function connect() {
   source.addEventListener("update", e => applyUpdate(JSON.parse(e.data)));
   source.addEventListener("lagged", () => {
     source.close();
-    wireControls();
-connect();
+    connect();
   });
   // The browser reconnects by itself; the server then sends a snapshot.
   source.onerror = () => connection(false, "server not reachable: retrying");
 }
 
+wireControls();
 connect();

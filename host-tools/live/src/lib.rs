@@ -89,7 +89,20 @@ pub struct Shared {
     view: Mutex<View>,
     updates: broadcast::Sender<Arc<str>>,
     /// Commands for the device thread, which alone writes to the link.
-    commands: std::sync::mpsc::Sender<Asked>,
+    commands: std::sync::mpsc::SyncSender<Asked>,
+}
+
+/// Commands waiting for the device at most: each can take seconds (a
+/// device that does not answer is asked three times).
+const COMMANDS_QUEUED: usize = 4;
+
+/// Why a command was not handed to the device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NotAsked {
+    /// As many as may wait are waiting already (4).
+    Busy,
+    /// The device thread has stopped: the device is gone.
+    Gone,
 }
 
 /// A command the page asked for, and where its answer goes.
@@ -104,7 +117,7 @@ impl Shared {
     /// A view of `source`, nothing seen yet, and where the device thread
     /// takes the page's commands from.
     pub fn new(source: &str) -> (Arc<Self>, std::sync::mpsc::Receiver<Asked>) {
-        let (commands, asked) = std::sync::mpsc::channel();
+        let (commands, asked) = std::sync::mpsc::sync_channel(COMMANDS_QUEUED);
         let shared = Arc::new(Self {
             view: Mutex::new(View::new(source)),
             updates: broadcast::channel(UPDATES_QUEUED).0,
@@ -113,17 +126,31 @@ impl Shared {
         (shared, asked)
     }
 
-    /// Hand `asked` to the device thread; `false` when it has stopped
-    /// (the device is gone).
-    pub fn ask(&self, asked: Asked) -> bool {
-        self.commands.send(asked).is_ok()
+    /// Hand `asked` to the device thread, or say why not.
+    pub fn ask(&self, asked: Asked) -> Result<(), NotAsked> {
+        self.commands.try_send(asked).map_err(|e| match e {
+            std::sync::mpsc::TrySendError::Full(_) => NotAsked::Busy,
+            std::sync::mpsc::TrySendError::Disconnected(_) => NotAsked::Gone,
+        })
     }
 
-    /// The view now, as JSON, and the updates from then on.
+    /// The view now, as JSON, and the updates from then on: what the view
+    /// holds but has not sent goes to the pages already open first, so
+    /// the new page gets it once, in its snapshot.
     pub fn subscribe(&self) -> (String, broadcast::Receiver<Arc<str>>) {
-        let view = self.lock();
+        let mut view = self.lock();
+        if let Some(pending) = view.take_pending() {
+            self.publish(&pending);
+        }
         let snapshot = serde_json::to_string(&view.snapshot()).unwrap_or_else(|_| "{}".into());
         (snapshot, self.updates.subscribe())
+    }
+
+    /// Send `update` to every open page (none open is not an error).
+    fn publish(&self, update: &view::Update) {
+        if let Ok(json) = serde_json::to_string(update) {
+            let _ = self.updates.send(json.into());
+        }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, View> {
@@ -133,8 +160,8 @@ impl Shared {
     }
 }
 
-/// Start `link`'s stream and serve the live view on `listen` until the
-/// process is stopped; `source` names the device on the page. Prints the
+/// Start `link`'s stream and serve the live view on `listen` until
+/// Ctrl-C or SIGTERM; `source` names the device on the page. Prints the
 /// address to open.
 pub fn run(mut link: Link, source: &str, listen: SocketAddr) -> Result<()> {
     if let Err(e) = link.command(Command::Stream(true))? {
@@ -157,8 +184,33 @@ pub fn run(mut link: Link, source: &str, listen: SocketAddr) -> Result<()> {
         .context("cannot start the web server's runtime")?;
     runtime.block_on(async {
         let listener = tokio::net::TcpListener::from_std(listener)?;
-        server::serve(listener, shared).await
+        tokio::select! {
+            served = server::serve(listener, shared) => served,
+            () = stopped() => Ok(()),
+        }
     })
+}
+
+/// Ctrl-C or SIGTERM: `run` returns, and the QEMU behind a replay is
+/// stopped with it (a killed `needle live` would leave it running until
+/// its replay ends).
+async fn stopped() {
+    #[cfg(unix)]
+    let terminated = async {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut terminate) => {
+                terminate.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminated = std::future::pending::<()>();
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        () = terminated => {}
+    }
 }
 
 /// Read the device until its link closes, feeding the view, publishing
@@ -192,17 +244,14 @@ fn feed(mut link: Link, shared: &Shared, asked: &std::sync::mpsc::Receiver<Asked
             let per_s = rate.add(now, stats.samples - samples_then);
             samples_then = stats.samples;
             last_update = now;
-            let update = view.take_update(&stats, per_s);
-            if let Ok(json) = serde_json::to_string(&update) {
-                // No page open is not an error.
-                let _ = shared.updates.send(json.into());
-            }
+            shared.publish(&view.take_update(&stats, per_s));
         }
         drop(view);
         if closed {
             return;
         }
-        while let Ok(asked) = asked.try_recv() {
+        // One a turn: the device is read between commands.
+        if let Ok(asked) = asked.try_recv() {
             let answer = match link.command(asked.command) {
                 Ok(Ok(())) => Answer::done(&asked.what),
                 Ok(Err(why)) => Answer::not(
@@ -243,5 +292,41 @@ impl RateOverASecond {
         } else {
             0.0
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use needle_holder::insertion::{Phase, Sample};
+    use needle_holder::units::{MicroNewtons, Nanometres, NanometresPerSecond};
+    use needle_io::frames::{Item, StreamStats};
+
+    #[test]
+    fn a_page_opened_between_updates_gets_each_point_once_and_an_open_page_too() {
+        let (shared, _asked) = Shared::new("test");
+        let mut open = shared.updates.subscribe();
+        let sample = Sample {
+            index: 7,
+            x: Nanometres(0),
+            v: NanometresPerSecond(0),
+            force: MicroNewtons(0),
+            model: MicroNewtons(0),
+            residual: MicroNewtons(0),
+            phase: Phase::Loading,
+        };
+        shared.lock().apply(&Item::Sample(sample));
+        let (snapshot, mut opened) = shared.subscribe();
+        assert!(snapshot.contains("[0.014,"), "{snapshot}");
+        let sent = open
+            .try_recv()
+            .expect("the open page is sent what the new one is shown");
+        assert!(sent.contains("[0.014,"), "{sent}");
+        let next = shared.lock().take_update(&StreamStats::default(), 0.0);
+        assert!(
+            next.points.is_empty(),
+            "not sent again with the next update"
+        );
+        assert!(opened.try_recv().is_err());
     }
 }

@@ -18,7 +18,7 @@ use tokio_stream::wrappers::BroadcastStream;
 use tokio_stream::{Stream, StreamExt};
 
 use crate::commands::{Answer, Request};
-use crate::{Asked, Shared};
+use crate::{Asked, NotAsked, Shared};
 
 const INDEX: &str = include_str!("../assets/index.html");
 
@@ -97,22 +97,27 @@ async fn command(
         Err(e) => return bad(Answer::not(&what, format!("{e:#}"))),
     };
     let (answer, answered) = tokio::sync::oneshot::channel();
-    let gone = || {
+    let unavailable = |why: &str| {
         (
             StatusCode::SERVICE_UNAVAILABLE,
-            Json(Answer::not(&what, "the device is gone")),
+            Json(Answer::not(&what, why)),
         )
     };
-    if !shared.ask(Asked {
+    let asked = Asked {
         command,
         what: what.clone(),
         answer,
-    }) {
-        return gone();
+    };
+    match shared.ask(asked) {
+        Ok(()) => {}
+        Err(NotAsked::Busy) => {
+            return unavailable("the device is busy with earlier commands: ask again")
+        }
+        Err(NotAsked::Gone) => return unavailable("the device is gone"),
     }
     match answered.await {
         Ok(answer) => (StatusCode::OK, Json(answer)),
-        Err(_) => gone(),
+        Err(_) => unavailable("the device is gone"),
     }
 }
 

@@ -159,7 +159,13 @@ impl View {
         match item {
             Item::Sample(s) => self.sample(s),
             Item::Frame(message) => self.message(message),
-            Item::Gap { .. } | Item::Skipped { .. } | Item::Restart { .. } => {}
+            // The device started again: its sample indices (and times)
+            // start again, in an insertion of their own.
+            Item::Restart { .. } => {
+                self.start_insertion();
+                self.last_phase = Phase::Out;
+            }
+            Item::Gap { .. } | Item::Skipped { .. } => {}
         }
     }
 
@@ -167,12 +173,28 @@ impl View {
     pub fn disconnected(&mut self, problem: Option<String>) {
         self.device.connected = false;
         self.device.problem = problem;
+        self.device.samples_per_s = 0.0;
         self.device_changed = true;
+    }
+
+    /// The points and events not yet sent: sent to the pages already open
+    /// before a new page takes its snapshot, which holds them, so that no
+    /// page is given them twice.
+    pub fn take_pending(&mut self) -> Option<Update> {
+        if self.pending.points.is_empty() && self.pending.events.is_empty() {
+            return None;
+        }
+        Some(std::mem::take(&mut self.pending))
     }
 
     /// What changed since the last call, with the stream's counters and
     /// the samples a second measured over the last second.
     pub fn take_update(&mut self, stats: &StreamStats, samples_per_s: f64) -> Update {
+        let samples_per_s = if self.device.connected {
+            samples_per_s
+        } else {
+            0.0
+        };
         let (lost, withheld) = (stats.lost_samples, stats.withheld_samples);
         if (lost, withheld, samples_per_s)
             != (

@@ -12,13 +12,33 @@ use needle_analysis::sim::{self, Plan};
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
 
-/// `needle live` killed when the test ends, however it ends.
+/// `needle live` stopped when the test ends, however it ends: SIGTERM,
+/// as a user's `kill` would (it then stops its QEMU), and SIGKILL if it
+/// has not gone in 10 s.
 struct Live(Child);
+
+impl Live {
+    /// SIGTERM; how it exited, if it did within 10 s.
+    fn stop(&mut self) -> Option<std::process::ExitStatus> {
+        let pid = self.0.id().to_string();
+        let _ = Command::new("kill").args(["-TERM", &pid]).status();
+        let until = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < until {
+            if let Ok(Some(status)) = self.0.try_wait() {
+                return Some(status);
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        None
+    }
+}
 
 impl Drop for Live {
     fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
+        if self.stop().is_none() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
     }
 }
 
@@ -93,7 +113,7 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
         .spawn()
         .unwrap();
     let stdout = child.stdout.take().unwrap();
-    let _live = Live(child);
+    let mut live = Live(child);
     let mut first = String::new();
     BufReader::new(stdout).read_line(&mut first).unwrap();
     let address = first
@@ -171,4 +191,10 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     assert!(later
         .first()
         .is_some_and(|snapshot| snapshot.contains("\"kind\":\"puncture\"")));
+
+    // SIGTERM stops it, and the QEMU behind it, at once.
+    let status = live
+        .stop()
+        .expect("needle live stops within 10 s of SIGTERM");
+    assert!(status.success(), "{status}");
 }
