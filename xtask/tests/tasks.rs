@@ -5,7 +5,6 @@
 use std::process::Command;
 
 use needle_analysis::sim::{self, Plan};
-use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
 use needle_io::frames::{decode_all, Item, Message};
 
@@ -41,14 +40,9 @@ fn size_builds_every_image_and_names_its_file_flash_and_ram() {
 #[test]
 fn qemu_runs_an_image_on_a_replay_and_leaves_its_frames_in_the_file_named() {
     let dir = tempfile::tempdir().unwrap();
-    let (trial, _) = sim::insertion(&LIVER1, &Plan::PAPER);
-    let config = DeviceConfig::default();
+    let (trial, _, bytes) = sim::insertion_replay(&LIVER1, &Plan::PAPER);
     let replay = dir.path().join("liver1.replay");
-    std::fs::write(
-        &replay,
-        sim::to_replay(&trial, 500, &config.load_cell, &config.encoder),
-    )
-    .unwrap();
+    std::fs::write(&replay, bytes).unwrap();
     let out = dir.path().join("frames.bin");
     let (stdout, _) = xtask(&[
         "qemu",

@@ -16,7 +16,6 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
 use object::{Object, ObjectSection, ObjectSymbol, SectionKind};
 
@@ -68,12 +67,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let dir = firmware::target_directory()?.join("bench");
     std::fs::create_dir_all(&dir)?;
     let replay_path = dir.join("liver1.replay");
-    let (trial, _) = sim::insertion(&LIVER1, &Plan::PAPER);
-    let config = DeviceConfig::default();
-    std::fs::write(
-        &replay_path,
-        sim::to_replay(&trial, 500, &config.load_cell, &config.encoder),
-    )?;
+    let (trial, _, replay) = sim::insertion_replay(&LIVER1, &Plan::PAPER);
+    std::fs::write(&replay_path, replay)?;
     needle_io::out!(
         "recorded insertion: liver 1, 3 mm/s, {} samples at 500 Hz",
         trial.len()

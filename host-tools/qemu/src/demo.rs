@@ -9,7 +9,6 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use needle_holder::config::DeviceConfig;
 use needle_holder::insertion::{Event, EventKind, Sample};
 
 use crate::firmware::{self, Board, Serial};
@@ -52,14 +51,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         None => firmware::target_directory()?.join("demo"),
     };
     needle_io::input::create_out_dir(&dir)?;
-    let (trial, truth) = sim::insertion(&tissue, &plan);
-    let config = DeviceConfig::default();
-    let replay = sim::to_replay(
-        &trial,
-        plan.rate_hz as u16,
-        &config.load_cell,
-        &config.encoder,
-    );
+    let (trial, truth, replay) = sim::insertion_replay(&tissue, &plan);
     let replay_path = dir.join("liver1.replay");
     std::fs::write(&replay_path, &replay)
         .with_context(|| format!("{}: cannot write", replay_path.display()))?;

@@ -9,7 +9,6 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use needle_analysis::sim::{self, Plan};
-use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
 
 /// `needle live` stopped when the test ends, however it ends: SIGTERM,
@@ -98,14 +97,9 @@ fn events_until(address: &str, needle: &str) -> Vec<String> {
 #[test]
 fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     let dir = tempfile::tempdir().unwrap();
-    let (trial, truth) = sim::insertion(&LIVER1, &Plan::PAPER);
-    let config = DeviceConfig::default();
+    let (_, truth, bytes) = sim::insertion_replay(&LIVER1, &Plan::PAPER);
     let replay = dir.path().join("liver1.replay");
-    std::fs::write(
-        &replay,
-        sim::to_replay(&trial, 500, &config.load_cell, &config.encoder),
-    )
-    .unwrap();
+    std::fs::write(&replay, bytes).unwrap();
     let mut child = Command::new(env!("CARGO_BIN_EXE_needle"))
         .args(["live", "--replay", replay.to_str().unwrap()])
         .stdout(Stdio::piped())

@@ -1115,6 +1115,17 @@ pub fn raw_record(x_m: f64, f_n: f64, load_cell: &LoadCell, encoder: &Encoder) -
     }
 }
 
+/// One plain insertion of `tissue` under `plan`, its truth, and its
+/// replay for a device of the default configuration: what the demo, the
+/// bench and the QEMU tests run.
+pub fn insertion_replay(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth, Vec<u8>) {
+    let (trial, truth) = insertion(tissue, plan);
+    let config = needle_holder::config::DeviceConfig::default();
+    let rate_hz = plan.rate_hz as u16;
+    let replay = to_replay(&trial, rate_hz, &config.load_cell, &config.encoder);
+    (trial, truth, replay)
+}
+
 /// The library tissue that relaxes at rest (`skin_phantom`) inserted
 /// 20 mm and held still 5 s, as a replay that names it (the firmware
 /// runs that tissue): what `needle bench` counts with relaxation on and
