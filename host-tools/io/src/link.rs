@@ -96,6 +96,11 @@ impl Link {
         capture.write(&held)
     }
 
+    /// Keep no more of the bytes read (the file, if any, closed).
+    pub fn stop_capture(&mut self) {
+        self.capture = None;
+    }
+
     /// The port closed (the device went away, or QEMU exited).
     pub fn closed(&self) -> bool {
         self.closed

@@ -64,37 +64,39 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     }
     // Created once a device has answered: a port with no device behind
     // it left an empty directory.
-    crate::input::create_out_dir(&args.out)?;
-    // One recording into a directory at a time (two replaced each other's
-    // trials, both saying they succeeded); and, the lock taken, the
-    // directory checked again: another may have recorded into it since.
-    let _lock = crate::input::lock_output(
-        &args.out,
-        &args.out.join(".needle-record.lock"),
-        "needle record",
-    )?;
-    check_dir(&args.out)?;
-    let capture = args.out.join("stream.bin");
-    let file = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&capture)
-        .with_context(|| format!("{}: cannot create", capture.display()))?;
+    let mut recorder = Recorder::create(&args.out, None)?;
+    let (file, capture) = recorder.stream_file()?;
     link.capture_to(file, &capture)?;
     crate::note!(
         "recording from {} into {} (Ctrl-C stops)",
         args.port,
         args.out.display()
     );
-    let mut recorder = Recorder::new(&args.out);
     let recorded = record(&mut link, &mut recorder, &stop, until);
     if let Err(e) = recorded {
         recorder.abandon();
+        show(&mut recorder);
         return Err(e);
     }
-    recorder.finish()?;
+    let why = if link.closed() {
+        "the device went away"
+    } else if stop.load(Ordering::SeqCst) {
+        "stopped by a signal"
+    } else {
+        "the recording ended"
+    };
+    let finished = recorder.finish(why);
+    show(&mut recorder);
+    finished?;
     crate::note!("{}", crate::decode::summary_line(&link.decoder().stats()));
     Ok(())
+}
+
+/// The recorder's lines, each above the progress line.
+fn show(recorder: &mut Recorder) {
+    for line in recorder.take_lines() {
+        crate::note!("\r\x1b[K{line}");
+    }
 }
 
 /// How long a device may send nothing at all (its status heartbeat comes
@@ -116,8 +118,9 @@ fn record(
     {
         for item in link.poll()? {
             heard = Instant::now();
-            recorder.item(item)?;
+            recorder.item(&item)?;
         }
+        show(recorder);
         // Nothing at all, not even a heartbeat: a device that was reset
         // and waits for its host (the QEMU replay does) is asked to stream.
         if heard.elapsed() >= SILENCE && asked.is_none_or(|a| a.elapsed() >= SILENCE) {
@@ -131,8 +134,7 @@ fn record(
         // came back with its stream off) sends no samples until asked:
         // recording on in silence waited forever. Asked again, at most
         // once a second.
-        if std::mem::take(&mut recorder.stream_off)
-            && asked.is_none_or(|a| a.elapsed() >= Duration::from_secs(1))
+        if recorder.take_stream_off() && asked.is_none_or(|a| a.elapsed() >= Duration::from_secs(1))
         {
             asked = Some(Instant::now());
             // No answer (the device going away, say) ends nothing here:
@@ -146,19 +148,19 @@ fn record(
                 "the device's stream is off (another program turned it off, or the device came back with it off): {answer}"
             ));
         }
+        show(recorder);
         if shown.elapsed() >= Duration::from_millis(500) {
-            recorder.progress();
+            if let Some(progress) = recorder.progress() {
+                crate::note_inline!("\r\x1b[K{progress}");
+            }
             shown = Instant::now();
         }
     }
     for item in link.finish() {
-        recorder.item(item)?;
+        recorder.item(&item)?;
     }
     if link.closed() {
         recorder.line("the device went away (its port closed)");
-        recorder.close("the device went away")?;
-    } else if stop.load(Ordering::SeqCst) {
-        recorder.close("stopped by a signal")?;
     }
     Ok(())
 }
@@ -200,8 +202,11 @@ struct TrialFile {
     last: Option<Sample>,
 }
 
-/// Splits the samples into trials and writes them.
-struct Recorder {
+/// Splits a device's samples into trials and writes them, one CSV an
+/// insertion, as `needle record` does (and `needle live` when asked to
+/// record). What it has to say — a trial written, a gap, an event — it
+/// keeps for its caller to show ([`Recorder::take_lines`]).
+pub struct Recorder {
     dir: PathBuf,
     rate_hz: Option<u16>,
     pending: Vec<Sample>,
@@ -210,31 +215,92 @@ struct Recorder {
     /// Samples before the needle was first seen out of tissue: the tail of
     /// an insertion under way when the recording began, no trial.
     before_out: Option<u64>,
-    /// A status frame said the device's stream is off since [`record`]
-    /// last looked.
+    /// A status frame said the device's stream is off since
+    /// [`Recorder::take_stream_off`] last looked.
     stream_off: bool,
     /// The board's counters as the last status gave them: a rise is
     /// reported once.
     board: BoardCounters,
+    lines: Vec<String>,
+    /// Whether events, halts and replies get a line each (a terminal has
+    /// no other place for them; the live page lists them itself).
+    frame_lines: bool,
+    /// One recording into a directory at a time.
+    _lock: crate::input::OutputLock,
 }
 
 impl Recorder {
-    fn new(dir: &Path) -> Self {
-        Self {
+    /// A recording into `dir` (created if missing; it must hold no trial
+    /// CSV or stream yet, and no other recording may be writing to it),
+    /// of a device sampling at `rate_hz` if known (else from its first
+    /// header or status frame).
+    pub fn create(dir: &Path, rate_hz: Option<u16>) -> Result<Self> {
+        check_dir(dir)?;
+        crate::input::create_out_dir(dir)?;
+        // Two recordings into one directory replaced each other's trials,
+        // both saying they succeeded; and, the lock taken, the directory
+        // is checked again: another may have recorded into it since.
+        let lock =
+            crate::input::lock_output(dir, &dir.join(".needle-record.lock"), "needle record")?;
+        check_dir(dir)?;
+        Ok(Self {
             dir: dir.to_path_buf(),
-            rate_hz: None,
+            rate_hz: rate_hz.filter(|&r| r > 0),
             pending: Vec::new(),
             current: None,
             written: 0,
             before_out: Some(0),
             stream_off: false,
             board: BoardCounters::default(),
-        }
+            lines: Vec::new(),
+            frame_lines: true,
+            _lock: lock,
+        })
     }
 
-    fn item(&mut self, item: Item) -> Result<()> {
+    /// No line for each event, halt and reply: the caller shows them.
+    pub fn without_frame_lines(mut self) -> Self {
+        self.frame_lines = false;
+        self
+    }
+
+    /// `stream.bin` in the recording's directory, new, for the raw bytes
+    /// (`needle decode` reads it).
+    pub fn stream_file(&self) -> Result<(std::fs::File, PathBuf)> {
+        let path = self.dir.join("stream.bin");
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .with_context(|| format!("{}: cannot create", path.display()))?;
+        Ok((file, path))
+    }
+
+    /// The directory the trials go to.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Trials written so far.
+    pub fn written(&self) -> usize {
+        self.written
+    }
+
+    /// What the recorder has said since the last call, oldest first.
+    pub fn take_lines(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.lines)
+    }
+
+    /// Whether a status frame said the device's stream is off since the
+    /// last call.
+    pub fn take_stream_off(&mut self) -> bool {
+        std::mem::take(&mut self.stream_off)
+    }
+
+    /// One item from the device's stream.
+    pub fn item(&mut self, item: &Item) -> Result<()> {
         match item {
-            Item::Sample(s) => self.sample(s)?,
+            Item::Sample(s) => self.sample(*s)?,
             Item::Frame(Message::Header(h)) => self.learn_rate(h.sample_rate_hz)?,
             Item::Frame(Message::Status(s)) => {
                 self.stream_off |= !s.streaming;
@@ -253,11 +319,13 @@ impl Recorder {
                 self.learn_rate(s.sample_rate_hz)?
             }
             Item::Frame(frame @ (Message::Event(_) | Message::Halt(_) | Message::Reply(_))) => {
-                self.line(&describe(&frame, self.rate_hz))
+                if self.frame_lines {
+                    self.line(&describe(frame, self.rate_hz))
+                }
             }
             Item::Gap { first, last, why } => self.line(&format!(
                 "gap     samples {first}..={last} {} ({})",
-                missing_name(why),
+                missing_name(*why),
                 last - first + 1
             )),
             Item::Skipped { bytes, reason } => {
@@ -274,9 +342,8 @@ impl Recorder {
         Ok(())
     }
 
-    /// A line above the progress line.
-    fn line(&self, text: &str) {
-        crate::note!("\r\x1b[K{text}");
+    fn line(&mut self, text: &str) {
+        self.lines.push(text.to_owned());
     }
 
     fn learn_rate(&mut self, rate_hz: u16) -> Result<()> {
@@ -380,7 +447,7 @@ impl Recorder {
 
     /// After a failure (a full disk, say): the trial in hand stays under
     /// its temporary name, as far as it could be written, and is named.
-    fn abandon(&mut self) {
+    pub fn abandon(&mut self) {
         if let Some(mut trial) = self.current.take() {
             let _ = trial.writer.flush();
             self.line(&format!(
@@ -391,27 +458,30 @@ impl Recorder {
         }
     }
 
-    fn progress(&self) {
-        let (Some(trial), Some(rate)) = (self.current.as_ref(), self.rate_hz) else {
-            return;
-        };
-        let Some(s) = trial.last else { return };
-        crate::note_inline!(
-            "\r\x1b[Ktrial {}: {:.1} s, {} samples, x {:.2} mm, f {:.3} N, {}",
+    /// The trial in hand, in a line: its length, where the needle is,
+    /// the force, the phase.
+    pub fn progress(&self) -> Option<String> {
+        let (trial, rate) = (self.current.as_ref()?, self.rate_hz?);
+        let s = trial.last?;
+        Some(format!(
+            "trial {}: {:.1} s, {} samples, x {:.2} mm, f {:.3} N, {}",
             self.written,
             trial.samples as f64 / f64::from(rate),
             trial.samples,
             s.x.as_m() * 1e3,
             s.force.as_n(),
             crate::decode::phase_name(s.phase)
-        );
+        ))
     }
 
-    fn finish(mut self) -> Result<()> {
+    /// End the recording, for `why`: the trial in hand is written (if the
+    /// needle entered the tissue in it).
+    pub fn finish(&mut self, why: &str) -> Result<()> {
         if let Some(n) = self.before_out.filter(|&n| n > 0) {
             self.line(&format!(
                 "{n} samples, all of an insertion under way when the recording began: in stream.bin only, no trial"
             ));
+            self.before_out = None;
         }
         if !self.pending.is_empty() {
             bail!(
@@ -419,8 +489,9 @@ impl Recorder {
                 self.pending.len()
             );
         }
-        self.close("the recording ended")?;
-        crate::note!("\r\x1b[K{} trials in {}", self.written, self.dir.display());
+        self.close(why)?;
+        let done = format!("{} trials in {}", self.written, self.dir.display());
+        self.line(&done);
         Ok(())
     }
 }

@@ -9,10 +9,11 @@ const T = 0, X = 1, F = 2, MODEL = 3, RESIDUAL = 4, PHASE = 5;
 const INSERTIONS_KEPT = 5;
 const POINTS_PER_INSERTION = 12000;
 const EVENTS_KEPT = 200;
+const NOTES_KEPT = 100;
 const PHASE_FILL = [null, "rgba(255, 200, 0, 0.15)", "rgba(0, 140, 255, 0.12)", "rgba(150, 60, 255, 0.12)"];
 const EVENT_COLOUR = { contact: "#2a7", puncture: "#d22", structure: "#e80", exit: "#27d", fault: "#000" };
 
-let view = { device: {}, insertions: [], events: [] };
+let view = { device: {}, insertions: [], events: [], notes: [] };
 let plots = null;
 let drawing = false;
 
@@ -109,18 +110,26 @@ function markEvents(u) {
   for (const e of view.events) {
     if (e.insertion !== number) continue;
     const x = u.valToPos(e.t_s, "x", true);
+    // The label beside the line, on the side with room for it.
+    const right = x > u.bbox.left + 0.7 * u.bbox.width;
+    ctx.textAlign = right ? "right" : "left";
     ctx.strokeStyle = ctx.fillStyle = EVENT_COLOUR[e.kind] || "#000";
     ctx.beginPath();
     ctx.moveTo(x, u.bbox.top);
     ctx.lineTo(x, u.bbox.top + u.bbox.height);
     ctx.stroke();
-    ctx.fillText(`${e.kind} ${e.force_n.toFixed(2)} N`, x + 4, u.bbox.top + 14 * devicePixelRatio);
+    ctx.fillText(`${e.kind} ${e.force_n.toFixed(2)} N`, right ? x - 4 : x + 4, u.bbox.top + 14 * devicePixelRatio);
   }
   ctx.restore();
 }
 
 function column(points, i) {
   return points.map(p => p[i]);
+}
+
+function insertionName(number, newest) {
+  if (number === 0) return "measured, before the first contact";
+  return `measured, insertion ${number}${newest ? " (this one)" : ""}`;
 }
 
 function draw() {
@@ -131,6 +140,13 @@ function draw() {
   for (let k = 0; k < INSERTIONS_KEPT; k++) {
     const ins = kept[k - (INSERTIONS_KEPT - kept.length)];
     facets.push(ins ? [column(ins.points, X), column(ins.points, F)] : [[], []]);
+    // Each legend entry names its insertion; none for one not yet made.
+    const entry = plots.byPosition.root.querySelectorAll(".u-legend .u-series")[k];
+    if (entry) {
+      entry.style.display = ins ? "" : "none";
+      const label = entry.querySelector(".u-label");
+      if (ins && label) label.textContent = insertionName(ins.number, k === INSERTIONS_KEPT - 1);
+    }
   }
   const pts = current().points;
   facets.push([column(pts, X), column(pts, MODEL)]);
@@ -163,6 +179,7 @@ function drawDevice() {
   text("faults", d.faults || "–");
   text("rate", d.samples_per_s == null ? "–" : `${d.samples_per_s} (device rate ${d.sample_rate_hz ?? "?"} Hz)`);
   text("dropped", d.frames_dropped ?? "–");
+  text("recording", d.recording || "not recording");
   text("missing", `${d.samples_lost ?? 0} / ${d.samples_withheld ?? 0}`);
   const halt = document.getElementById("halt");
   halt.textContent = d.halt ? `HALT: ${d.halt_reason || "asserted"}` : "halt line released";
@@ -205,8 +222,19 @@ function applyUpdate(u) {
     view.events.push(e);
     if (view.events.length > EVENTS_KEPT) view.events.shift();
   }
+  for (const n of u.notes || []) {
+    view.notes.push(n);
+    if (view.notes.length > NOTES_KEPT) view.notes.shift();
+    document.getElementById("notes").prepend(noteLine(n));
+  }
   if (u.device) view.device = u.device;
   later();
+}
+
+function noteLine(text) {
+  const line = document.createElement("li");
+  line.textContent = text;
+  return line;
 }
 
 // The controls: each sends one request and logs the answer, the device's
@@ -251,6 +279,8 @@ function wireControls() {
   click("rearm", () => ({ command: "rearm" }));
   click("stream-on", () => ({ command: "stream", on: true }));
   click("stream-off", () => ({ command: "stream", on: false }));
+  click("record-on", () => ({ command: "record", on: true }));
+  click("record-off", () => ({ command: "record", on: false }));
   click("select-tissue", () => ({ command: "tissue", name: document.getElementById("tissue-name").value }));
   click("set-assist", () => ({
     command: "assist",
@@ -272,6 +302,7 @@ function connect() {
   const source = new EventSource("/events");
   source.addEventListener("snapshot", e => {
     view = JSON.parse(e.data);
+    document.getElementById("notes").replaceChildren(...view.notes.slice().reverse().map(noteLine));
     offerControls(view.library, view.assist_modes);
     connection(true, "live");
     later();

@@ -1,6 +1,7 @@
-//! What the page asks of the device — tare, a tissue, assist, re-arm, the
-//! stream on or off — the command each sends, and the answer the page
-//! shows: done, or the device's reason, or what was wrong with the asking.
+//! What the page asks — of the device: tare, a tissue, assist, re-arm, the
+//! stream on or off; of the host: record or stop — what each does, and
+//! the answer the page shows: done, or the device's reason, or what was
+//! wrong with the asking.
 
 use std::path::Path;
 
@@ -13,7 +14,8 @@ use serde::{Deserialize, Serialize};
 /// `{"command": "tissue", "name": "liver1"}`, `{"command": "upload",
 /// "file_name": "fit.toml", "toml": "…", "entry": null}`,
 /// `{"command": "assist", "modes": "puncture,back-off", "depth_mm": 20}`,
-/// `{"command": "rearm"}`, `{"command": "stream", "on": true}`.
+/// `{"command": "rearm"}`, `{"command": "stream", "on": true}`,
+/// `{"command": "record", "on": true}`.
 #[derive(Debug, Deserialize)]
 #[serde(tag = "command", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Request {
@@ -37,6 +39,18 @@ pub enum Request {
     Stream {
         on: bool,
     },
+    /// Trial CSVs, as `needle record` writes them, into a new directory.
+    Record {
+        on: bool,
+    },
+}
+
+/// What a request comes to: a command for the device, or a recording
+/// started or stopped on the host.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Job {
+    Device(Command),
+    Record(bool),
 }
 
 impl Request {
@@ -48,12 +62,21 @@ impl Request {
             Request::Upload { file_name, .. } => format!("upload {file_name}"),
             Request::Assist { modes, depth_mm } => format!("assist {modes}, {depth_mm} mm"),
             Request::Rearm => "re-arm".into(),
-            Request::Stream { on } => format!("stream {}", if *on { "on" } else { "off" }),
+            Request::Stream { on } => format!("stream {}", on_off(*on)),
+            Request::Record { on } => format!("record {}", on_off(*on)),
         }
     }
 
-    /// The command to send, or why there is none.
-    pub fn command(&self) -> Result<Command> {
+    /// What to do, or why it cannot be done.
+    pub fn job(&self) -> Result<Job> {
+        Ok(match self {
+            Request::Record { on } => Job::Record(*on),
+            device => Job::Device(device.command()?),
+        })
+    }
+
+    /// The device's command, or why there is none.
+    fn command(&self) -> Result<Command> {
         Ok(match self {
             Request::Tare => Command::Tare,
             Request::Tissue { name } => {
@@ -82,7 +105,16 @@ impl Request {
             }
             Request::Rearm => Command::Rearm,
             Request::Stream { on } => Command::Stream(*on),
+            Request::Record { .. } => anyhow::bail!("a recording is the host's, not the device's"),
         })
+    }
+}
+
+fn on_off(on: bool) -> &'static str {
+    if on {
+        "on"
+    } else {
+        "off"
     }
 }
 
@@ -100,6 +132,14 @@ impl Answer {
         Self {
             ok: true,
             said: format!("{what}: done"),
+        }
+    }
+
+    /// Done, and what came of it.
+    pub fn done_with(what: &str, detail: impl std::fmt::Display) -> Self {
+        Self {
+            ok: true,
+            said: format!("{what}: {detail}"),
         }
     }
 

@@ -9,20 +9,23 @@
 //! runs the firmware in QEMU on a replay behind the same page, so anyone
 //! can try it without hardware.
 //!
-//! Four parts, dependencies one way: [`view`] (what the page shows,
+//! Five parts, dependencies one way: [`view`] (what the page shows,
 //! bounded, updated item by item: no I/O), [`commands`] (what the page
-//! may ask and the command each sends), the device thread here (owns the
-//! link, feeds the view, publishes an update every [`UPDATE_PERIOD`],
-//! sends the pages' commands between reads), and [`server`] (axum: the
-//! page, its bundled plotting library, the updates as server-sent
-//! events, the commands as `POST /command`).
+//! may ask and what each does), [`recording`] (trial CSVs as `needle
+//! record` writes them, when the page asks), the device thread here (owns
+//! the link, feeds the recording and the view, publishes an update every
+//! [`UPDATE_PERIOD`], does the pages' commands between reads), and
+//! [`server`] (axum: the page, its bundled plotting library, the updates
+//! as server-sent events, the commands as `POST /command`).
 
 pub mod commands;
+pub mod recording;
 pub mod server;
 pub mod view;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -32,7 +35,8 @@ use needle_io::decode::command_error;
 use needle_io::link::Link;
 use tokio::sync::{broadcast, oneshot};
 
-use crate::commands::Answer;
+use crate::commands::{Answer, Job};
+use crate::recording::Recording;
 use crate::view::View;
 
 #[derive(Debug, clap::Args)]
@@ -52,6 +56,11 @@ pub struct LiveArgs {
     /// the page sends the device commands.
     #[arg(long, default_value = "127.0.0.1:0")]
     pub listen: SocketAddr,
+    /// Where the page's Record button records to: a new directory beneath
+    /// this one each time (recording-001, recording-002, …), trial CSVs
+    /// and stream.bin as `needle record` writes them.
+    #[arg(long, default_value = "recordings")]
+    pub record_into: PathBuf,
 }
 
 /// `needle live`.
@@ -68,9 +77,9 @@ pub fn run_command(args: &LiveArgs) -> Result<()> {
             let qemu = needle_qemu::firmware::QemuLive::start(board, &elf, replay)?;
             let link = Link::open(&qemu.port, args.baud)?;
             let source = format!("the firmware in QEMU, replaying {}", replay.display());
-            run(link, &source, args.listen)
+            run(link, &source, args)
         }
-        (None, Some(port)) => run(Link::open(port, args.baud)?, port, args.listen),
+        (None, Some(port)) => run(Link::open(port, args.baud)?, port, args),
         (None, None) => anyhow::bail!("give --port (a device) or --replay (QEMU)"),
     }
 }
@@ -90,6 +99,9 @@ pub struct Shared {
     updates: broadcast::Sender<Arc<str>>,
     /// Commands for the device thread, which alone writes to the link.
     commands: std::sync::mpsc::SyncSender<Asked>,
+    /// `needle live` is stopping: the device thread ends the recording
+    /// and returns.
+    stop: AtomicBool,
 }
 
 /// Commands waiting for the device at most: each can take seconds (a
@@ -105,9 +117,9 @@ pub enum NotAsked {
     Gone,
 }
 
-/// A command the page asked for, and where its answer goes.
+/// What the page asked for, and where its answer goes.
 pub struct Asked {
-    pub command: Command,
+    pub job: Job,
     /// What was asked, in the page's words.
     pub what: String,
     pub answer: oneshot::Sender<Answer>,
@@ -122,6 +134,7 @@ impl Shared {
             view: Mutex::new(View::new(source)),
             updates: broadcast::channel(UPDATES_QUEUED).0,
             commands,
+            stop: AtomicBool::new(false),
         });
         (shared, asked)
     }
@@ -160,16 +173,18 @@ impl Shared {
     }
 }
 
-/// Start `link`'s stream and serve the live view on `listen` until
+/// Start `link`'s stream and serve the live view on `args.listen` until
 /// Ctrl-C or SIGTERM; `source` names the device on the page. Prints the
-/// address to open.
-pub fn run(mut link: Link, source: &str, listen: SocketAddr) -> Result<()> {
+/// address to open. A recording under way when it stops is finished
+/// first, as `needle record` finishes one.
+pub fn run(mut link: Link, source: &str, args: &LiveArgs) -> Result<()> {
     if let Err(e) = link.command(Command::Stream(true))? {
         anyhow::bail!(
             "{source}: the device refused to stream: {}",
             command_error(&e)
         );
     }
+    let listen = args.listen;
     let listener = std::net::TcpListener::bind(listen)
         .with_context(|| format!("cannot listen on {listen}"))?;
     listener.set_nonblocking(true)?;
@@ -177,18 +192,24 @@ pub fn run(mut link: Link, source: &str, listen: SocketAddr) -> Result<()> {
     needle_io::out!("live view at http://{address}/ (Ctrl-C stops)")?;
     let (shared, asked) = Shared::new(source);
     let feeding = shared.clone();
-    std::thread::spawn(move || feed(link, &feeding, &asked));
+    let recording = Recording::new(&args.record_into);
+    let device = std::thread::spawn(move || feed(link, &feeding, &asked, recording));
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("cannot start the web server's runtime")?;
-    runtime.block_on(async {
+    let served = runtime.block_on(async {
         let listener = tokio::net::TcpListener::from_std(listener)?;
         tokio::select! {
-            served = server::serve(listener, shared) => served,
+            served = server::serve(listener, shared.clone()) => served,
             () = stopped() => Ok(()),
         }
-    })
+    });
+    shared.stop.store(true, Ordering::SeqCst);
+    if device.join().is_err() {
+        needle_io::note!("needle live: the device thread failed");
+    }
+    served
 }
 
 /// Ctrl-C or SIGTERM: `run` returns, and the QEMU behind a replay is
@@ -213,12 +234,18 @@ async fn stopped() {
     }
 }
 
-/// Read the device until its link closes, feeding the view, publishing
-/// what changed every [`UPDATE_PERIOD`] and sending the pages' commands
-/// between reads. The link is this thread's alone: a page cannot hold up
-/// reading it, and the frames read while a command waits for its reply
-/// are published with the next update.
-fn feed(mut link: Link, shared: &Shared, asked: &std::sync::mpsc::Receiver<Asked>) {
+/// Read the device until its link closes or `needle live` stops, feeding
+/// the recording and the view, publishing what changed every
+/// [`UPDATE_PERIOD`] and doing the pages' commands between reads. The
+/// link is this thread's alone: a page cannot hold up reading it, and the
+/// frames read while a command waits for its reply are published with the
+/// next update.
+fn feed(
+    mut link: Link,
+    shared: &Shared,
+    asked: &std::sync::mpsc::Receiver<Asked>,
+    mut recording: Recording,
+) {
     let mut last_update = Instant::now();
     let mut samples_then = 0u64;
     let mut rate = RateOverASecond::default();
@@ -228,8 +255,10 @@ fn feed(mut link: Link, shared: &Shared, asked: &std::sync::mpsc::Receiver<Asked
             Err(e) => (Vec::new(), Some(format!("{e:#}"))),
         };
         let closed = link.closed() || problem.is_some();
+        let stopping = shared.stop.load(Ordering::SeqCst);
         let mut view = shared.lock();
         for item in &items {
+            recording.item(&mut link, &mut view, item);
             view.apply(item);
         }
         if closed {
@@ -238,7 +267,20 @@ fn feed(mut link: Link, shared: &Shared, asked: &std::sync::mpsc::Receiver<Asked
             }
             view.disconnected(problem);
         }
-        if closed || last_update.elapsed() >= UPDATE_PERIOD {
+        if closed || stopping {
+            for item in link.finish() {
+                recording.item(&mut link, &mut view, &item);
+            }
+            let why = if closed {
+                "the device went away"
+            } else {
+                "needle live stopped"
+            };
+            // Not recording is no news here.
+            let _ = recording.stop(&mut link, &mut view, why, "record");
+        }
+        if closed || stopping || last_update.elapsed() >= UPDATE_PERIOD {
+            recording.show(&mut view);
             let stats = link.decoder().stats();
             let now = Instant::now();
             let per_s = rate.add(now, stats.samples - samples_then);
@@ -247,21 +289,36 @@ fn feed(mut link: Link, shared: &Shared, asked: &std::sync::mpsc::Receiver<Asked
             shared.publish(&view.take_update(&stats, per_s));
         }
         drop(view);
-        if closed {
+        if closed || stopping {
             return;
         }
         // One a turn: the device is read between commands.
         if let Ok(asked) = asked.try_recv() {
-            let answer = match link.command(asked.command) {
-                Ok(Ok(())) => Answer::done(&asked.what),
-                Ok(Err(why)) => Answer::not(
-                    &asked.what,
-                    format!("the device refused: {}", command_error(&why)),
-                ),
-                Err(e) => Answer::not(&asked.what, format!("{e:#}")),
-            };
+            let answer = answer(&mut link, shared, &mut recording, &asked);
             // A page that closed before the answer came is not an error.
             let _ = asked.answer.send(answer);
+        }
+    }
+}
+
+/// Do what the page asked.
+fn answer(link: &mut Link, shared: &Shared, recording: &mut Recording, asked: &Asked) -> Answer {
+    let what = &asked.what;
+    match asked.job {
+        Job::Device(command) => match link.command(command) {
+            Ok(Ok(())) => Answer::done(what),
+            Ok(Err(why)) => {
+                Answer::not(what, format!("the device refused: {}", command_error(&why)))
+            }
+            Err(e) => Answer::not(what, format!("{e:#}")),
+        },
+        Job::Record(true) => {
+            let rate_hz = shared.lock().sample_rate_hz();
+            recording.start(link, rate_hz, what)
+        }
+        Job::Record(false) => {
+            let mut view = shared.lock();
+            recording.stop(link, &mut view, "stopped from the page", what)
         }
     }
 }

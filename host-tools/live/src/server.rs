@@ -92,8 +92,8 @@ async fn command(
         }
     };
     let what = request.what();
-    let command = match request.command() {
-        Ok(command) => command,
+    let job = match request.job() {
+        Ok(job) => job,
         Err(e) => return bad(Answer::not(&what, format!("{e:#}"))),
     };
     let (answer, answered) = tokio::sync::oneshot::channel();
@@ -104,7 +104,7 @@ async fn command(
         )
     };
     let asked = Asked {
-        command,
+        job,
         what: what.clone(),
         answer,
     };

@@ -24,6 +24,8 @@ pub const DISPLAY_HZ: u32 = 100;
 pub const POINTS_PER_INSERTION: usize = 12_000;
 /// Events the page lists.
 pub const EVENTS_KEPT: usize = 200;
+/// Lines of the host's own (a recording's trials, say) the page lists.
+pub const NOTES_KEPT: usize = 100;
 
 /// One displayed sample: time (s), position (mm), measured force, the
 /// device's model and the residual (N), and the phase (0 out, 1 loading,
@@ -84,6 +86,9 @@ pub struct Device {
     pub samples_withheld: u64,
     /// The phase now.
     pub phase: &'static str,
+    /// The recording under way, in a line (where, trials written, the
+    /// trial in hand); none when not recording.
+    pub recording: Option<String>,
 }
 
 /// Everything a page needs to start: sent to each page as it opens.
@@ -96,6 +101,7 @@ pub struct Snapshot<'a> {
     pub device: &'a Device,
     pub insertions: &'a VecDeque<Insertion>,
     pub events: &'a VecDeque<EventLine>,
+    pub notes: &'a VecDeque<String>,
 }
 
 /// What changed since the last update.
@@ -104,6 +110,7 @@ pub struct Update {
     /// New points, each with the insertion it belongs to.
     pub points: Vec<(u32, Point)>,
     pub events: Vec<EventLine>,
+    pub notes: Vec<String>,
     pub device: Option<Device>,
 }
 
@@ -113,6 +120,7 @@ pub struct View {
     device: Device,
     insertions: VecDeque<Insertion>,
     events: VecDeque<EventLine>,
+    notes: VecDeque<String>,
     pending: Update,
     device_changed: bool,
     /// Samples since the last point kept.
@@ -133,6 +141,7 @@ impl View {
             },
             insertions: VecDeque::from([Insertion::default()]),
             events: VecDeque::new(),
+            notes: VecDeque::new(),
             pending: Update::default(),
             device_changed: true,
             since_point: 0,
@@ -151,6 +160,24 @@ impl View {
             device: &self.device,
             insertions: &self.insertions,
             events: &self.events,
+            notes: &self.notes,
+        }
+    }
+
+    /// A line of the host's own for the page's log.
+    pub fn note(&mut self, text: String) {
+        if self.notes.len() == NOTES_KEPT {
+            self.notes.pop_front();
+        }
+        self.notes.push_back(text.clone());
+        self.pending.notes.push(text);
+    }
+
+    /// The recording under way, in a line, or none.
+    pub fn set_recording(&mut self, recording: Option<String>) {
+        if self.device.recording != recording {
+            self.device.recording = recording;
+            self.device_changed = true;
         }
     }
 
@@ -181,7 +208,8 @@ impl View {
     /// before a new page takes its snapshot, which holds them, so that no
     /// page is given them twice.
     pub fn take_pending(&mut self) -> Option<Update> {
-        if self.pending.points.is_empty() && self.pending.events.is_empty() {
+        let pending = &self.pending;
+        if pending.points.is_empty() && pending.events.is_empty() && pending.notes.is_empty() {
             return None;
         }
         Some(std::mem::take(&mut self.pending))
@@ -213,6 +241,11 @@ impl View {
             update.device = Some(self.device.clone());
         }
         update
+    }
+
+    /// The device's sample rate, once a frame has said it.
+    pub fn sample_rate_hz(&self) -> Option<u16> {
+        self.device.sample_rate_hz
     }
 
     fn rate_hz(&self) -> f64 {

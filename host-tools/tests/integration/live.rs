@@ -5,6 +5,7 @@
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -14,11 +15,38 @@ use needle_holder::model::params::LIVER1;
 /// `needle live` stopped when the test ends, however it ends: SIGTERM,
 /// as a user's `kill` would (it then stops its QEMU), and SIGKILL if it
 /// has not gone in 10 s.
-struct Live(Child);
+pub(crate) struct Live(Child);
 
 impl Live {
+    /// `needle live --replay REPLAY MORE…`, and the address it serves on, read
+    /// from the line it prints first.
+    pub(crate) fn start(replay: &Path, more: &[&str]) -> (Self, String) {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_needle"))
+            .args(["live", "--replay", replay.to_str().unwrap()])
+            .args(more)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let live = Live(child);
+        let mut first = String::new();
+        BufReader::new(stdout).read_line(&mut first).unwrap();
+        let address = first
+            .split("http://")
+            .nth(1)
+            .and_then(|rest| rest.split('/').next())
+            .unwrap_or_else(|| panic!("no address in {first:?}"))
+            .to_string();
+        assert!(
+            address.starts_with("127.0.0.1:"),
+            "loopback unless asked: {first}"
+        );
+        (live, address)
+    }
+
     /// SIGTERM; how it exited, if it did within 10 s.
-    fn stop(&mut self) -> Option<std::process::ExitStatus> {
+    pub(crate) fn stop(&mut self) -> Option<std::process::ExitStatus> {
         let pid = self.0.id().to_string();
         let _ = Command::new("kill").args(["-TERM", &pid]).status();
         let until = Instant::now() + Duration::from_secs(10);
@@ -34,6 +62,9 @@ impl Live {
 
 impl Drop for Live {
     fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(Some(_))) {
+            return;
+        }
         if self.stop().is_none() {
             let _ = self.0.kill();
             let _ = self.0.wait();
@@ -97,29 +128,18 @@ fn events_until(address: &str, needle: &str) -> Vec<String> {
 #[test]
 fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     let dir = tempfile::tempdir().unwrap();
-    let (_, truth, bytes) = sim::insertion_replay(&LIVER1, &Plan::PAPER);
+    // 15 mm from the liver (5 s at 3 mm/s): the recording begins with the
+    // needle out, as a trial does.
+    let plan = Plan {
+        surface_x_m: 0.015,
+        ..Plan::PAPER
+    };
+    let (_, truth, bytes) = sim::insertion_replay(&LIVER1, &plan);
     let replay = dir.path().join("liver1.replay");
     std::fs::write(&replay, bytes).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_needle"))
-        .args(["live", "--replay", replay.to_str().unwrap()])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let stdout = child.stdout.take().unwrap();
-    let mut live = Live(child);
-    let mut first = String::new();
-    BufReader::new(stdout).read_line(&mut first).unwrap();
-    let address = first
-        .split("http://")
-        .nth(1)
-        .and_then(|rest| rest.split('/').next())
-        .unwrap_or_else(|| panic!("no address in {first:?}"))
-        .to_string();
-    assert!(
-        address.starts_with("127.0.0.1:"),
-        "loopback unless asked: {first}"
-    );
+    let recordings = dir.path().join("recordings");
+    let (mut live, address) =
+        Live::start(&replay, &["--record-into", recordings.to_str().unwrap()]);
 
     let page = get(&address, "/");
     assert!(page.starts_with("HTTP/1.1 200"), "{page}");
@@ -128,6 +148,16 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     assert!(uplot.starts_with("HTTP/1.1 200") && uplot.len() > 40_000);
     let missing = get(&address, "/assets/nothing.js");
     assert!(missing.starts_with("HTTP/1.1 404") && missing.contains("no asset named"));
+
+    // A recording from the page, from before contact to after the
+    // puncture.
+    let record = post(&address, r#"{"command":"record","on":true}"#);
+    assert!(
+        record.contains(r#""ok":true"#) && record.contains("recording-001"),
+        "{record}"
+    );
+    let again = post(&address, r#"{"command":"record","on":true}"#);
+    assert!(again.contains("already recording into"), "{again}");
 
     // Commands from the page reach the device and come back answered;
     // a request that is no command, or names what is not there, is
@@ -180,15 +210,53 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
         "{force_n} N against the simulation's {expected_n} N"
     );
 
+    let stopped = post(&address, r#"{"command":"record","on":false}"#);
+    assert!(stopped.contains("1 trials in"), "{stopped}");
+    let into = recordings.join("recording-001");
+    assert!(std::fs::metadata(into.join("stream.bin")).unwrap().len() > 10_000);
+    let csv = std::fs::read_to_string(into.join("trial_000.csv")).unwrap();
+    assert_eq!(
+        csv.lines().next(),
+        Some(needle_io::decode::CSV_HEADER.join(",").as_str()),
+        "the columns `needle record` writes"
+    );
+    let trial = needle_io::trial::read(&into.join("trial_000.csv")).unwrap();
+    let steps_s: Vec<f64> = trial.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(
+        steps_s
+            .iter()
+            .all(|dt| (dt - 1.0 / plan.rate_hz).abs() < 1e-6),
+        "every sample, none lost to the page"
+    );
+    let peak_n = trial.f_n.iter().cloned().fold(f64::MIN, f64::max);
+    assert!(
+        (peak_n - expected_n).abs() < 0.05 * expected_n,
+        "the recorded trial peaks at {peak_n} N against the simulation's {expected_n} N"
+    );
+    let nothing = post(&address, r#"{"command":"record","on":false}"#);
+    assert!(nothing.contains("not recording"), "{nothing}");
+
     // A page opened after the puncture has it from its first message.
     let later = events_until(&address, "\"kind\":\"puncture\"");
     assert!(later
         .first()
         .is_some_and(|snapshot| snapshot.contains("\"kind\":\"puncture\"")));
 
-    // SIGTERM stops it, and the QEMU behind it, at once.
+    // SIGTERM stops it, and the QEMU behind it, at once; a recording
+    // under way is finished first, as `needle record` finishes one.
+    let second = post(&address, r#"{"command":"record","on":true}"#);
+    assert!(second.contains("recording-002"), "{second}");
     let status = live
         .stop()
         .expect("needle live stops within 10 s of SIGTERM");
     assert!(status.success(), "{status}");
+    let left: Vec<String> = std::fs::read_dir(recordings.join("recording-002"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(left.iter().any(|name| name == "stream.bin"), "{left:?}");
+    assert!(
+        !left.iter().any(|name| name.ends_with(".part")),
+        "the trial in hand finished: {left:?}"
+    );
 }
