@@ -18,12 +18,16 @@ step "prerequisites"
 # when they are there and installs them when not.
 rustup target add thumbv6m-none-eabi thumbv7m-none-eabi thumbv7em-none-eabihf
 rustup component add rustfmt clippy llvm-tools
-if ! command -v qemu-system-arm >/dev/null; then
-    SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
-    $SUDO apt-get update
-    $SUDO apt-get install -y --no-install-recommends qemu-system-arm
-fi
+apt_install() {
+    local sudo=""; [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    $sudo apt-get update
+    $sudo apt-get install -y --no-install-recommends "$@"
+}
+command -v qemu-system-arm >/dev/null || apt_install qemu-system-arm
 qemu-system-arm --version | head -n 1
+# The live view's browser test drives Debian's Chromium through its ChromeDriver.
+{ command -v chromium && command -v chromedriver; } >/dev/null || apt_install chromium chromium-driver
+chromedriver --version
 if ! command -v defmt-print >/dev/null; then
     cargo install defmt-print --version 1.2.0 --locked
 fi

@@ -17,6 +17,7 @@ mod library;
 mod apart_check;
 mod apart_validation;
 mod broken_streams;
+mod browser;
 mod decode_cli;
 mod detect;
 mod diagnose;

@@ -1,0 +1,209 @@
+//! `needle live` in a real browser: Debian's headless Chromium, driven
+//! over WebDriver (its ChromeDriver, by `fantoccini`), against the
+//! firmware in QEMU replaying a liver insertion in real time. What a
+//! researcher at the rig would do: open the page, tare with the needle
+//! out of the tissue, start recording, watch the puncture appear. The screenshot it takes
+//! is the one the book shows (`target/tmp/live.png`, copied to
+//! `book/src/img/live.png` by hand when the page changes).
+//!
+//! `.ci/test.sh` installs `chromium` and `chromium-driver`; without them
+//! this test fails, saying which is missing.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use fantoccini::{Client, ClientBuilder, Locator};
+use hyper_util::client::legacy::connect::HttpConnector;
+use needle_analysis::sim::{self, Plan};
+use needle_holder::config::DeviceConfig;
+use needle_holder::model::params::LIVER1;
+
+use crate::live::Live;
+
+const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
+const CHROMIUM: &str = "/usr/bin/chromium";
+
+/// ChromeDriver on a port of its choosing, killed when the test ends.
+struct Driver(Child);
+
+impl Driver {
+    fn start() -> (Self, u16) {
+        for program in [CHROMEDRIVER, CHROMIUM] {
+            assert!(
+                Path::new(program).exists(),
+                "{program} is missing: install Debian's chromium and chromium-driver (.ci/test.sh does)"
+            );
+        }
+        let mut child = Command::new(CHROMEDRIVER)
+            .arg("--port=0")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let stdout = BufReader::new(child.stdout.take().unwrap());
+        let driver = Driver(child);
+        for line in stdout.lines() {
+            let line = line.unwrap();
+            if let Some(port) = line.split("started successfully on port ").nth(1) {
+                let port = port.trim_end_matches('.').trim().parse().unwrap();
+                return (driver, port);
+            }
+        }
+        panic!("ChromeDriver ended without saying its port");
+    }
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Headless Chromium as this machine's closed network needs it: no
+/// sandbox (CI runs as root), no background connections, a profile of
+/// its own.
+async fn browser(port: u16, profile: &Path) -> Client {
+    let options = serde_json::json!({
+        "binary": CHROMIUM,
+        "args": [
+            "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic",
+            "--no-first-run", "--disable-background-networking",
+            "--disable-component-update", "--disable-sync",
+            "--window-size=1280,1900",
+            format!("--user-data-dir={}", profile.display()),
+        ],
+    });
+    let mut capabilities = serde_json::Map::new();
+    capabilities.insert("goog:chromeOptions".into(), options);
+    ClientBuilder::new(HttpConnector::new())
+        .capabilities(capabilities)
+        .connect(&format!("http://127.0.0.1:{port}"))
+        .await
+        .expect("a session of headless Chromium")
+}
+
+/// The text of the first element `css` finds once `done` holds of it,
+/// polled every 100 ms; the test fails naming what it waited for.
+async fn wait_for(
+    browser: &Client,
+    css: &str,
+    within: Duration,
+    done: impl Fn(&str) -> bool,
+) -> String {
+    let until = Instant::now() + within;
+    let mut last = None;
+    while Instant::now() < until {
+        if let Ok(element) = browser.find(Locator::Css(css)).await {
+            if let Ok(text) = element.text().await {
+                if done(&text) {
+                    return text;
+                }
+                last = Some(text);
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("`{css}` not as awaited within {within:?}; last seen: {last:?}");
+}
+
+async fn click(browser: &Client, css: &str) {
+    let button = browser.find(Locator::Css(css)).await.unwrap();
+    button.click().await.unwrap();
+}
+
+#[test]
+fn a_tare_clicked_in_the_page_reaches_the_device_and_the_puncture_is_listed() {
+    // The needle starts 40 mm from the liver (13 s at 3 mm/s), time to
+    // load the page and tare before contact, and the load cell reads
+    // 10 mN with the needle out (below the 50 mN that counts as
+    // contact), so a tare moves the device's zero.
+    let plan = Plan {
+        surface_x_m: 0.04,
+        ..Plan::PAPER
+    };
+    let (mut trial, truth) = sim::insertion(&LIVER1, &plan);
+    const OFFSET_N: f64 = 0.01;
+    trial.f_n.iter_mut().for_each(|f_n| *f_n += OFFSET_N);
+    let config = DeviceConfig::default();
+    let bytes = sim::to_replay(
+        &trial,
+        plan.rate_hz as u16,
+        &config.load_cell,
+        &config.encoder,
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let replay = dir.path().join("liver1-offset.replay");
+    std::fs::write(&replay, bytes).unwrap();
+
+    let (mut live, address) = Live::start(
+        &replay,
+        &[
+            "--record-into",
+            dir.path().join("recordings").to_str().unwrap(),
+        ],
+    );
+    let (_driver, port) = Driver::start();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let screenshot = runtime.block_on(async {
+        let browser = browser(port, &dir.path().join("profile")).await;
+        browser.goto(&format!("http://{address}/")).await.unwrap();
+        let second = Duration::from_secs(1);
+        wait_for(&browser, "#connection", 20 * second, |t| t == "live").await;
+        let zero = wait_for(&browser, "#zero", 20 * second, |t| t.ends_with("counts")).await;
+
+        click(&browser, "#tare").await;
+        wait_for(&browser, "#replies li", 10 * second, |t| {
+            t.contains("tare: done")
+        })
+        .await;
+        let tared = wait_for(&browser, "#zero", 5 * second, |t| t != zero).await;
+        click(&browser, "#record-on").await;
+        wait_for(&browser, "#recording", 5 * second, |t| {
+            t.contains("recording-001")
+        })
+        .await;
+
+        let row = wait_for(&browser, "#events tr.puncture", 60 * second, |_| true).await;
+        // Let the plots draw the fall after the puncture.
+        tokio::time::sleep(2 * second).await;
+        let png = browser.screenshot().await.unwrap();
+        browser.close().await.unwrap();
+        (zero, tared, row, png)
+    });
+    let (zero, tared, row, png) = screenshot;
+
+    let counts = |text: &str| -> i64 { text.trim_end_matches(" counts").parse().unwrap() };
+    // Q16.16 µN a count.
+    let n_per_count = f64::from(config.load_cell.gain_q16) / 65_536.0 * 1e-6;
+    let moved_n = (counts(&tared) - counts(&zero)) as f64 * n_per_count;
+    assert!(
+        (moved_n - OFFSET_N).abs() < 0.003,
+        "the tare moved the zero by {moved_n} N ({zero} → {tared}); the load cell read {OFFSET_N} N"
+    );
+
+    // The row: insertion, kind, time, depth, force, confidence.
+    let cells: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(cells.get(1), Some(&"puncture"), "{row}");
+    let force_n: f64 = cells[4].parse().unwrap();
+    let expected_n = truth.puncture_force_n;
+    assert!(
+        (force_n - expected_n).abs() < 0.05 * expected_n,
+        "the page lists {force_n} N against the simulation's {expected_n} N: {row}"
+    );
+
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("live.png");
+    std::fs::write(&out, &png).unwrap();
+    assert!(png.starts_with(b"\x89PNG") && png.len() > 20_000);
+    eprintln!("the page, as Chromium drew it: {}", out.display());
+
+    let status = live
+        .stop()
+        .expect("needle live stops within 10 s of SIGTERM");
+    assert!(status.success(), "{status}");
+}
