@@ -30,7 +30,7 @@ enum Command {
     /// Watch an insertion live in a browser (a page on 127.0.0.1).
     Live(needle_live::LiveArgs),
     /// Build the firmware, replay one liver insertion in QEMU, decode it live.
-    Demo(demo::DemoArgs),
+    Demo(DemoCommand),
     /// Count instructions per sample under QEMU; measure flash and RAM.
     Bench(bench::BenchArgs),
     /// Simulate trials (CSV + firmware replays + truth.json), with effects.
@@ -45,6 +45,42 @@ enum Command {
     Diagnose(diagnose::DiagnoseArgs),
 }
 
+/// `needle demo`, in the terminal or, with `--live`, in the browser.
+#[derive(clap::Args)]
+struct DemoCommand {
+    #[command(flatten)]
+    demo: demo::DemoArgs,
+    /// Serve the live view over the demo's insertion instead of decoding
+    /// it here (`needle live --replay` on the demo's replay, on the
+    /// lm3s6965 board); open the address it prints.
+    #[arg(long)]
+    live: bool,
+    /// With --live: where to serve the page.
+    #[arg(long, default_value = "127.0.0.1:0", requires = "live")]
+    listen: std::net::SocketAddr,
+}
+
+fn run_demo(args: &DemoCommand) -> anyhow::Result<()> {
+    if !args.live {
+        return demo::run(&args.demo);
+    }
+    if args.demo.board != needle_qemu::firmware::Board::Lm3s6965 {
+        let board = clap::ValueEnum::to_possible_value(&args.demo.board)
+            .map_or_else(String::new, |v| v.get_name().to_owned());
+        anyhow::bail!(
+            "--live runs the firmware on the lm3s6965 board; leave --board out (or run `needle demo --board {board}` without --live)"
+        );
+    }
+    let demo = demo::write_replay(&args.demo)?;
+    needle_live::run_command(&needle_live::LiveArgs {
+        port: None,
+        baud: 115_200,
+        record_into: demo.dir.join("recordings"),
+        replay: Some(demo.replay),
+        listen: args.listen,
+    })
+}
+
 fn main() -> ExitCode {
     keep_freed_heap();
     let cli = match Cli::try_parse() {
@@ -53,7 +89,7 @@ fn main() -> ExitCode {
     };
     let result = match &cli.command {
         Command::Decode(args) => decode::run(args),
-        Command::Demo(args) => demo::run(args),
+        Command::Demo(args) => run_demo(args),
         Command::Device(args) => device::run(args),
         Command::Record(args) => record::run(args),
         Command::Live(args) => needle_live::run_command(args),

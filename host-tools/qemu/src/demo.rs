@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use needle_holder::insertion::{Event, EventKind, Sample};
 
 use crate::firmware::{self, Board, Serial};
-use needle_analysis::sim::{self, Plan};
+use needle_analysis::sim::{self, Plan, Truth};
 use needle_holder::model::params::LIVER1;
 use needle_io::decode::{describe, summary_line};
 use needle_io::frames::{Item, Message, StreamDecoder};
@@ -32,35 +32,15 @@ pub struct DemoArgs {
 const QEMU_TIMEOUT: Duration = Duration::from_secs(120);
 
 pub fn run(args: &DemoArgs) -> Result<()> {
-    let tissue = LIVER1;
-    let plan = Plan::PAPER;
-    needle_io::out!(
-        "needle demo: liver 1 of the paper (a1 = {} N/m, a2 = {} N/m², puncture at {:.2} mm), {} mm/s, {} Hz",
-        tissue.a1_n_per_m,
-        tissue.a2_n_per_m2,
-        tissue.puncture_depth_m * 1e3,
-        plan.speed_mps * 1e3,
-        plan.rate_hz
-    )?;
+    let demo = write_replay(args)?;
     firmware::ensure_qemu()?;
     needle_io::out!("building the firmware for {} …", args.board.target())?;
     let elf = firmware::build(args.board)?;
-
-    let dir = match &args.out {
-        Some(dir) => dir.clone(),
-        None => firmware::target_directory()?.join("demo"),
-    };
-    needle_io::input::create_out_dir(&dir)?;
-    let (trial, truth, replay) = sim::insertion_replay(&tissue, &plan);
-    let replay_path = dir.join("liver1.replay");
-    std::fs::write(&replay_path, &replay)
-        .with_context(|| format!("{}: cannot write", replay_path.display()))?;
-    needle_io::out!(
-        "replay: {} ({} samples, {:.1} s)",
-        replay_path.display(),
-        trial.len(),
-        trial.t_s.last().unwrap_or(&0.0)
-    )?;
+    let Demo {
+        dir,
+        replay: replay_path,
+        truth,
+    } = demo;
 
     let listener = TcpListener::bind("127.0.0.1:0").context("cannot listen on loopback")?;
     let addr = listener.local_addr()?;
@@ -125,6 +105,50 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         bail!("the stream was not clean: see above");
     }
     Ok(())
+}
+
+/// The demo's insertion, written as a replay file.
+pub struct Demo {
+    /// Where the demo keeps its files.
+    pub dir: PathBuf,
+    /// The replay of liver 1 under the paper's protocol.
+    pub replay: PathBuf,
+    pub truth: Truth,
+}
+
+/// Say what the demo inserts, and write its replay into the demo's
+/// directory (`needle demo --live` serves the live view over it).
+pub fn write_replay(args: &DemoArgs) -> Result<Demo> {
+    let tissue = LIVER1;
+    let plan = Plan::PAPER;
+    needle_io::out!(
+        "needle demo: liver 1 of the paper (a1 = {} N/m, a2 = {} N/m², puncture at {:.2} mm), {} mm/s, {} Hz",
+        tissue.a1_n_per_m,
+        tissue.a2_n_per_m2,
+        tissue.puncture_depth_m * 1e3,
+        plan.speed_mps * 1e3,
+        plan.rate_hz
+    )?;
+    let dir = match &args.out {
+        Some(dir) => dir.clone(),
+        None => firmware::target_directory()?.join("demo"),
+    };
+    needle_io::input::create_out_dir(&dir)?;
+    let (trial, truth, replay) = sim::insertion_replay(&tissue, &plan);
+    let replay_path = dir.join("liver1.replay");
+    std::fs::write(&replay_path, &replay)
+        .with_context(|| format!("{}: cannot write", replay_path.display()))?;
+    needle_io::out!(
+        "replay: {} ({} samples, {:.1} s)",
+        replay_path.display(),
+        trial.len(),
+        trial.t_s.last().unwrap_or(&0.0)
+    )?;
+    Ok(Demo {
+        dir,
+        replay: replay_path,
+        truth,
+    })
 }
 
 fn accept_within(

@@ -18,31 +18,38 @@ use needle_holder::model::params::LIVER1;
 pub(crate) struct Live(Child);
 
 impl Live {
-    /// `needle live --replay REPLAY MORE…`, and the address it serves on, read
-    /// from the line it prints first.
+    /// `needle live --replay REPLAY MORE…`, and the address it serves on.
     pub(crate) fn start(replay: &Path, more: &[&str]) -> (Self, String) {
+        let mut args = vec!["live", "--replay", replay.to_str().unwrap()];
+        args.extend_from_slice(more);
+        Self::spawn(&args)
+    }
+
+    /// `needle ARGS…`, and the address it serves on, read from the line
+    /// that gives it (the first `needle live` prints).
+    pub(crate) fn spawn(args: &[&str]) -> (Self, String) {
         let mut child = Command::new(env!("CARGO_BIN_EXE_needle"))
-            .args(["live", "--replay", replay.to_str().unwrap()])
-            .args(more)
+            .args(args)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
             .unwrap();
         let stdout = child.stdout.take().unwrap();
         let live = Live(child);
-        let mut first = String::new();
-        BufReader::new(stdout).read_line(&mut first).unwrap();
-        let address = first
-            .split("http://")
-            .nth(1)
-            .and_then(|rest| rest.split('/').next())
-            .unwrap_or_else(|| panic!("no address in {first:?}"))
-            .to_string();
-        assert!(
-            address.starts_with("127.0.0.1:"),
-            "loopback unless asked: {first}"
-        );
-        (live, address)
+        let mut said = Vec::new();
+        for line in BufReader::new(stdout).lines() {
+            let line = line.unwrap();
+            if let Some(rest) = line.split("http://").nth(1) {
+                let address = rest.split('/').next().unwrap().to_string();
+                assert!(
+                    address.starts_with("127.0.0.1:"),
+                    "loopback unless asked: {line}"
+                );
+                return (live, address);
+            }
+            said.push(line);
+        }
+        panic!("no address in {said:?}");
     }
 
     /// SIGTERM; how it exited, if it did within 10 s.
@@ -259,4 +266,37 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
         !left.iter().any(|name| name.ends_with(".part")),
         "the trial in hand finished: {left:?}"
     );
+}
+
+#[test]
+fn needle_demo_live_serves_the_demo_insertion_behind_the_page() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let (mut live, address) = Live::spawn(&["demo", "--live", "--out", out.to_str().unwrap()]);
+    let page = get(&address, "/");
+    assert!(page.starts_with("HTTP/1.1 200"), "{page}");
+    let first = events_until(&address, "liver1.replay");
+    assert!(
+        first
+            .first()
+            .is_some_and(|snapshot| snapshot.contains(&format!(
+                "replaying {}",
+                out.join("liver1.replay").display()
+            ))),
+        "{first:?}"
+    );
+    let record = post(&address, r#"{"command":"record","on":true}"#);
+    assert!(
+        record.contains(
+            &out.join("recordings")
+                .join("recording-001")
+                .display()
+                .to_string()
+        ),
+        "the demo's recordings beside its replay: {record}"
+    );
+    let status = live
+        .stop()
+        .expect("needle demo --live stops within 10 s of SIGTERM");
+    assert!(status.success(), "{status}");
 }
