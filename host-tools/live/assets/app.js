@@ -174,6 +174,7 @@ function drawDevice() {
   text("source", d.source || "–");
   text("tissue", d.tissue || "–");
   text("assist", d.assist == null ? "–" : `${d.assist}; target depth ${d.target_depth_mm.toFixed(1)} mm`);
+  if (d.assist != null) mirrorControls(d);
   text("phase", d.phase || "–");
   text("zero", d.tare_counts == null ? "–" : `${d.tare_counts} counts`);
   text("faults", d.faults || "–");
@@ -271,6 +272,28 @@ function offerControls(library, modes) {
       boxes.appendChild(label);
     }
   }
+}
+
+// The controls show what the device runs whenever that changes (set
+// from this page, another page, `needle device`, or a restart), and are
+// the user's to edit in between.
+const mirrored = {};
+function mirror(key, value, apply) {
+  if (value == null || mirrored[key] === value) return;
+  mirrored[key] = value;
+  apply();
+}
+
+function mirrorControls(d) {
+  mirror("assist", `${d.assist};${d.target_depth_mm}`, () => {
+    const on = new Set((d.assist || "").split(","));
+    for (const box of document.querySelectorAll("#assist-modes input")) box.checked = on.has(box.value);
+    if (d.target_depth_mm != null) document.getElementById("depth-mm").value = Number(d.target_depth_mm.toFixed(1));
+  });
+  mirror("tissue", d.tissue, () => {
+    const select = document.getElementById("tissue-name");
+    if ([...select.options].some(o => o.value === d.tissue)) select.value = d.tissue;
+  });
 }
 
 function wireControls() {

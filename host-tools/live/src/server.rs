@@ -84,11 +84,16 @@ async fn command(
 ) -> (StatusCode, Json<Answer>) {
     let Json(request) = match request {
         Ok(request) => request,
+        // 400 for JSON that is no command, 415 for a body that is not
+        // JSON, 413 for one over axum's 2 MB: each with what was wrong.
         Err(e) => {
-            return bad(Answer::not(
-                "the request",
-                format!("not a command: {}", e.body_text()),
-            ))
+            return (
+                e.status(),
+                Json(Answer::not(
+                    "the request",
+                    format!("not a command: {}", e.body_text()),
+                )),
+            )
         }
     };
     let what = request.what();
@@ -139,4 +144,50 @@ async fn events(
         })
     });
     Sse::new(first.chain(rest)).keep_alive(KeepAlive::default())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use axum::body::Body;
+    use axum::http::Request as HttpRequest;
+    use tower::ServiceExt;
+
+    /// The status and the answer's words for a `POST /command` of `body`
+    /// as `content_type`, with no device behind the server.
+    async fn command_answer(content_type: &str, body: Vec<u8>) -> (StatusCode, String) {
+        let (shared, _asked) = Shared::new("test");
+        let request = HttpRequest::post("/command")
+            .header(header::CONTENT_TYPE, content_type)
+            .body(Body::from(body))
+            .unwrap();
+        let response = router(shared).oneshot(request).await.unwrap();
+        let status = response.status();
+        let bytes = axum::body::to_bytes(response.into_body(), 1 << 16)
+            .await
+            .unwrap();
+        (status, String::from_utf8_lossy(&bytes).into_owned())
+    }
+
+    #[tokio::test]
+    async fn a_request_that_is_no_command_is_told_what_was_wrong_with_its_status() {
+        let tare = br#"{"command":"tare"}"#.to_vec();
+        let (status, said) = command_answer("text/plain", tare).await;
+        assert_eq!(status, StatusCode::UNSUPPORTED_MEDIA_TYPE, "{said}");
+        assert!(
+            said.contains("not a command") && said.contains("application/json"),
+            "{said}"
+        );
+
+        let mut huge =
+            br#"{"command":"upload","file_name":"big.toml","entry":null,"toml":""#.to_vec();
+        huge.resize(3 << 20, b'#');
+        huge.extend_from_slice(br#""}"#);
+        let (status, said) = command_answer("application/json", huge).await;
+        assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE, "{said}");
+        assert!(said.contains("not a command"), "{said}");
+
+        let (status, said) = command_answer("application/json", b"{not json".to_vec()).await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{said}");
+    }
 }

@@ -2,7 +2,8 @@
 //! over WebDriver (its ChromeDriver, by `fantoccini`), against the
 //! firmware in QEMU replaying a liver insertion in real time. What a
 //! researcher at the rig would do: open the page, tare with the needle
-//! out of the tissue, start recording, watch the puncture appear. The screenshot it takes
+//! out of the tissue, start recording, see assist set from elsewhere,
+//! watch the puncture appear and the halt line go up. The screenshot it takes
 //! is the one the book shows (`target/tmp/live.png`, copied to
 //! `book/src/img/live.png` by hand when the page changes).
 //!
@@ -20,7 +21,7 @@ use needle_analysis::sim::{self, Plan};
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
 
-use crate::live::Live;
+use crate::live::{post, Live};
 
 const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
 const CHROMIUM: &str = "/usr/bin/chromium";
@@ -169,7 +170,32 @@ fn a_tare_clicked_in_the_page_reaches_the_device_and_the_puncture_is_listed() {
         })
         .await;
 
+        // Assist set from elsewhere (a script, another page) shows in
+        // this page's controls; stop-on-puncture raises the halt line.
+        let asked = post(
+            &address,
+            r#"{"command":"assist","modes":"puncture","depth_mm":30}"#,
+        );
+        assert!(asked.contains(r#""ok":true"#), "{asked}");
+        let until = Instant::now() + 5 * second;
+        loop {
+            let box_ = browser
+                .find(Locator::Css("#assist-modes input[value=puncture]"))
+                .await
+                .unwrap();
+            if box_.is_selected().await.unwrap() {
+                break;
+            }
+            assert!(
+                Instant::now() < until,
+                "the page's puncture box never ticked"
+            );
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+
         let row = wait_for(&browser, "#events tr.puncture", 60 * second, |_| true).await;
+        let halt = wait_for(&browser, "#halt", 5 * second, |t| t.starts_with("HALT")).await;
+        assert!(halt.contains("puncture"), "{halt}");
         // Let the plots draw the fall after the puncture.
         tokio::time::sleep(2 * second).await;
         let png = browser.screenshot().await.unwrap();

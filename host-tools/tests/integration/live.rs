@@ -98,15 +98,21 @@ fn get(address: &str, path: &str) -> String {
     String::from_utf8_lossy(&body).into_owned()
 }
 
-fn post(address: &str, body: &str) -> String {
+/// `POST /command` of `body` as JSON: the reply, status line first.
+pub(crate) fn post(address: &str, body: &str) -> String {
+    post_raw(address, "application/json", body)
+}
+
+/// `POST /command` with `body` under `content_type`.
+fn post_raw(address: &str, content_type: &str, body: &str) -> String {
+    let length = body.len();
     let mut stream = TcpStream::connect(address).unwrap();
     stream
         .set_read_timeout(Some(Duration::from_secs(30)))
         .unwrap();
     write!(
         stream,
-        "POST /command HTTP/1.1\r\nHost: {address}\r\nContent-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
-        body.len()
+        "POST /command HTTP/1.1\r\nHost: {address}\r\nContent-Type: {content_type}\r\nContent-Length: {length}\r\nConnection: close\r\n\r\n{body}",
     )
     .unwrap();
     let mut reply = Vec::new();
@@ -179,6 +185,11 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     assert!(
         garbage.starts_with("HTTP/1.1 400") && garbage.contains("not a command"),
         "{garbage}"
+    );
+    let text = post_raw(&address, "text/plain", r#"{"command":"tare"}"#);
+    assert!(
+        text.starts_with("HTTP/1.1 415") && text.contains("not a command"),
+        "{text}"
     );
     let spleen = post(&address, r#"{"command":"tissue","name":"spleen"}"#);
     assert!(
