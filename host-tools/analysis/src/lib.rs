@@ -8,5 +8,6 @@ pub mod detect;
 pub mod diagnose;
 pub mod evaluate;
 pub mod fit;
+pub mod page;
 pub mod plot;
 pub mod sim;

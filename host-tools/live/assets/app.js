@@ -1,7 +1,9 @@
 // needle live: the page's side. The server sends a snapshot of the view
 // when the page opens ("snapshot") and what changed ten times a second
 // ("update"); a page that fell behind is told to start afresh ("lagged").
-// Plots are uPlot (bundled, MIT: /assets/uPlot-LICENSE).
+// Plots are uPlot (bundled, MIT: /assets/uPlot-LICENSE); the x-y line
+// drawing (inOrder) and the chart width are charts.js's, shared with the
+// reports.
 "use strict";
 
 // A point is [t_s, x_mm, force_n, model_n, residual_n, phase].
@@ -16,23 +18,6 @@ const EVENT_COLOUR = { contact: "#2a7", puncture: "#d22", structure: "#e80", exi
 let view = { device: {}, insertions: [], events: [], notes: [] };
 let plots = null;
 let drawing = false;
-
-function width() {
-  return Math.max(400, Math.min(1200, document.body.clientWidth - 40));
-}
-
-// Lines in the points' own order (a needle goes in and comes out: x is
-// not sorted), for uPlot's x-y mode.
-function inOrder(u, seriesIdx, idx0, idx1) {
-  const [xs, ys] = u.data[seriesIdx];
-  const stroke = new Path2D();
-  const sx = u.series[seriesIdx].facets[0].scale, sy = u.series[seriesIdx].facets[1].scale;
-  for (let i = 0; i < xs.length; i++) {
-    const px = u.valToPos(xs[i], sx, true), py = u.valToPos(ys[i], sy, true);
-    if (i === 0) stroke.moveTo(px, py); else stroke.lineTo(px, py);
-  }
-  return { stroke, fill: null, clip: null, band: null, gaps: null, flags: 0 };
-}
 
 function byPositionSeries() {
   const series = [{}];
@@ -54,7 +39,7 @@ function byPositionSeries() {
 
 function makePlots() {
   const byPosition = new uPlot({
-    mode: 2, width: width(), height: 300,
+    mode: 2, width: chartWidth(), height: 300,
     scales: { x: { time: false, auto: true }, y: { auto: true } },
     axes: [{ label: "position (mm)" }, { label: "force (N)" }],
     legend: { live: false },
@@ -62,7 +47,7 @@ function makePlots() {
   }, [null, ...Array(INSERTIONS_KEPT + 1).fill([[], []])], document.getElementById("by-position"));
 
   const byTime = new uPlot({
-    width: width(), height: 260,
+    width: chartWidth(), height: 260,
     scales: { x: { time: false } },
     axes: [{ label: "time (s)" }, { label: "force (N)" }],
     series: [{ label: "time (s)" },
@@ -72,7 +57,7 @@ function makePlots() {
   }, [[], [], []], document.getElementById("by-time"));
 
   const residual = new uPlot({
-    width: width(), height: 160,
+    width: chartWidth(), height: 160,
     scales: { x: { time: false } },
     axes: [{ label: "time (s)" }, { label: "residual (N)" }],
     series: [{ label: "time (s)" }, { label: "measured − model", stroke: "#555", width: 1 }],
@@ -110,15 +95,13 @@ function markEvents(u) {
   for (const e of view.events) {
     if (e.insertion !== number) continue;
     const x = u.valToPos(e.t_s, "x", true);
-    // The label beside the line, on the side with room for it.
-    const right = x > u.bbox.left + 0.7 * u.bbox.width;
-    ctx.textAlign = right ? "right" : "left";
+
     ctx.strokeStyle = ctx.fillStyle = EVENT_COLOUR[e.kind] || "#000";
     ctx.beginPath();
     ctx.moveTo(x, u.bbox.top);
     ctx.lineTo(x, u.bbox.top + u.bbox.height);
     ctx.stroke();
-    ctx.fillText(`${e.kind} ${e.force_n.toFixed(2)} N`, right ? x - 4 : x + 4, u.bbox.top + 14 * devicePixelRatio);
+    labelAt(u, x, u.bbox.top + 14 * devicePixelRatio, `${e.kind} ${e.force_n.toFixed(2)} N`);
   }
   ctx.restore();
 }

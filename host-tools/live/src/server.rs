@@ -17,35 +17,27 @@ use axum::Router;
 use tokio_stream::wrappers::BroadcastStream;
 use tokio_stream::{Stream, StreamExt};
 
+use needle_analysis::page;
+
 use crate::commands::{Answer, Request};
 use crate::{Asked, NotAsked, Shared};
 
 const INDEX: &str = include_str!("../assets/index.html");
 
-/// The page's files: name, type, contents.
-const ASSETS: [(&str, &str, &str); 5] = [
+/// The page's files: name, type, contents; all but the live view's own
+/// are every page's (`needle_analysis::page`).
+const ASSETS: [(&str, &str, &str); 7] = [
     (
         "app.js",
         "text/javascript",
         include_str!("../assets/app.js"),
     ),
-    ("style.css", "text/css", include_str!("../assets/style.css")),
-    // uPlot 1.6.32 (MIT, uPlot-LICENSE beside it), as published on npm.
-    (
-        "uPlot.iife.min.js",
-        "text/javascript",
-        include_str!("../assets/uPlot.iife.min.js"),
-    ),
-    (
-        "uPlot.min.css",
-        "text/css",
-        include_str!("../assets/uPlot.min.css"),
-    ),
-    (
-        "uPlot-LICENSE",
-        "text/plain",
-        include_str!("../assets/uPlot-LICENSE"),
-    ),
+    ("live.css", "text/css", include_str!("../assets/live.css")),
+    ("page.css", "text/css", page::STYLE_CSS),
+    ("charts.js", "text/javascript", page::CHARTS_JS),
+    ("uPlot.iife.min.js", "text/javascript", page::UPLOT_JS),
+    ("uPlot.min.css", "text/css", page::UPLOT_CSS),
+    ("uPlot-LICENSE", "text/plain", page::UPLOT_LICENSE),
 ];
 
 /// Serve the live view on `listener` until the process stops.

@@ -7,8 +7,13 @@
 //! is the one the book shows (`target/tmp/live.png`, copied to
 //! `book/src/img/live.png` by hand when the page changes).
 //!
+//! And the pages `needle fit --plot` and `needle diagnose --report` write,
+//! opened from their files: every chart drawn, labelled as the analysis
+//! says (their screenshots, `target/tmp/fit.png` and `report.png`, are the
+//! book's `img/fit-page.png` and `img/report.png`).
+//!
 //! `.ci/test.sh` installs `chromium` and `chromium-driver`; without them
-//! this test fails, saying which is missing.
+//! these tests fail, saying which is missing.
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -232,4 +237,116 @@ fn a_tare_clicked_in_the_page_reaches_the_device_and_the_puncture_is_listed() {
         .stop()
         .expect("needle live stops within 10 s of SIGTERM");
     assert!(status.success(), "{status}");
+}
+
+/// `needle ARGS…`, which must succeed.
+fn needle(args: &[&str]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "needle {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The legends' labels of every chart on the page, once each has drawn.
+async fn legends(browser: &Client, charts: usize) -> Vec<String> {
+    let until = Instant::now() + Duration::from_secs(10);
+    loop {
+        let drawn = browser.find_all(Locator::Css(".uplot")).await.unwrap();
+        if drawn.len() == charts {
+            break;
+        }
+        assert!(
+            Instant::now() < until,
+            "{} of {charts} charts drawn",
+            drawn.len()
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let mut labels = Vec::new();
+    for label in browser
+        .find_all(Locator::Css(".u-legend .u-label"))
+        .await
+        .unwrap()
+    {
+        labels.push(label.text().await.unwrap());
+    }
+    labels
+}
+
+#[test]
+fn the_fit_and_the_diagnosis_draw_their_pages_in_the_live_views_look() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_owned();
+    let data = path("trials");
+    needle(&[
+        "simulate",
+        "--out",
+        &data,
+        "--effects",
+        "depth_dependent_cutting",
+        "--trials",
+        "6",
+    ]);
+    let fit = path("fit.html");
+    needle(&["fit", &data, "--json", &path("fit.json"), "--plot", &fit]);
+    let report = path("gap.html");
+    needle(&[
+        "diagnose",
+        &data,
+        "--json",
+        &path("gap.json"),
+        "--report",
+        &report,
+    ]);
+
+    let (_driver, port) = Driver::start();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    runtime.block_on(async {
+        let browser = browser(port, &dir.path().join("profile")).await;
+
+        browser.goto(&format!("file://{fit}")).await.unwrap();
+        let labels = legends(&browser, 1).await;
+        assert_eq!(labels, ["measured", "fitted model"]);
+        let page = browser.source().await.unwrap();
+        for text in ["puncture force", "stiffness a1", "value ± spread"] {
+            assert!(page.contains(text), "the fit's page lacks {text}");
+        }
+        std::fs::write(out.join("fit.png"), browser.screenshot().await.unwrap()).unwrap();
+
+        browser.goto(&format!("file://{report}")).await.unwrap();
+        let labels = legends(&browser, 2).await;
+        assert_eq!(
+            labels,
+            [
+                "measured",
+                "nominal",
+                "+ depth_dependent_cutting",
+                "measured − nominal",
+                "measured − + depth_dependent_cutting"
+            ]
+        );
+        let verdict = browser
+            .find(Locator::Css(".verdict"))
+            .await
+            .unwrap()
+            .text()
+            .await
+            .unwrap();
+        assert!(
+            verdict.contains("with depth_dependent_cutting"),
+            "{verdict}"
+        );
+        std::fs::write(out.join("report.png"), browser.screenshot().await.unwrap()).unwrap();
+        browser.close().await.unwrap();
+    });
+    eprintln!("the pages, as Chromium drew them: {}", out.display());
 }

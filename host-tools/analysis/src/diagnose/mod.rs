@@ -1613,7 +1613,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         let (augmented, label) = withheld_overlay(&data, &out);
         let svg = report_figure(path);
         figure::draw(&svg, &data[0], &augmented, &label)?;
-        report::write(path, &svg, &out)?;
+        report::write(path, &svg, &out, &data[0], &augmented, &label)?;
     }
     let text = serde_json::to_string_pretty(&out)? + "\n";
     match &args.json {

@@ -1,10 +1,27 @@
-//! The one-page report: an HTML page with the verdict, the ranked
-//! candidates and the residual figure (SVG beside it, drawn with plotters).
+//! The one-page report: the verdict, the waterfall of effects, the
+//! ranked candidates and a withheld trial drawn with and without the
+//! named effect, in the look of every page the tools make
+//! ([`crate::page`]), in one file; the same figure as SVG beside it, for
+//! print (drawn with plotters).
 
 use std::path::Path;
 
+use super::prepare::{Prepared, PHASES};
 use super::Diagnosis;
+use crate::page::{self, colour, Band, Chart, Line};
 use anyhow::{Context, Result};
+
+/// Phase bands, in [`PHASES`] order; none for the approach and after,
+/// where the needle is out of the tissue.
+const BAND_COLOURS: [Option<&str>; 7] = [
+    None,
+    Some("rgba(255, 200, 0, 0.15)"),
+    Some("rgba(0, 140, 255, 0.12)"),
+    Some("rgba(120, 120, 120, 0.12)"),
+    Some("rgba(40, 170, 120, 0.15)"),
+    Some("rgba(150, 60, 255, 0.12)"),
+    None,
+];
 
 /// The diagnosis in one line: what `needle diagnose` prints on stderr and
 /// the report's headline.
@@ -38,8 +55,17 @@ pub fn headline(out: &Diagnosis) -> String {
     )
 }
 
-/// Write the page to `path`, showing the figure already drawn at `svg`.
-pub fn write(path: &Path, svg: &Path, out: &Diagnosis) -> Result<()> {
+/// Write the page to `path`: `p`, a withheld trial, drawn with its
+/// nominal and `augmented` (the model with `label`, same samples); `svg`
+/// names the print figure beside it.
+pub fn write(
+    path: &Path,
+    svg: &Path,
+    out: &Diagnosis,
+    p: &Prepared,
+    augmented: &[f64],
+    label: &str,
+) -> Result<()> {
     let mut rows = String::new();
     for c in &out.candidates {
         rows += &format!(
@@ -51,17 +77,101 @@ pub fn write(path: &Path, svg: &Path, out: &Diagnosis) -> Result<()> {
             if c.significant { "yes" } else { "no" },
         );
     }
-    let html = format!(
-        "<!doctype html><meta charset=utf-8><title>needle diagnose</title>\
-         <h1>Sim-to-real gap</h1><p><b>Verdict:</b> {}.\
-         <h2>The gap, effect by effect (held out)</h2>{}\
-         <h2>Candidates, held out</h2><table border=1><tr><th>effect<th>held-out RMS (N)<th>shrink<th>paired t<th>significant</tr>\n{rows}</table>\
-         <h2>A withheld trial: the model with and without the named effect, and the residual by phase</h2><img src=\"{}\">",
-        headline(out),
-        waterfall_svg(out),
-        svg.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+    let charts = withheld_charts(p, augmented, label);
+    let svg_name = svg
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let verdict_class = if out.verdict.explained { "ok" } else { "bad" };
+    let verdict = page::escape(&headline(out));
+    let waterfall = waterfall_svg(out);
+    let (force, residual) = (page::figure(0, &charts[0]), page::figure(1, &charts[1]));
+    let svg_name = page::escape(&svg_name);
+    let body = format!(
+        "<h1>Sim-to-real gap</h1>\n<p class=\"verdict {verdict_class}\"><b>Verdict:</b> {verdict}.</p>\n\
+         <h2>The gap, effect by effect (held out)</h2>\n{waterfall}\n\
+         <h2>Candidates, held out</h2>\n<table><tr><th>effect</th><th>held-out RMS (N)</th><th>shrink</th><th>paired t</th><th>significant</th></tr>\n{rows}</table>\n\
+         <h2>A withheld trial: the model with and without the named effect, and the residual by phase</h2>\n{force}{residual}\
+         <p class=\"caption\">The same figure for print: <a href=\"{svg_name}\">{svg_name}</a>.</p>"
     );
+    let html = page::standalone("needle diagnose", &body, &charts)?;
     std::fs::write(path, html).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// The withheld trial against time — measured, nominal, with the effect —
+/// and the residual of each beneath, phases shaded.
+fn withheld_charts(p: &Prepared, augmented: &[f64], label: &str) -> [Chart; 2] {
+    let t = &p.trial.t_s;
+    let line = |name: &str, colour, dashed, ys: &[f64]| {
+        Line::new(
+            name,
+            colour,
+            dashed,
+            t.iter().copied().zip(ys.iter().copied()),
+        )
+    };
+    let augmented_residual: Vec<f64> = p
+        .trial
+        .f_n
+        .iter()
+        .zip(augmented)
+        .map(|(f, a)| f - a)
+        .collect();
+    let bands = phase_bands(p);
+    let force = Chart {
+        caption: format!("{} (withheld): measured, nominal, {label}", p.file),
+        x_label: "time (s)".into(),
+        y_label: "force (N)".into(),
+        lines: vec![
+            line("measured", colour::MEASURED, false, &p.trial.f_n),
+            line("nominal", colour::MODEL, true, &p.nominal_n),
+            line(label, colour::AUGMENTED, false, augmented),
+        ],
+        markers: Vec::new(),
+        bands: bands.clone(),
+        height: 340,
+    };
+    let residual = Chart {
+        caption: "residual (measured − model), phases shaded".into(),
+        x_label: "time (s)".into(),
+        y_label: "residual (N)".into(),
+        lines: vec![
+            line("measured − nominal", colour::MODEL, false, &p.residual_n),
+            line(
+                &format!("measured − {label}"),
+                colour::AUGMENTED,
+                false,
+                &augmented_residual,
+            ),
+        ],
+        markers: Vec::new(),
+        bands,
+        height: 240,
+    };
+    [force, residual]
+}
+
+/// A band for each run of one phase, named.
+fn phase_bands(p: &Prepared) -> Vec<Band> {
+    let t = &p.trial.t_s;
+    let mut bands = Vec::new();
+    let mut start = 0;
+    for i in 1..=t.len() {
+        if i < t.len() && p.phase[i] == p.phase[start] {
+            continue;
+        }
+        let phase = p.phase[start];
+        if let Some(colour) = BAND_COLOURS[phase] {
+            bands.push(Band {
+                from: t[start],
+                to: t[i - 1],
+                label: PHASES[phase],
+                colour,
+            });
+        }
+        start = i;
+    }
+    bands
 }
 
 /// The waterfall as an inline figure: a bar for the held-out RMS of the
@@ -77,7 +187,10 @@ fn waterfall_svg(out: &Diagnosis) -> String {
     let noise = out.noise_floor_n;
     let explained = super::EXPLAINED_FACTOR * noise;
     let top = bars.iter().map(|b| b.1).fold(explained, f64::max).max(1e-9) * 1.15;
-    let (w, h, left, bottom, bar_w) = (140.0 * bars.len() as f64 + 120.0, 300.0, 70.0, 250.0, 90.0);
+    // Wide enough that the noise floor's label, at the right, clears the
+    // bars.
+    let w = 140.0 * bars.len() as f64 + 300.0;
+    let (h, left, bottom, bar_w) = (300.0, 70.0, 250.0, 90.0);
     let y = |v: f64| bottom - (v / top) * (bottom - 20.0);
     let mut svg = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\

@@ -33,7 +33,9 @@ pub struct FitArgs {
     #[arg(long)]
     pub toml: Option<PathBuf>,
     /// Draw force against position of the first trial, with the fitted
-    /// model over it and the events marked, to this SVG file.
+    /// model over it and the events marked: a page (in the look of the
+    /// live view and the diagnosis report) unless the name ends in `.svg`,
+    /// which gets an SVG figure for print.
     #[arg(long)]
     pub plot: Option<PathBuf>,
 }
@@ -511,7 +513,6 @@ pub fn run(args: &FitArgs) -> Result<()> {
 
 /// The first fitted trial with the fitted model over it.
 fn plot_first_trial(dir: &Path, fit: &FitReport, params: TissueParams, path: &Path) -> Result<()> {
-    use crate::plot::{force_vs_position, Marker, Series};
     let first = &fit
         .per_trial
         .first()
@@ -533,39 +534,105 @@ fn plot_first_trial(dir: &Path, fit: &FitReport, params: TissueParams, path: &Pa
         .zip(trial.f_n.iter().copied())
         .collect();
     let fitted: Vec<(f64, f64)> = trial.x_m.iter().copied().zip(model).collect();
+    let title = format!("{first}: force against position");
     let markers = [
-        Marker {
-            label: "contact",
-            x_m: geometry.contact_x_m,
-            f_n: 0.0,
-        },
-        Marker {
-            label: "puncture",
-            x_m: geometry.puncture_x_m,
-            f_n: geometry.puncture_force_n,
-        },
-        Marker {
-            label: "relaxed surface",
-            x_m: geometry.relaxed_x_m,
-            f_n: 0.0,
-        },
+        ("contact", geometry.contact_x_m, 0.0),
+        ("puncture", geometry.puncture_x_m, geometry.puncture_force_n),
+        ("relaxed surface", geometry.relaxed_x_m, 0.0),
     ];
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("svg"))
+    {
+        return plot_svg(path, &title, measured, fitted, &markers);
+    }
+    plot_page(path, &title, fit, measured, fitted, &markers)
+}
+
+/// The plot as an SVG figure (plotters).
+fn plot_svg(
+    path: &Path,
+    title: &str,
+    measured: Vec<(f64, f64)>,
+    fitted: Vec<(f64, f64)>,
+    markers: &[(&str, f64, f64)],
+) -> Result<()> {
+    use crate::plot::{force_vs_position, Marker, Series};
+    let markers: Vec<Marker> = markers
+        .iter()
+        .map(|&(label, x_m, f_n)| Marker { label, x_m, f_n })
+        .collect();
     let series = [
         Series {
             label: "measured",
-            color: plotters::style::RGBColor(70, 110, 200),
+            color: plotters::style::RGBColor(20, 60, 200),
             points: measured,
         },
         Series {
             label: "fitted model",
-            color: plotters::style::RGBColor(220, 60, 40),
+            color: plotters::style::RGBColor(220, 30, 30),
             points: fitted,
         },
     ];
-    force_vs_position(
-        path,
-        &format!("{first}: force against position"),
-        &series,
-        &markers,
-    )
+    force_vs_position(path, title, &series, &markers)
+}
+
+/// The plot as a page, with the fit's main estimates beneath.
+fn plot_page(
+    path: &Path,
+    title: &str,
+    fit: &FitReport,
+    measured: Vec<(f64, f64)>,
+    fitted: Vec<(f64, f64)>,
+    markers: &[(&str, f64, f64)],
+) -> Result<()> {
+    use crate::page::{self, colour, Chart, Line, Marker};
+    let mm = |points: Vec<(f64, f64)>| points.into_iter().map(|(x, f)| (x * 1e3, f));
+    let chart = Chart {
+        caption: format!("{title}: measured (solid) and the fitted model (dashed)"),
+        x_label: "needle position (mm)".into(),
+        y_label: "force (N)".into(),
+        lines: vec![
+            Line::new("measured", colour::MEASURED, false, mm(measured)),
+            Line::new("fitted model", colour::MODEL, true, mm(fitted)),
+        ],
+        markers: markers
+            .iter()
+            .map(|&(label, x_m, f_n)| Marker {
+                label: label.to_owned(),
+                x: x_m * 1e3,
+                y: f_n,
+            })
+            .collect(),
+        bands: Vec::new(),
+        height: 420,
+    };
+    let mut rows = String::new();
+    for (name, estimate, unit) in [
+        ("stiffness a1", &fit.a1_n_per_m, "N/m"),
+        ("stiffness a2", &fit.a2_n_per_m2, "N/m²"),
+        ("puncture force", &fit.puncture_force_n, "N"),
+        ("puncture depth", &fit.puncture_depth_m, "m"),
+        ("cutting force", &fit.cutting_force_n, "N"),
+        ("friction C_p", &fit.cp_n_per_m, "N/m"),
+        ("friction C_n", &fit.cn_n_per_m, "N/m"),
+        ("sensor noise", &fit.noise_n, "N"),
+    ] {
+        let value = match (estimate.value, estimate.sd, estimate.model_uses) {
+            (Some(v), Some(sd), _) => format!("{v:.4} ± {sd:.4}"),
+            (Some(v), None, _) => format!("{v:.4}"),
+            (None, _, Some(used)) => format!("not identified (the model uses {used:.4})"),
+            (None, _, None) => "not identified".to_owned(),
+        };
+        rows += &format!("<tr><td>{name}</td><td>{value}</td><td>{unit}</td></tr>\n");
+    }
+    let body = format!(
+        "<h1>needle fit</h1>\n<p>{} trials fitted; the first drawn.</p>\n{}\
+         <h2>Estimates over the trials</h2>\n<table><tr><th>parameter</th><th>value ± spread</th><th>unit</th></tr>\n{rows}</table>\n\
+         <p class=\"caption\">Every estimate, with its note, is in the fit's JSON (<code>--json</code>).</p>",
+        fit.trials,
+        page::figure(0, &chart),
+    );
+    let html = page::standalone("needle fit", &body, &[chart])?;
+    std::fs::write(path, html).with_context(|| format!("{}: cannot write", path.display()))
 }
