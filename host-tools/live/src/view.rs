@@ -4,7 +4,8 @@
 //! from one moment to the next.
 //!
 //! Bounded whatever runs for how long: [`INSERTIONS_KEPT`] insertions of
-//! at most [`POINTS_PER_INSERTION`] points each, [`EVENTS_KEPT`] events.
+//! at most [`POINTS_PER_INSERTION`] points each, [`EVENTS_KEPT`] events,
+//! [`NOTES_KEPT`] lines of the host's own.
 
 use std::collections::VecDeque;
 
@@ -437,6 +438,7 @@ mod tests {
             };
             for _ in 0..EVENTS_KEPT {
                 view.apply(&Item::Frame(Message::Event(event)));
+                view.note("trial written".into());
             }
             view.take_update(&StreamStats::default(), 500.0);
         }
@@ -451,6 +453,7 @@ mod tests {
             .iter()
             .all(|i| i.points.len() == POINTS_PER_INSERTION));
         assert_eq!(snapshot.events.len(), EVENTS_KEPT);
+        assert_eq!(snapshot.notes.len(), NOTES_KEPT);
     }
 
     #[test]

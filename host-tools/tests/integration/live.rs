@@ -311,3 +311,79 @@ fn needle_demo_live_serves_the_demo_insertion_behind_the_page() {
         .expect("needle demo --live stops within 10 s of SIGTERM");
     assert!(status.success(), "{status}");
 }
+
+#[test]
+fn at_2_khz_the_page_keeps_up_decimated_and_the_recording_keeps_every_sample() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = Plan {
+        rate_hz: 2000.0,
+        speed_mps: 0.006,
+        surface_x_m: 0.012,
+        depth_m: 0.025,
+        dwell_s: 0.5,
+        ..Plan::PAPER
+    };
+    let (trial, _, bytes) = sim::insertion_replay(&LIVER1, &plan);
+    let replay = dir.path().join("fast.replay");
+    std::fs::write(&replay, bytes).unwrap();
+    let recordings = dir.path().join("recordings");
+    let (mut live, address) =
+        Live::start(&replay, &["--record-into", recordings.to_str().unwrap()]);
+    let record = post(&address, r#"{"command":"record","on":true}"#);
+    assert!(record.contains(r#""ok":true"#), "{record}");
+
+    // To the end of the replay, when the device goes away.
+    let seen = events_until(&address, "\"connected\":false");
+    assert!(
+        seen.last()
+            .is_some_and(|last| last.contains("\"connected\":false")),
+        "the replay's end never reached the page"
+    );
+    let mut rates = Vec::new();
+    let mut points = 0;
+    let mut lost = 0;
+    for data in &seen[1..] {
+        let update: serde_json::Value = serde_json::from_str(data).unwrap();
+        points += update["points"].as_array().map_or(0, Vec::len);
+        if let Some(device) = update["device"].as_object() {
+            rates.push(device["samples_per_s"].as_f64().unwrap());
+            lost += device["samples_lost"].as_u64().unwrap()
+                + device["samples_withheld"].as_u64().unwrap();
+        }
+    }
+    let fastest = rates.iter().cloned().fold(0.0, f64::max);
+    assert!(
+        (1800.0..2300.0).contains(&fastest),
+        "the page saw {fastest} samples a second from a 2 kHz device"
+    );
+    assert_eq!(lost, 0, "no sample lost or withheld");
+    let seconds = trial.len() as f64 / plan.rate_hz;
+    assert!(
+        (points as f64) < 110.0 * seconds + 50.0,
+        "{points} points in {seconds:.1} s: the page is given 100 a second, not 2000"
+    );
+
+    // Every sample recorded, in trials split where the needle left the
+    // tissue, each as evenly spaced as the device sampled.
+    let into = recordings.join("recording-001");
+    let trials: Vec<_> = (0..)
+        .map(|k| into.join(format!("trial_{k:03}.csv")))
+        .take_while(|path| path.exists())
+        .collect();
+    assert!(!trials.is_empty(), "no trial recorded at 2 kHz");
+    for path in &trials {
+        let recorded = needle_io::trial::read(path).unwrap();
+        assert!(
+            recorded
+                .t_s
+                .windows(2)
+                .all(|w| (w[1] - w[0] - 1.0 / plan.rate_hz).abs() < 1e-7),
+            "{}: a sample missing at 2 kHz",
+            path.display()
+        );
+    }
+    let status = live
+        .stop()
+        .expect("needle live stops within 10 s of SIGTERM");
+    assert!(status.success(), "{status}");
+}
