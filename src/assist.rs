@@ -132,6 +132,9 @@ impl AssistConfig {
 
     /// Whether this sample halts the robot, and why. `phase` is the phase
     /// state after the sample; `event` what the detectors flagged in it.
+    /// Inlined into the per-sample step, where most modes are off and the
+    /// call cost more than the checks.
+    #[inline]
     pub fn check(&self, phase: &PhaseState, s: &Sample, event: Option<EventKind>) -> Option<Halt> {
         let m = self.modes;
         let halt = |reason, hold_x| Halt {
