@@ -58,6 +58,9 @@ pub struct Link {
     /// Where the raw bytes read go, as they arrive, when the caller keeps
     /// them (`needle record`'s `stream.bin`).
     capture: Option<Capture>,
+    /// Why writing the capture failed (a full disk), until the caller
+    /// asks; capturing stopped there.
+    capture_failed: Option<anyhow::Error>,
     closed: bool,
 }
 
@@ -76,6 +79,7 @@ impl Link {
             next_seq: None,
             backlog: Vec::new(),
             capture: None,
+            capture_failed: None,
             closed: false,
         })
     }
@@ -94,6 +98,12 @@ impl Link {
         capture.file = Some((file, path.to_path_buf()));
         let held = std::mem::take(&mut capture.held);
         capture.write(&held)
+    }
+
+    /// Why writing the capture failed, once: the bytes read since are not
+    /// in it (they were decoded all the same).
+    pub fn take_capture_error(&mut self) -> Option<anyhow::Error> {
+        self.capture_failed.take()
     }
 
     /// Keep no more of the bytes read (the file, if any, closed).
@@ -149,7 +159,12 @@ impl Link {
             Ok(0) => self.closed = true,
             Ok(n) => {
                 if let Some(capture) = self.capture.as_mut() {
-                    capture.write(&buf[..n])?;
+                    if let Err(e) = capture.write(&buf[..n]) {
+                        // What failed is the file, not the device: the
+                        // stream goes on being read, and the caller is told.
+                        self.capture = None;
+                        self.capture_failed = Some(e);
+                    }
                 }
                 let backlog = &mut self.backlog;
                 let mut seq = None;

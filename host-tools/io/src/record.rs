@@ -64,7 +64,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     }
     // Created once a device has answered: a port with no device behind
     // it left an empty directory.
-    let mut recorder = Recorder::create(&args.out, None)?;
+    let mut recorder = Recorder::create(&args.out, None, "needle record")?;
     let (file, capture) = recorder.stream_file()?;
     link.capture_to(file, &capture)?;
     crate::note!(
@@ -119,6 +119,9 @@ fn record(
         for item in link.poll()? {
             heard = Instant::now();
             recorder.item(&item)?;
+        }
+        if let Some(e) = link.take_capture_error() {
+            return Err(e);
         }
         show(recorder);
         // Nothing at all, not even a heartbeat: a device that was reset
@@ -233,15 +236,14 @@ impl Recorder {
     /// A recording into `dir` (created if missing; it must hold no trial
     /// CSV or stream yet, and no other recording may be writing to it),
     /// of a device sampling at `rate_hz` if known (else from its first
-    /// header or status frame).
-    pub fn create(dir: &Path, rate_hz: Option<u16>) -> Result<Self> {
+    /// header or status frame); `by` names the program in the lock.
+    pub fn create(dir: &Path, rate_hz: Option<u16>, by: &str) -> Result<Self> {
         check_dir(dir)?;
         crate::input::create_out_dir(dir)?;
         // Two recordings into one directory replaced each other's trials,
         // both saying they succeeded; and, the lock taken, the directory
         // is checked again: another may have recorded into it since.
-        let lock =
-            crate::input::lock_output(dir, &dir.join(".needle-record.lock"), "needle record")?;
+        let lock = crate::input::lock_output(dir, &dir.join(".needle-record.lock"), by)?;
         check_dir(dir)?;
         Ok(Self {
             dir: dir.to_path_buf(),

@@ -12,6 +12,7 @@ const INSERTIONS_KEPT = 5;
 const POINTS_PER_INSERTION = 12000;
 const EVENTS_KEPT = 200;
 const NOTES_KEPT = 100;
+const REPLIES_KEPT = 100;
 const PHASE_FILL = [null, "rgba(255, 200, 0, 0.15)", "rgba(0, 140, 255, 0.12)", "rgba(150, 60, 255, 0.12)"];
 const EVENT_COLOUR = { contact: "#2a7", puncture: "#d22", structure: "#e80", exit: "#27d", fault: "#000" };
 
@@ -209,10 +210,17 @@ function applyUpdate(u) {
   for (const n of u.notes || []) {
     view.notes.push(n);
     if (view.notes.length > NOTES_KEPT) view.notes.shift();
-    document.getElementById("notes").prepend(noteLine(n));
+    prependKept(document.getElementById("notes"), noteLine(n), NOTES_KEPT);
   }
   if (u.device) view.device = u.device;
   later();
+}
+
+// A log line first, the oldest dropped past `kept`: a tab left open for
+// hours stays the size it was.
+function prependKept(list, line, kept) {
+  list.prepend(line);
+  while (list.childElementCount > kept) list.lastElementChild.remove();
 }
 
 function noteLine(text) {
@@ -236,7 +244,7 @@ async function send(request) {
   const line = document.createElement("li");
   line.className = answer.ok ? "done" : "refused";
   line.textContent = `${new Date().toLocaleTimeString()}  ${answer.said}`;
-  document.getElementById("replies").prepend(line);
+  prependKept(document.getElementById("replies"), line, REPLIES_KEPT);
 }
 
 function offerControls(library, modes) {

@@ -261,6 +261,7 @@ fn feed(
             recording.item(&mut link, &mut view, item);
             view.apply(item);
         }
+        recording.check_capture(&mut link, &mut view);
         if closed {
             if let Some(problem) = &problem {
                 needle_io::note!("needle live: {problem}");

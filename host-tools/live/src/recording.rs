@@ -50,7 +50,7 @@ impl Recording {
     fn open(&self, link: &mut Link, rate_hz: Option<u16>) -> Result<Recorder> {
         let dir = next_dir(&self.into)?;
         // The page lists events and replies itself.
-        let recorder = Recorder::create(&dir, rate_hz)?.without_frame_lines();
+        let recorder = Recorder::create(&dir, rate_hz, "needle live")?.without_frame_lines();
         let (file, path) = recorder.stream_file()?;
         link.capture_to(file, &path)?;
         Ok(recorder)
@@ -87,15 +87,31 @@ impl Recording {
         // choice: the recording waits for it.
         recorder.take_stream_off();
         if let Err(e) = recorder.item(item) {
-            recorder.abandon();
-            for line in recorder.take_lines() {
-                view.note(line);
-            }
-            view.note(format!("recording stopped: {e:#}"));
-            view.set_recording(None);
-            self.recorder = None;
-            link.stop_capture();
+            self.fail(link, view, &e);
         }
+    }
+
+    /// After a read: a stream file that could not be written stops the
+    /// recording, as a trial that cannot be does.
+    pub fn check_capture(&mut self, link: &mut Link, view: &mut View) {
+        if let Some(e) = link.take_capture_error() {
+            if self.recorder.is_some() {
+                self.fail(link, view, &e);
+            }
+        }
+    }
+
+    fn fail(&mut self, link: &mut Link, view: &mut View, e: &anyhow::Error) {
+        let Some(mut recorder) = self.recorder.take() else {
+            return;
+        };
+        recorder.abandon();
+        for line in recorder.take_lines() {
+            view.note(line);
+        }
+        view.note(format!("recording stopped: {e:#}"));
+        view.set_recording(None);
+        link.stop_capture();
     }
 
     /// The recorder's lines to the page, and the recording in a line.

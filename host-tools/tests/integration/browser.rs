@@ -144,24 +144,26 @@ fn a_tare_clicked_in_the_page_reaches_the_device_and_the_puncture_is_listed() {
     let replay = dir.path().join("liver1-offset.replay");
     std::fs::write(&replay, bytes).unwrap();
 
-    let (mut live, address) = Live::start(
-        &replay,
-        &[
-            "--record-into",
-            dir.path().join("recordings").to_str().unwrap(),
-        ],
-    );
+    let recordings = dir.path().join("recordings");
     let (_driver, port) = Driver::start();
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .unwrap();
-    let screenshot = runtime.block_on(async {
+    let (screenshot, mut live) = runtime.block_on(async {
+        // Chromium up first: the replay's clock starts with `needle live`.
         let browser = browser(port, &dir.path().join("profile")).await;
+        let (live, address) =
+            Live::start(&replay, &["--record-into", recordings.to_str().unwrap()]);
         browser.goto(&format!("http://{address}/")).await.unwrap();
         let second = Duration::from_secs(1);
         wait_for(&browser, "#connection", 20 * second, |t| t == "live").await;
         let zero = wait_for(&browser, "#zero", 20 * second, |t| t.ends_with("counts")).await;
+        let phase = wait_for(&browser, "#phase", 5 * second, |t| t != "–").await;
+        assert_eq!(
+            phase, "out",
+            "the needle reached the tissue before the page could tare"
+        );
 
         click(&browser, "#tare").await;
         wait_for(&browser, "#replies li", 10 * second, |t| {
@@ -205,7 +207,7 @@ fn a_tare_clicked_in_the_page_reaches_the_device_and_the_puncture_is_listed() {
         tokio::time::sleep(2 * second).await;
         let png = browser.screenshot().await.unwrap();
         browser.close().await.unwrap();
-        (zero, tared, row, png)
+        ((zero, tared, row, png), live)
     });
     let (zero, tared, row, png) = screenshot;
 
@@ -233,10 +235,25 @@ fn a_tare_clicked_in_the_page_reaches_the_device_and_the_puncture_is_listed() {
     assert!(png.starts_with(b"\x89PNG") && png.len() > 20_000);
     eprintln!("the page, as Chromium drew it: {}", out.display());
 
+    // SIGTERM with the needle in the tissue: the recording begun from the
+    // page is finished first, the trial in hand written whole.
     let status = live
         .stop()
         .expect("needle live stops within 10 s of SIGTERM");
     assert!(status.success(), "{status}");
+    let into = recordings.join("recording-001");
+    let recorded = needle_io::trial::read(&into.join("trial_000.csv")).unwrap();
+    let peak_n = recorded.f_n.iter().cloned().fold(f64::MIN, f64::max);
+    // Tared: the 10 mN the load cell read with the needle out is gone.
+    assert!(
+        (peak_n - expected_n).abs() < 0.05 * expected_n,
+        "the recorded trial peaks at {peak_n} N against the simulation's {expected_n} N"
+    );
+    let left: Vec<String> = std::fs::read_dir(&into)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(!left.iter().any(|name| name.ends_with(".part")), "{left:?}");
 }
 
 /// `needle ARGS…`, which must succeed.

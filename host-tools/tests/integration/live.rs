@@ -141,10 +141,10 @@ fn events_until(address: &str, needle: &str) -> Vec<String> {
 #[test]
 fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     let dir = tempfile::tempdir().unwrap();
-    // 15 mm from the liver (5 s at 3 mm/s): the recording begins with the
-    // needle out, as a trial does.
+    // 20 mm from the liver (6.7 s at 3 mm/s): the recording begins with
+    // the needle out, as a trial does.
     let plan = Plan {
-        surface_x_m: 0.015,
+        surface_x_m: 0.02,
         ..Plan::PAPER
     };
     let (_, truth, bytes) = sim::insertion_replay(&LIVER1, &plan);
@@ -260,23 +260,12 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
         .first()
         .is_some_and(|snapshot| snapshot.contains("\"kind\":\"puncture\"")));
 
-    // SIGTERM stops it, and the QEMU behind it, at once; a recording
-    // under way is finished first, as `needle record` finishes one.
-    let second = post(&address, r#"{"command":"record","on":true}"#);
-    assert!(second.contains("recording-002"), "{second}");
+    // SIGTERM stops it, and the QEMU behind it, at once (a recording
+    // under way is finished first: the browser test).
     let status = live
         .stop()
         .expect("needle live stops within 10 s of SIGTERM");
     assert!(status.success(), "{status}");
-    let left: Vec<String> = std::fs::read_dir(recordings.join("recording-002"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    assert!(left.iter().any(|name| name == "stream.bin"), "{left:?}");
-    assert!(
-        !left.iter().any(|name| name.ends_with(".part")),
-        "the trial in hand finished: {left:?}"
-    );
 }
 
 #[test]
@@ -318,7 +307,8 @@ fn at_2_khz_the_page_keeps_up_decimated_and_the_recording_keeps_every_sample() {
     let plan = Plan {
         rate_hz: 2000.0,
         speed_mps: 0.006,
-        surface_x_m: 0.012,
+        // 5 s to the tissue: the recording begins with the needle out.
+        surface_x_m: 0.03,
         depth_m: 0.025,
         dwell_s: 0.5,
         ..Plan::PAPER
@@ -371,6 +361,12 @@ fn at_2_khz_the_page_keeps_up_decimated_and_the_recording_keeps_every_sample() {
         .take_while(|path| path.exists())
         .collect();
     assert!(!trials.is_empty(), "no trial recorded at 2 kHz");
+    let insertion = needle_io::trial::read(&trials[0]).unwrap();
+    let least_s = 2.0 * plan.depth_m / plan.speed_mps + plan.dwell_s;
+    assert!(
+        insertion.t_s.last().unwrap() > &least_s,
+        "the first trial holds the whole insertion ({least_s:.1} s of it)"
+    );
     for path in &trials {
         let recorded = needle_io::trial::read(path).unwrap();
         assert!(
