@@ -28,7 +28,14 @@ impl Live {
     /// `needle ARGS…`, and the address it serves on, read from the line
     /// that gives it (the first `needle live` prints).
     pub(crate) fn spawn(args: &[&str]) -> (Self, String) {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_needle"))
+        Self::spawn_with(args, |_| {})
+    }
+
+    /// [`Self::spawn`], with the command made as `shape` says first.
+    pub(crate) fn spawn_with(args: &[&str], shape: impl FnOnce(&mut Command)) -> (Self, String) {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_needle"));
+        shape(&mut command);
+        let mut child = command
             .args(args)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -378,6 +385,73 @@ fn at_2_khz_the_page_keeps_up_decimated_and_the_recording_keeps_every_sample() {
             path.display()
         );
     }
+    let status = live
+        .stop()
+        .expect("needle live stops within 10 s of SIGTERM");
+    assert!(status.success(), "{status}");
+}
+
+#[test]
+fn a_recording_that_fills_its_disk_stops_saying_so_and_the_view_goes_on() {
+    // Built before the limit below, which would stop cargo too.
+    needle_qemu::firmware::build(needle_qemu::firmware::Board::Lm3s6965).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let plan = Plan {
+        surface_x_m: 0.02,
+        ..Plan::PAPER
+    };
+    let (_, _, bytes) = sim::insertion_replay(&LIVER1, &plan);
+    let replay = dir.path().join("liver1.replay");
+    std::fs::write(&replay, bytes).unwrap();
+    let recordings = dir.path().join("recordings");
+    let args = [
+        "live",
+        "--replay",
+        replay.to_str().unwrap(),
+        "--record-into",
+        recordings.to_str().unwrap(),
+    ];
+    // A full disk, as the process meets it: no file may grow past 48 KiB
+    // (a write beyond fails with EFBIG; the signal that would kill the
+    // process for it ignored, as a disk's ENOSPC kills nothing).
+    let (mut live, address) = Live::spawn_with(&args, |command| {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            command.pre_exec(|| {
+                let limit = libc::rlimit {
+                    rlim_cur: 48 << 10,
+                    rlim_max: 48 << 10,
+                };
+                if libc::setrlimit(libc::RLIMIT_FSIZE, &limit) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+                Ok(())
+            });
+        }
+    });
+    let record = post(&address, r#"{"command":"record","on":true}"#);
+    assert!(record.contains(r#""ok":true"#), "{record}");
+
+    let seen = events_until(&address, "recording stopped");
+    let stopped = seen.last().expect("updates from the page's stream");
+    assert!(
+        stopped.contains("recording stopped") && stopped.contains("File too large"),
+        "the page is told the recording stopped, and why: {stopped}"
+    );
+    // The view goes on: the device still read, the puncture still shown.
+    let later = events_until(&address, "\"kind\":\"puncture\"");
+    assert!(
+        later
+            .last()
+            .is_some_and(|u| u.contains("\"kind\":\"puncture\"")),
+        "no puncture after the recording stopped"
+    );
+    assert!(
+        !later.iter().any(|u| u.contains("\"connected\":false")),
+        "the device was given up with the recording"
+    );
     let status = live
         .stop()
         .expect("needle live stops within 10 s of SIGTERM");
