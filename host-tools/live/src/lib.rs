@@ -174,7 +174,7 @@ impl Shared {
 }
 
 /// Start `link`'s stream and serve the live view on `args.listen` until
-/// Ctrl-C or SIGTERM; `source` names the device on the page. Prints the
+/// Ctrl-C, SIGTERM or SIGHUP; `source` names the device on the page. Prints the
 /// address to open. A recording under way when it stops is finished
 /// first, as `needle record` finishes one.
 pub fn run(mut link: Link, source: &str, args: &LiveArgs) -> Result<()> {
@@ -212,18 +212,25 @@ pub fn run(mut link: Link, source: &str, args: &LiveArgs) -> Result<()> {
     served
 }
 
-/// Ctrl-C or SIGTERM: `run` returns, and the QEMU behind a replay is
-/// stopped with it (a killed `needle live` would leave it running until
+/// Ctrl-C, SIGTERM or SIGHUP: `run` returns, and the QEMU behind a replay
+/// is stopped with it (a killed `needle live` would leave it running until
 /// its replay ends).
 async fn stopped() {
     #[cfg(unix)]
     let terminated = async {
         use tokio::signal::unix::{signal, SignalKind};
-        match signal(SignalKind::terminate()) {
-            Ok(mut terminate) => {
-                terminate.recv().await;
+        // `kill`, and a terminal closed under it, as `needle record` takes them.
+        match (
+            signal(SignalKind::terminate()),
+            signal(SignalKind::hangup()),
+        ) {
+            (Ok(mut terminate), Ok(mut hangup)) => {
+                tokio::select! {
+                    _ = terminate.recv() => {}
+                    _ = hangup.recv() => {}
+                }
             }
-            Err(_) => std::future::pending::<()>().await,
+            _ => std::future::pending::<()>().await,
         }
     };
     #[cfg(not(unix))]

@@ -416,6 +416,11 @@ impl QemuLive {
         let mut cmd = {
             let mut live = Command::new(cmd.get_program());
             live.args(args);
+            // A group of its own: Ctrl-C at the terminal is for the program
+            // that started it, which finishes what it does (a recording)
+            // and then stops QEMU by dropping this.
+            #[cfg(unix)]
+            std::os::unix::process::CommandExt::process_group(&mut live, 0);
             live
         };
         let mut child = spawn_qemu(&mut cmd)?;

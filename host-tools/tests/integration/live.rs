@@ -61,8 +61,13 @@ impl Live {
 
     /// SIGTERM; how it exited, if it did within 10 s.
     pub(crate) fn stop(&mut self) -> Option<std::process::ExitStatus> {
+        self.stop_with("-TERM")
+    }
+
+    /// `kill SIGNAL`; how it exited, if it did within 10 s.
+    pub(crate) fn stop_with(&mut self, signal: &str) -> Option<std::process::ExitStatus> {
         let pid = self.0.id().to_string();
-        let _ = Command::new("kill").args(["-TERM", &pid]).status();
+        let _ = Command::new("kill").args([signal, &pid]).status();
         let until = Instant::now() + Duration::from_secs(10);
         while Instant::now() < until {
             if let Ok(Some(status)) = self.0.try_wait() {
@@ -302,10 +307,18 @@ fn needle_demo_live_serves_the_demo_insertion_behind_the_page() {
         ),
         "the demo's recordings beside its replay: {record}"
     );
+    // A terminal closed under it: the recording finished, QEMU stopped.
     let status = live
-        .stop()
-        .expect("needle demo --live stops within 10 s of SIGTERM");
+        .stop_with("-HUP")
+        .expect("needle demo --live stops within 10 s of SIGHUP");
     assert!(status.success(), "{status}");
+    let files = std::fs::read_dir(out.join("recordings").join("recording-001")).unwrap();
+    assert!(
+        files
+            .map(|e| e.unwrap().file_name())
+            .all(|name| !name.to_string_lossy().ends_with(".part")),
+        "a trial left unfinished"
+    );
 }
 
 #[test]
