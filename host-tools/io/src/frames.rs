@@ -266,6 +266,13 @@ impl StreamDecoder {
         self.reconstructor.config()
     }
 
+    /// The bytes of the frame being read, since the last delimiter (none
+    /// when what came since is longer than any frame): what a capture
+    /// begun now starts with, so that it starts with a whole frame.
+    pub fn partial_frame(&self) -> Option<&[u8]> {
+        (self.overflow == 0).then_some(self.pending.as_slice())
+    }
+
     /// Decode what `bytes` completes; call `on_item` for each item.
     pub fn feed(
         &mut self,

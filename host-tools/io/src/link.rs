@@ -24,19 +24,26 @@ use crate::frames::{Item, Message, StreamDecoder};
 struct Capture {
     held: Vec<u8>,
     file: Option<(std::fs::File, std::path::PathBuf)>,
+    /// Stopped inside a frame: the capture ends with that frame's end.
+    ending: bool,
 }
 
 impl Capture {
-    fn write(&mut self, bytes: &[u8]) -> Result<()> {
+    /// Keep `bytes` (only up to the frame's end when ending); whether the
+    /// capture is then complete.
+    fn write(&mut self, bytes: &[u8]) -> Result<bool> {
+        let end = self
+            .ending
+            .then(|| bytes.iter().position(|&b| b == 0))
+            .flatten();
+        let bytes = end.map_or(bytes, |i| &bytes[..=i]);
         match &mut self.file {
             Some((file, path)) => file
                 .write_all(bytes)
-                .with_context(|| format!("{}: cannot write", path.display())),
-            None => {
-                self.held.extend_from_slice(bytes);
-                Ok(())
-            }
+                .with_context(|| format!("{}: cannot write", path.display()))?,
+            None => self.held.extend_from_slice(bytes),
         }
+        Ok(end.is_some())
     }
 }
 
@@ -90,14 +97,23 @@ impl Link {
         self.capture.get_or_insert_with(Capture::default);
     }
 
-    /// Write the bytes kept so far, and every byte read from now on, to
-    /// `file` at `path`, as they arrive: a recording stopped by any means
-    /// keeps what came before.
+    /// Write the bytes kept so far (or, if none were kept, the frame being
+    /// read), and every byte read from now on, to `file` at `path`, as they
+    /// arrive: a recording stopped by any means keeps what came before.
     pub fn capture_to(&mut self, file: std::fs::File, path: &std::path::Path) -> Result<()> {
+        if self.capture.as_ref().is_none_or(|c| c.ending) {
+            // Begun mid-stream: from the start of the frame being read, so
+            // that the file begins with a whole one.
+            let held = self.decoder.partial_frame().unwrap_or_default().to_vec();
+            self.capture = Some(Capture {
+                held,
+                ..Capture::default()
+            });
+        }
         let capture = self.capture.get_or_insert_with(Capture::default);
         capture.file = Some((file, path.to_path_buf()));
         let held = std::mem::take(&mut capture.held);
-        capture.write(&held)
+        capture.write(&held).map(|_| ())
     }
 
     /// Why writing the capture failed, once: the bytes read since are not
@@ -106,9 +122,15 @@ impl Link {
         self.capture_failed.take()
     }
 
-    /// Keep no more of the bytes read (the file, if any, closed).
+    /// Keep no more of the bytes read: at once between frames, else at the
+    /// end of the frame being read, so that the file ends with a whole one
+    /// (it is closed then).
     pub fn stop_capture(&mut self) {
-        self.capture = None;
+        let between = self.decoder.partial_frame().is_none_or(<[u8]>::is_empty);
+        match self.capture.as_mut() {
+            Some(capture) if !between && capture.file.is_some() => capture.ending = true,
+            _ => self.capture = None,
+        }
     }
 
     /// The port closed (the device went away, or QEMU exited).
@@ -159,11 +181,15 @@ impl Link {
             Ok(0) => self.closed = true,
             Ok(n) => {
                 if let Some(capture) = self.capture.as_mut() {
-                    if let Err(e) = capture.write(&buf[..n]) {
+                    match capture.write(&buf[..n]) {
+                        Ok(false) => {}
+                        Ok(true) => self.capture = None,
                         // What failed is the file, not the device: the
                         // stream goes on being read, and the caller is told.
-                        self.capture = None;
-                        self.capture_failed = Some(e);
+                        Err(e) => {
+                            self.capture = None;
+                            self.capture_failed = Some(e);
+                        }
                     }
                 }
                 let backlog = &mut self.backlog;

@@ -244,6 +244,26 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     assert!(stopped.contains("1 trials in"), "{stopped}");
     let into = recordings.join("recording-001");
     assert!(std::fs::metadata(into.join("stream.bin")).unwrap().len() > 10_000);
+    // Begun and ended mid-stream, the stream file starts and ends with a
+    // whole frame.
+    // (The frame under way when it stopped ends within a frame's time.)
+    let decode = || {
+        let decoded = Command::new(env!("CARGO_BIN_EXE_needle"))
+            .args(["decode", into.join("stream.bin").to_str().unwrap()])
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&decoded.stdout).into_owned()
+            + &String::from_utf8_lossy(&decoded.stderr)
+    };
+    let mut said = decode();
+    for _ in 0..20 {
+        if said.contains(" 0 bytes skipped") {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        said = decode();
+    }
+    assert!(said.contains(" 0 bytes skipped"), "{said}");
     let csv = std::fs::read_to_string(into.join("trial_000.csv")).unwrap();
     assert_eq!(
         csv.lines().next(),
