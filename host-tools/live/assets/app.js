@@ -45,6 +45,7 @@ function makePlots() {
     axes: [{ label: "position (mm)" }, { label: "force (N)" }],
     legend: { live: false },
     series: byPositionSeries(),
+    hooks: { draw: [markEventsAtPosition] },
   }, [null, ...Array(INSERTIONS_KEPT + 1).fill([[], []])], document.getElementById("by-position"));
 
   const byTime = new uPlot({
@@ -103,6 +104,24 @@ function markEvents(u) {
     ctx.lineTo(x, u.bbox.top + u.bbox.height);
     ctx.stroke();
     labelAt(u, x, u.bbox.top + 14 * devicePixelRatio, `${e.kind} ${e.force_n.toFixed(2)} N`);
+  }
+  ctx.restore();
+}
+
+// This insertion's events where they happened on the force–position
+// curve: a dot and its kind.
+function markEventsAtPosition(u) {
+  const number = current().number, ctx = u.ctx;
+  ctx.save();
+  ctx.font = `${12 * devicePixelRatio}px sans-serif`;
+  for (const e of view.events) {
+    if (e.insertion !== number) continue;
+    const x = u.valToPos(e.x_mm, "x", true), y = u.valToPos(e.force_n, "y", true);
+    ctx.fillStyle = EVENT_COLOUR[e.kind] || "#000";
+    ctx.beginPath();
+    ctx.arc(x, y, 4 * devicePixelRatio, 0, 2 * Math.PI);
+    ctx.fill();
+    labelAt(u, x, y - 8 * devicePixelRatio, e.kind);
   }
   ctx.restore();
 }
