@@ -24,26 +24,36 @@ use crate::frames::{Item, Message, StreamDecoder};
 struct Capture {
     held: Vec<u8>,
     file: Option<(std::fs::File, std::path::PathBuf)>,
-    /// Stopped inside a frame: the capture ends with that frame's end.
-    ending: bool,
+    /// Bytes in the file, and those of them after its last delimiter
+    /// (the frame being read).
+    written: u64,
+    since_delimiter: u64,
 }
 
 impl Capture {
-    /// Keep `bytes` (only up to the frame's end when ending); whether the
-    /// capture is then complete.
-    fn write(&mut self, bytes: &[u8]) -> Result<bool> {
-        let end = self
-            .ending
-            .then(|| bytes.iter().position(|&b| b == 0))
-            .flatten();
-        let bytes = end.map_or(bytes, |i| &bytes[..=i]);
+    fn write(&mut self, bytes: &[u8]) -> Result<()> {
         match &mut self.file {
             Some((file, path)) => file
                 .write_all(bytes)
                 .with_context(|| format!("{}: cannot write", path.display()))?,
             None => self.held.extend_from_slice(bytes),
         }
-        Ok(end.is_some())
+        self.written += bytes.len() as u64;
+        self.since_delimiter = match bytes.iter().rposition(|&b| b == 0) {
+            Some(i) => (bytes.len() - i - 1) as u64,
+            None => self.since_delimiter + bytes.len() as u64,
+        };
+        Ok(())
+    }
+
+    /// Close the file after its last whole frame: the frame being read is
+    /// in no trial either.
+    fn end(self) -> Result<()> {
+        if let Some((file, path)) = self.file {
+            file.set_len(self.written - self.since_delimiter)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+        }
+        Ok(())
     }
 }
 
@@ -101,19 +111,16 @@ impl Link {
     /// read), and every byte read from now on, to `file` at `path`, as they
     /// arrive: a recording stopped by any means keeps what came before.
     pub fn capture_to(&mut self, file: std::fs::File, path: &std::path::Path) -> Result<()> {
-        if self.capture.as_ref().is_none_or(|c| c.ending) {
+        let capture = self.capture.get_or_insert_with(|| Capture {
             // Begun mid-stream: from the start of the frame being read, so
             // that the file begins with a whole one.
-            let held = self.decoder.partial_frame().unwrap_or_default().to_vec();
-            self.capture = Some(Capture {
-                held,
-                ..Capture::default()
-            });
-        }
-        let capture = self.capture.get_or_insert_with(Capture::default);
+            held: self.decoder.partial_frame().unwrap_or_default().to_vec(),
+            ..Capture::default()
+        });
         capture.file = Some((file, path.to_path_buf()));
         let held = std::mem::take(&mut capture.held);
-        capture.write(&held).map(|_| ())
+        (capture.written, capture.since_delimiter) = (0, 0);
+        capture.write(&held)
     }
 
     /// Why writing the capture failed, once: the bytes read since are not
@@ -122,15 +129,10 @@ impl Link {
         self.capture_failed.take()
     }
 
-    /// Keep no more of the bytes read: at once between frames, else at the
-    /// end of the frame being read, so that the file ends with a whole one
-    /// (it is closed then).
-    pub fn stop_capture(&mut self) {
-        let between = self.decoder.partial_frame().is_none_or(<[u8]>::is_empty);
-        match self.capture.as_mut() {
-            Some(capture) if !between && capture.file.is_some() => capture.ending = true,
-            _ => self.capture = None,
-        }
+    /// Keep no more of the bytes read: the file closed after its last
+    /// whole frame.
+    pub fn stop_capture(&mut self) -> Result<()> {
+        self.capture.take().map_or(Ok(()), Capture::end)
     }
 
     /// The port closed (the device went away, or QEMU exited).
@@ -181,15 +183,11 @@ impl Link {
             Ok(0) => self.closed = true,
             Ok(n) => {
                 if let Some(capture) = self.capture.as_mut() {
-                    match capture.write(&buf[..n]) {
-                        Ok(false) => {}
-                        Ok(true) => self.capture = None,
+                    if let Err(e) = capture.write(&buf[..n]) {
                         // What failed is the file, not the device: the
                         // stream goes on being read, and the caller is told.
-                        Err(e) => {
-                            self.capture = None;
-                            self.capture_failed = Some(e);
-                        }
+                        self.capture = None;
+                        self.capture_failed = Some(e);
                     }
                 }
                 let backlog = &mut self.backlog;

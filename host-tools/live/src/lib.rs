@@ -219,18 +219,25 @@ async fn stopped() {
     #[cfg(unix)]
     let terminated = async {
         use tokio::signal::unix::{signal, SignalKind};
-        // `kill`, and a terminal closed under it, as `needle record` takes them.
-        match (
-            signal(SignalKind::terminate()),
-            signal(SignalKind::hangup()),
-        ) {
-            (Ok(mut terminate), Ok(mut hangup)) => {
-                tokio::select! {
-                    _ = terminate.recv() => {}
-                    _ = hangup.recv() => {}
+        // `kill`, and a terminal closed under it (unless started under
+        // `nohup`, which ignores that), as `needle record` takes them.
+        let on = |kind: SignalKind| async move {
+            match signal(kind) {
+                Ok(mut stream) => {
+                    stream.recv().await;
                 }
+                Err(_) => std::future::pending::<()>().await,
             }
-            _ => std::future::pending::<()>().await,
+        };
+        let hangup = async {
+            if ignored(libc::SIGHUP) {
+                std::future::pending::<()>().await;
+            }
+            on(SignalKind::hangup()).await;
+        };
+        tokio::select! {
+            () = on(SignalKind::terminate()) => {}
+            () = hangup => {}
         }
     };
     #[cfg(not(unix))]
@@ -238,6 +245,18 @@ async fn stopped() {
     tokio::select! {
         _ = tokio::signal::ctrl_c() => {}
         () = terminated => {}
+    }
+}
+
+/// Whether `signal` was set to be ignored when the process started.
+#[cfg(unix)]
+fn ignored(signal: libc::c_int) -> bool {
+    // SAFETY: a query only (no new action given); `old` is plain data that
+    // sigaction fills in.
+    unsafe {
+        let mut old: libc::sigaction = std::mem::zeroed();
+        libc::sigaction(signal, std::ptr::null(), &mut old) == 0
+            && old.sa_sigaction == libc::SIG_IGN
     }
 }
 

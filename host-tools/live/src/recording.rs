@@ -61,7 +61,9 @@ impl Recording {
         let Some(mut recorder) = self.recorder.take() else {
             return Answer::not(what, "not recording");
         };
-        link.stop_capture();
+        if let Err(e) = link.stop_capture() {
+            view.note(format!("{e:#}"));
+        }
         let finished = recorder.finish(why);
         if finished.is_err() {
             recorder.abandon();
@@ -111,7 +113,8 @@ impl Recording {
         }
         view.note(format!("recording stopped: {e:#}"));
         view.set_recording(None);
-        link.stop_capture();
+        // Failing already: what else fails is said above.
+        let _ = link.stop_capture();
     }
 
     /// The recorder's lines to the page, and the recording in a line.

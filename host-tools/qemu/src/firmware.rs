@@ -376,6 +376,32 @@ pub fn spawn_qemu(cmd: &mut Command) -> Result<std::process::Child> {
         .context("cannot start qemu-system-arm")
 }
 
+/// Have the child killed when the thread that starts it ends, however
+/// it ends: a live replay waits for its host's first command without
+/// end, and a `needle live` killed before it could stop QEMU (SIGKILL,
+/// or a signal before its handlers are set) left it waiting for ever.
+#[cfg(target_os = "linux")]
+fn die_with_parent(command: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    let parent = std::process::id();
+    // SAFETY: only async-signal-safe calls between fork and exec.
+    unsafe {
+        command.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            // The parent gone already, before the request was made.
+            if libc::getppid() as u32 != parent {
+                libc::_exit(1);
+            }
+            Ok(())
+        });
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn die_with_parent(_: &mut Command) {}
+
 /// The firmware in QEMU as a device on a serial port: a live replay
 /// (`--live`: it waits for the host's first command, then samples in real
 /// time at the replay's rate) with its UART on a pseudo-terminal that the
@@ -416,11 +442,7 @@ impl QemuLive {
         let mut cmd = {
             let mut live = Command::new(cmd.get_program());
             live.args(args);
-            // A group of its own: Ctrl-C at the terminal is for the program
-            // that started it, which finishes what it does (a recording)
-            // and then stops QEMU by dropping this.
-            #[cfg(unix)]
-            std::os::unix::process::CommandExt::process_group(&mut live, 0);
+            die_with_parent(&mut live);
             live
         };
         let mut child = spawn_qemu(&mut cmd)?;

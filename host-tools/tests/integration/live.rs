@@ -104,6 +104,16 @@ fn request(address: &str, path: &str) -> TcpStream {
     stream
 }
 
+/// What `needle decode FILE` says, stdout and stderr.
+fn decode(file: &Path) -> String {
+    let decoded = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["decode", file.to_str().unwrap()])
+        .output()
+        .unwrap();
+    String::from_utf8_lossy(&decoded.stdout).into_owned()
+        + &String::from_utf8_lossy(&decoded.stderr)
+}
+
 fn get(address: &str, path: &str) -> String {
     let mut body = Vec::new();
     request(address, path).read_to_end(&mut body).unwrap();
@@ -246,23 +256,7 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
     assert!(std::fs::metadata(into.join("stream.bin")).unwrap().len() > 10_000);
     // Begun and ended mid-stream, the stream file starts and ends with a
     // whole frame.
-    // (The frame under way when it stopped ends within a frame's time.)
-    let decode = || {
-        let decoded = Command::new(env!("CARGO_BIN_EXE_needle"))
-            .args(["decode", into.join("stream.bin").to_str().unwrap()])
-            .output()
-            .unwrap();
-        String::from_utf8_lossy(&decoded.stdout).into_owned()
-            + &String::from_utf8_lossy(&decoded.stderr)
-    };
-    let mut said = decode();
-    for _ in 0..20 {
-        if said.contains(" 0 bytes skipped") {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-        said = decode();
-    }
+    let said = decode(&into.join("stream.bin"));
     assert!(said.contains(" 0 bytes skipped"), "{said}");
     let csv = std::fs::read_to_string(into.join("trial_000.csv")).unwrap();
     assert_eq!(
@@ -332,12 +326,18 @@ fn needle_demo_live_serves_the_demo_insertion_behind_the_page() {
         .stop_with("-HUP")
         .expect("needle demo --live stops within 10 s of SIGHUP");
     assert!(status.success(), "{status}");
-    let files = std::fs::read_dir(out.join("recordings").join("recording-001")).unwrap();
+    let into = out.join("recordings").join("recording-001");
+    let files = std::fs::read_dir(&into).unwrap();
     assert!(
         files
             .map(|e| e.unwrap().file_name())
             .all(|name| !name.to_string_lossy().ends_with(".part")),
         "a trial left unfinished"
+    );
+    let said = decode(&into.join("stream.bin"));
+    assert!(
+        said.contains(" 0 bytes skipped"),
+        "stream.bin ends with its last whole frame: {said}"
     );
 }
 
@@ -381,10 +381,14 @@ fn at_2_khz_the_page_keeps_up_decimated_and_the_recording_keeps_every_sample() {
                 + device["samples_withheld"].as_u64().unwrap();
         }
     }
-    let fastest = rates.iter().cloned().fold(0.0, f64::max);
+    // The typical second: QEMU, starved of the CPU by the tests beside
+    // it, can fall behind real time and catch up in a burst.
+    let mut streaming: Vec<f64> = rates.into_iter().filter(|&r| r > 0.0).collect();
+    streaming.sort_by(f64::total_cmp);
+    let typical = streaming[streaming.len() / 2];
     assert!(
-        (1800.0..2300.0).contains(&fastest),
-        "the page saw {fastest} samples a second from a 2 kHz device"
+        (1500.0..2500.0).contains(&typical),
+        "the page saw {typical} samples a second from a 2 kHz device: {streaming:?}"
     );
     assert_eq!(lost, 0, "no sample lost or withheld");
     let seconds = trial.len() as f64 / plan.rate_hz;
@@ -489,4 +493,78 @@ fn a_recording_that_fills_its_disk_stops_saying_so_and_the_view_goes_on() {
         .stop()
         .expect("needle live stops within 10 s of SIGTERM");
     assert!(status.success(), "{status}");
+}
+
+#[test]
+fn under_nohup_a_closed_terminal_leaves_needle_live_running() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, _, bytes) = sim::insertion_replay(&LIVER1, &Plan::PAPER);
+    let replay = dir.path().join("liver1.replay");
+    std::fs::write(&replay, bytes).unwrap();
+    let args = ["live", "--replay", replay.to_str().unwrap()];
+    let (mut live, address) = Live::spawn_with(&args, |command| {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            command.pre_exec(|| {
+                libc::signal(libc::SIGHUP, libc::SIG_IGN);
+                Ok(())
+            });
+        }
+    });
+    let pid = live.0.id().to_string();
+    let _ = Command::new("kill").args(["-HUP", &pid]).status();
+    std::thread::sleep(Duration::from_secs(1));
+    assert!(
+        live.0.try_wait().unwrap().is_none(),
+        "needle live under nohup stopped at SIGHUP"
+    );
+    assert!(get(&address, "/").starts_with("HTTP/1.1 200"));
+    let status = live
+        .stop()
+        .expect("needle live stops within 10 s of SIGTERM");
+    assert!(status.success(), "{status}");
+}
+
+/// The processes `pid` started (Linux: each of its threads' children).
+fn children(pid: u32) -> Vec<u32> {
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return Vec::new();
+    };
+    tasks
+        .filter_map(|task| std::fs::read_to_string(task.ok()?.path().join("children")).ok())
+        .flat_map(|list| {
+            list.split_whitespace()
+                .filter_map(|p| p.parse().ok())
+                .collect::<Vec<u32>>()
+        })
+        .collect()
+}
+
+#[test]
+fn a_killed_needle_live_takes_its_qemu_with_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, _, bytes) = sim::insertion_replay(&LIVER1, &Plan::PAPER);
+    let replay = dir.path().join("liver1.replay");
+    std::fs::write(&replay, bytes).unwrap();
+    let (mut live, _address) = Live::start(&replay, &[]);
+    let qemu: Vec<u32> = children(live.0.id())
+        .into_iter()
+        .filter(|pid| {
+            std::fs::read_to_string(format!("/proc/{pid}/comm"))
+                .is_ok_and(|name| name.starts_with("qemu-system"))
+        })
+        .collect();
+    assert_eq!(qemu.len(), 1, "one QEMU behind needle live");
+    live.0.kill().unwrap();
+    live.0.wait().unwrap();
+    let gone = |pid: u32| {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .map_or(true, |stat| stat.split_whitespace().nth(2) == Some("Z"))
+    };
+    let until = Instant::now() + Duration::from_secs(5);
+    while !gone(qemu[0]) {
+        assert!(Instant::now() < until, "QEMU outlived a killed needle live");
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }
