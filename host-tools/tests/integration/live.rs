@@ -298,7 +298,19 @@ fn the_page_and_the_puncture_reach_every_page_from_the_firmware_in_qemu() {
 fn needle_demo_live_serves_the_demo_insertion_behind_the_page() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    let (mut live, address) = Live::spawn(&["demo", "--live", "--out", out.to_str().unwrap()]);
+    let args = ["demo", "--live", "--out", out.to_str().unwrap()];
+    // SIGHUP as a terminal's session has it, whatever this test inherits
+    // (a CI started under `nohup` ignores it, and so would needle live).
+    let (mut live, address) = Live::spawn_with(&args, |command| {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            command.pre_exec(|| {
+                libc::signal(libc::SIGHUP, libc::SIG_DFL);
+                Ok(())
+            });
+        }
+    });
     let page = get(&address, "/");
     assert!(page.starts_with("HTTP/1.1 200"), "{page}");
     let first = events_until(&address, "liver1.replay");
