@@ -26,6 +26,7 @@ use needle_analysis::sim::{self, Plan};
 use needle_holder::config::DeviceConfig;
 use needle_holder::model::params::LIVER1;
 
+use crate::common::needle;
 use crate::live::{post, Live};
 
 const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
@@ -254,19 +255,6 @@ fn a_tare_clicked_in_the_page_reaches_the_device_and_the_puncture_is_listed() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert!(!left.iter().any(|name| name.ends_with(".part")), "{left:?}");
-}
-
-/// `needle ARGS…`, which must succeed.
-fn needle(args: &[&str]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_needle"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "needle {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 /// The legends' labels of every chart on the page, once each has drawn.

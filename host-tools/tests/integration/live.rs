@@ -106,12 +106,22 @@ fn request(address: &str, path: &str) -> TcpStream {
 
 /// What `needle decode FILE` says, stdout and stderr.
 fn decode(file: &Path) -> String {
-    let decoded = Command::new(env!("CARGO_BIN_EXE_needle"))
-        .args(["decode", file.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let decoded = crate::common::run(&["decode", file.to_str().unwrap()]);
     String::from_utf8_lossy(&decoded.stdout).into_owned()
         + &String::from_utf8_lossy(&decoded.stderr)
+}
+
+/// `command` started with SIGHUP's disposition `disposition` (default or
+/// ignored), whatever this test inherits.
+fn with_sighup(command: &mut Command, disposition: libc::sighandler_t) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: only async-signal-safe calls between fork and exec.
+    unsafe {
+        command.pre_exec(move || {
+            libc::signal(libc::SIGHUP, disposition);
+            Ok(())
+        });
+    }
 }
 
 fn get(address: &str, path: &str) -> String {
@@ -301,16 +311,8 @@ fn needle_demo_live_serves_the_demo_insertion_behind_the_page() {
     let args = ["demo", "--live", "--out", out.to_str().unwrap()];
     // SIGHUP as a terminal's session has it, whatever this test inherits
     // (a CI started under `nohup` ignores it, and so would needle live).
-    let (mut live, address) = Live::spawn_with(&args, |command| {
-        use std::os::unix::process::CommandExt;
-        // SAFETY: only async-signal-safe calls between fork and exec.
-        unsafe {
-            command.pre_exec(|| {
-                libc::signal(libc::SIGHUP, libc::SIG_DFL);
-                Ok(())
-            });
-        }
-    });
+    let (mut live, address) =
+        Live::spawn_with(&args, |command| with_sighup(command, libc::SIG_DFL));
     let page = get(&address, "/");
     assert!(page.starts_with("HTTP/1.1 200"), "{page}");
     let first = events_until(&address, "liver1.replay");
@@ -514,16 +516,8 @@ fn under_nohup_a_closed_terminal_leaves_needle_live_running() {
     let replay = dir.path().join("liver1.replay");
     std::fs::write(&replay, bytes).unwrap();
     let args = ["live", "--replay", replay.to_str().unwrap()];
-    let (mut live, address) = Live::spawn_with(&args, |command| {
-        use std::os::unix::process::CommandExt;
-        // SAFETY: only async-signal-safe calls between fork and exec.
-        unsafe {
-            command.pre_exec(|| {
-                libc::signal(libc::SIGHUP, libc::SIG_IGN);
-                Ok(())
-            });
-        }
-    });
+    let (mut live, address) =
+        Live::spawn_with(&args, |command| with_sighup(command, libc::SIG_IGN));
     let pid = live.0.id().to_string();
     let _ = Command::new("kill").args(["-HUP", &pid]).status();
     std::thread::sleep(Duration::from_secs(1));
