@@ -989,17 +989,24 @@ impl Beyond {
 /// with the needle moving back through it (a needle that starts again
 /// from rest, slower, holds less by Karnopp's law too), landing on a force
 /// still pulling (kinetic friction goes on; a needle let go of reads
-/// zero). The largest such snap in `f`; `None`: it never stuck.
+/// zero): the mean of the 25 samples after it below zero by three
+/// of its standard errors. (Kinetic friction on a slow withdrawal can be
+/// a few noise sd; five samples could not tell it from zero, and the
+/// tent's pull was then read as friction.) The largest such snap in `f`;
+/// `None`: it never stuck.
 pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize> {
     let least_n = 10.0 * noise_n.max(1e-4);
     let mut best: Option<(usize, f64)> = None;
-    for i in start + 3..f.len().min(x.len()).saturating_sub(5) {
+    let end = f.len().min(x.len());
+    for i in start + 3..end.saturating_sub(5) {
         let (low_at, low) = (i - 3..i)
             .map(|j| (j, f[j]))
             .fold((i, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
         let rise = f[i] - low;
-        let after = f[i..i + 5].iter().sum::<f64>() / 5.0;
-        let pulling = low <= -least_n && after <= -0.5 * least_n;
+        let landing = &f[i..(i + LANDING_SAMPLES).min(end)];
+        let after = landing.iter().sum::<f64>() / landing.len() as f64;
+        let standard_error_n = noise_n.max(1e-4) / (landing.len() as f64).sqrt();
+        let pulling = low <= -least_n && after <= -3.0 * standard_error_n;
         let moving = x[low_at.saturating_sub(3)] > x[low_at] && x[low_at] > x[i];
         if rise >= least_n && pulling && moving && best.is_none_or(|b| rise > b.1) {
             // The first sample past halfway up the snap, not the one after
@@ -1012,6 +1019,10 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
     }
     best.map(|b| b.0)
 }
+
+/// Samples after a snap whose mean says whether the needle still pulls
+/// ([`slipped`]).
+const LANDING_SAMPLES: usize = 25;
 
 /// Where a withdrawing needle was let go with a snap (`out` in time
 /// order): the last sample still pulling by ten noise sd, followed at once
