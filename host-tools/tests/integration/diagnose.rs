@@ -56,6 +56,11 @@ fn assert_named(out: &Value, effect: &str, least_shrink: f64) {
     if effect != "none" {
         assert_eq!(v["effects"][0]["effect"], effect, "{effect}: {v}");
         assert!(num(&v["shrink"]) >= least_shrink, "{effect}: {v}");
+        // Cutting free along each trial's path is tried after the shared
+        // candidates, whatever their ranking.
+        if v["effects"][0]["law"] == "along_depth_in_each_trial" {
+            return;
+        }
         let leading: Vec<&Value> = out["candidates"]
             .as_array()
             .unwrap()
@@ -321,6 +326,45 @@ fn spread_alone_is_none(tissue_name: &'static str, seed: u64, tare_sd_n: f64) ->
         "{tissue_name} seed {seed}: {left} vs {noise}"
     );
     out
+}
+
+/// A heterogeneous tissue: each trial's cutting force wanders along its
+/// own path (a random walk, sim's alternate form at no trend), with the
+/// tissue's spread from trial to trial and a jittered clock. No shared
+/// law predicts a withheld trial's wander; the verdict names it as
+/// cutting along depth in each trial, on both protocols, and leaves
+/// little of the gap.
+#[test]
+fn cutting_that_wanders_along_each_path_is_named() {
+    use needle_analysis::sim::Rig;
+    for protocol in [ProtocolKind::Paper, ProtocolKind::InsertDwellWithdraw] {
+        let dir = tempfile::tempdir().unwrap();
+        Dataset {
+            tissue_name: "liver1",
+            tissue: &LIVER1,
+            effects: &effects::parse_list("depth_dependent_cutting=0").unwrap(),
+            trials: 10,
+            seed: 5,
+            sensor: SENSOR,
+            through: false,
+            form: Form::Alternate,
+            rig: Rig {
+                protocol,
+                jitter: true,
+                spread: 0.15,
+                ..Default::default()
+            },
+        }
+        .write(dir.path())
+        .unwrap();
+        let (_, data) = load(dir.path(), None).unwrap();
+        let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
+        let v = &out["verdict"];
+        assert_named(&out, "depth_dependent_cutting", 0.15);
+        assert_eq!(v["effects"][0]["law"], "along_depth_in_each_trial", "{v}");
+        assert_eq!(v["effects"].as_array().unwrap().len(), 1, "{v}");
+        assert!(num(&v["effects"][0]["share_of_gap"]) >= 0.75, "{v}");
+    }
 }
 
 #[test]

@@ -119,4 +119,24 @@ pub struct Step {
     pub heldout_rms_after_n: f64,
     /// Its part of the gap, in mean squares above the noise floor.
     pub share_of_gap: f64,
+    /// How the effect was fitted: `shared` (a law whose parameters the
+    /// trials share, judged on withheld ones) or `along_depth_in_each_trial`
+    /// (cutting free along each trial's own path, `depth_dependent_cutting`
+    /// only: a heterogeneous tissue).
+    pub law: &'static str,
+    /// Along depth in each trial: the half-width of the depth window
+    /// each cutting sample's profile is the mean over, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub half_window_m: Option<f64>,
+}
+
+impl Step {
+    /// The effect's name as a reader is shown it, with its law if it is
+    /// not a shared one.
+    pub fn label(&self) -> String {
+        match self.half_window_m {
+            Some(_) => format!("{} (along depth, each trial its own)", self.effect),
+            None => self.effect.to_owned(),
+        }
+    }
 }

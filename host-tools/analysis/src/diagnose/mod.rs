@@ -18,6 +18,7 @@
 //!    turn, each further one that passes the same test against what the
 //!    ones before left (the waterfall, `verdict.effects`).
 
+mod along_depth;
 pub mod candidates;
 pub mod crossval;
 mod diagnosis;
@@ -1127,10 +1128,19 @@ pub fn diagnose_with_progress(
             })
             .flatten()
     });
-    let steps = match first {
+    let mut steps = match first {
         Some(first) => waterfall(first, bar, nominal, progress),
         None => Vec::new(),
     };
+    let (mut law, mut half_window_m) = ("shared", None);
+    if leaves_unexplained(&baseline, &steps, noise) {
+        progress("trying a cutting force free along depth in each trial");
+        if let Some(along) = cutting_along_depth(data, &baseline, bar) {
+            half_window_m = Some(along.1.grid_value);
+            steps = vec![along];
+            law = "along_depth_in_each_trial";
+        }
+    }
     let after = steps.last().map(|(_, s)| s.clone());
     let left = after.as_ref().unwrap_or(&baseline);
     let gap_open = left.rms() > EXPLAINED_FACTOR * noise;
@@ -1163,6 +1173,8 @@ pub fn diagnose_with_progress(
                 effect: CANDIDATES[*ci].effect,
                 heldout_rms_after_n: s.rms(),
                 share_of_gap: share,
+                law,
+                half_window_m,
             }
         })
         .collect();
@@ -1198,6 +1210,29 @@ pub fn diagnose_with_progress(
         },
         skipped: None,
     }
+}
+
+/// Whether `steps` leave a gap the verdict would call `unexplained`: open,
+/// and mostly not taken by them.
+fn leaves_unexplained(baseline: &Scored, steps: &[(usize, Scored)], noise_n: f64) -> bool {
+    let left = steps.last().map_or(baseline, |(_, s)| s);
+    left.rms() > EXPLAINED_FACTOR * noise_n
+        && (steps.is_empty() || gap_taken(baseline.rms(), left.rms(), noise_n) < MOST_OF_GAP)
+}
+
+/// [`along_depth::cutting_along_depth`] as the one step of the verdict,
+/// if it is significant against the baseline and takes
+/// [`along_depth::MOST_OF_GAP_ALONG_DEPTH`] of the gap.
+fn cutting_along_depth(data: &[Prepared], baseline: &Scored, bar: Bar) -> Option<(usize, Scored)> {
+    let scored = along_depth::cutting_along_depth(data, baseline);
+    let (_, t) = improvement(baseline, &scored);
+    let taken = gap_taken(baseline.rms(), scored.rms(), bar.noise_n);
+    let ci = CANDIDATES
+        .iter()
+        .position(|c| c.effect == "depth_dependent_cutting")?;
+    let named = taken >= along_depth::MOST_OF_GAP_ALONG_DEPTH
+        && bar.worthy(baseline.rms(), scored.rms(), t);
+    named.then_some((ci, scored))
 }
 
 /// Each candidate's report, in the order of its shrink alone.
@@ -1378,9 +1413,10 @@ fn backfitted_first<'c>(
 /// fitted (with the nominal corrections) on all the other trials.
 fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> (Vec<f64>, String) {
     let v = &out.verdict;
+    let along_depth = v.effects.first().and_then(|e| e.half_window_m);
     let named: Vec<&str> = [v.effect, v.second]
         .into_iter()
-        .filter(|e| *e != "none")
+        .filter(|e| *e != "none" && along_depth.is_none())
         .collect();
     let set: Vec<(&Candidate, f64)> = named
         .iter()
@@ -1402,7 +1438,7 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> (Vec<f64>, String) {
     }
     let theta = train.solve();
     let cols = columns(&data[0], &set);
-    let augmented = (0..data[0].trial.len())
+    let mut augmented: Vec<f64> = (0..data[0].trial.len())
         .map(|i| {
             data[0].nominal_n[i]
                 + cols
@@ -1412,6 +1448,19 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> (Vec<f64>, String) {
                     .sum::<f64>()
         })
         .collect();
+    if let (Some(half_m), Some(step)) = (along_depth, v.effects.first()) {
+        let p = &data[0];
+        let left: Vec<f64> = (0..p.trial.len())
+            .map(|i| p.trial.f_n[i] - augmented[i])
+            .collect();
+        for (a, d) in augmented
+            .iter_mut()
+            .zip(along_depth::profile(p, left, half_m))
+        {
+            *a += d;
+        }
+        return (augmented, format!("+ {}", step.label()));
+    }
     let label = if named.is_empty() {
         "nominal refitted".to_owned()
     } else {

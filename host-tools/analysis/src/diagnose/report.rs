@@ -32,11 +32,11 @@ pub fn headline(out: &Diagnosis) -> String {
             format!("unexplained (closest: {})", v.closest.join(" + "))
         }
         effect => {
-            let steps: Vec<&str> = v.effects.iter().map(|e| e.effect).collect();
-            if steps.len() > 1 {
-                format!("{} (in turn)", steps.join(" → "))
-            } else {
-                effect.to_owned()
+            let steps: Vec<String> = v.effects.iter().map(|e| e.label()).collect();
+            match steps.as_slice() {
+                [] => effect.to_owned(),
+                [one] => one.clone(),
+                _ => format!("{} (in turn)", steps.join(" → ")),
             }
         }
     };
@@ -182,7 +182,7 @@ fn phase_bands(p: &Prepared) -> Vec<Band> {
 fn waterfall_svg(out: &Diagnosis) -> String {
     let mut bars = vec![("nominal".to_owned(), out.baseline.heldout_rms_n)];
     for e in &out.verdict.effects {
-        bars.push((format!("+ {}", e.effect), e.heldout_rms_after_n));
+        bars.push((format!("+ {}", e.label()), e.heldout_rms_after_n));
     }
     let noise = out.noise_floor_n;
     let explained = super::EXPLAINED_FACTOR * noise;

@@ -116,7 +116,9 @@ pub(super) fn deeper_cutting(effects: &[Effect], form: Form, depth_m: f64, cutti
             cutting *= match form {
                 // Growing as the square root of depth, the same at 10 mm.
                 Form::Literature => 1.0 + g_per_m * (depth_m.max(0.0) * 0.01).sqrt(),
-                // Saturating over 20 mm, same initial slope.
+                // Saturating over 20 mm, same initial slope (and
+                // wandering about it along each trial's own path:
+                // `Protocol::cutting_wander`).
                 Form::Alternate => {
                     const L_M: f64 = 0.02;
                     1.0 + g_per_m * L_M * (1.0 - (-depth_m / L_M).exp())

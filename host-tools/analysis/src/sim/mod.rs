@@ -86,10 +86,52 @@ pub struct Protocol {
     pub tent_n_per_m: f64,
     /// Residual tare offset of the load cell, N.
     pub tare_n: f64,
+    /// The cutting force's factor along this trial's path, one every
+    /// [`WANDER_STEP_M`] of depth past the surface (linear between; the
+    /// last beyond): a heterogeneous tissue, whose cutting force wanders
+    /// along each needle's path in its own way. Empty: no wander.
+    pub cutting_wander: Vec<f64>,
     /// Sample times, s (a rig's jittered clock with gaps); `None`: every
     /// 1/rate from 0.
     #[serde(skip)]
     pub times_s: Option<Vec<f64>>,
+}
+
+/// Depth between the knots of [`Protocol::cutting_wander`], m.
+pub const WANDER_STEP_M: f64 = 0.0005;
+
+impl Protocol {
+    /// [`Self::cutting_wander`]'s factor `depth_m` past the surface (1
+    /// without one).
+    pub fn cutting_factor(&self, depth_m: f64) -> f64 {
+        let w = &self.cutting_wander;
+        let Some(&last) = w.last() else {
+            return 1.0;
+        };
+        let at = (depth_m / WANDER_STEP_M).max(0.0);
+        let k = at.floor() as usize;
+        match (w.get(k), w.get(k + 1)) {
+            (Some(a), Some(b)) => a + (b - a) * (at - k as f64),
+            _ => last,
+        }
+    }
+}
+
+/// A cutting force's wander along `reach_m` of a path through a
+/// heterogeneous tissue: a random walk of its logarithm, 3 % per √mm
+/// (16 % over 30 mm), from 1 at the surface.
+fn cutting_wander(reach_m: f64, rng: &mut impl Rng) -> Vec<f64> {
+    let steps = (reach_m.max(0.0) / WANDER_STEP_M).ceil() as usize + 4;
+    let step = Normal::new(0.0, 0.03 * (WANDER_STEP_M * 1e3).sqrt()).expect("constant sd");
+    let mut log_factor = 0.0;
+    (0..=steps)
+        .map(|k| {
+            if k > 0 {
+                log_factor += step.sample(rng);
+            }
+            f64::exp(log_factor)
+        })
+        .collect()
 }
 
 /// A membrane inside the tissue.
@@ -183,6 +225,7 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
         drag_m: 0.0,
         tent_n_per_m: 0.0,
         tare_n: 0.0,
+        cutting_wander: Vec::new(),
         times_s: None,
         surface_x_m: surface,
         segments: vec![
@@ -248,6 +291,7 @@ pub fn insert_dwell_withdraw(
         // Of the order of the capsule's own stiffness at puncture.
         tent_n_per_m: rng.gen_range(250.0..600.0),
         tare_n: 0.0,
+        cutting_wander: Vec::new(),
         times_s: None,
     }
 }
@@ -525,6 +569,7 @@ pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
         drag_m: 0.0,
         tent_n_per_m: 0.0,
         tare_n: 0.0,
+        cutting_wander: Vec::new(),
         times_s: None,
         segments: vec![
             Segment::Move {
@@ -1033,6 +1078,17 @@ impl Dataset<'_> {
             }
             if rig.tare_sd_n > 0.0 {
                 protocol.tare_n = rng.sample(Normal::new(0.0, rig.tare_sd_n)?);
+            }
+            let wanders = form == Form::Alternate
+                && effects
+                    .iter()
+                    .any(|e| matches!(e, Effect::DepthDependentCutting { .. }));
+            if wanders {
+                let mut wander_rng = ChaCha8Rng::seed_from_u64(
+                    seed.wrapping_mul(104_729).wrapping_add(k as u64) ^ 0x3A4D_3A4D,
+                );
+                let reach_m = deepest_x_m(&protocol) - protocol.surface_x_m;
+                protocol.cutting_wander = cutting_wander(reach_m, &mut wander_rng);
             }
             if rig.jitter {
                 let duration_s = motion::duration_s(&protocol.segments, 0.0);

@@ -184,7 +184,8 @@ impl<'a> Needle<'a> {
         let friction = self.bristles.follow(effects, form, target, moved_m);
         let cutting = tissue.cutting_n(k.vr_mps, p_m >= self.deepest_m && p_m < far_m);
         let depth_m = p_m - self.protocol.surface_x_m;
-        let cutting = forces::deeper_cutting(effects, form, depth_m, cutting);
+        let cutting = forces::deeper_cutting(effects, form, depth_m, cutting)
+            * self.protocol.cutting_factor(depth_m);
         self.deepest_m = self.deepest_m.max(p_m);
         if k.vr_mps.abs() >= tissue.half_band_mps {
             self.last_cutting_n = cutting;
