@@ -56,11 +56,7 @@ fn assert_named(out: &Value, effect: &str, least_shrink: f64) {
     if effect != "none" {
         assert_eq!(v["effects"][0]["effect"], effect, "{effect}: {v}");
         assert!(num(&v["shrink"]) >= least_shrink, "{effect}: {v}");
-        // Cutting free along each trial's path is tried after the shared
-        // candidates, whatever their ranking.
-        if v["effects"][0]["law"] == "along_depth_in_each_trial" {
-            return;
-        }
+        assert_eq!(v["effects"][0]["law"], "shared", "{effect}: {v}");
         let leading: Vec<&Value> = out["candidates"]
             .as_array()
             .unwrap()
@@ -359,12 +355,21 @@ fn cutting_that_wanders_along_each_path_is_named() {
         .unwrap();
         let (_, data) = load(dir.path(), None).unwrap();
         let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
-        let v = &out["verdict"];
-        assert_named(&out, "depth_dependent_cutting", 0.15);
-        assert_eq!(v["effects"][0]["law"], "along_depth_in_each_trial", "{v}");
-        assert_eq!(v["effects"].as_array().unwrap().len(), 1, "{v}");
-        assert!(num(&v["effects"][0]["share_of_gap"]) >= 0.75, "{v}");
+        assert_named_along_depth(&out);
     }
+}
+
+/// The verdict names cutting along depth in each trial, tried after the
+/// shared candidates (whatever their ranking), with a real shrink and a
+/// window within the ones tried.
+fn assert_named_along_depth(out: &Value) {
+    let v = &out["verdict"];
+    assert_eq!(v["effect"], "depth_dependent_cutting", "{v}");
+    let step = &v["effects"][0];
+    assert_eq!(step["law"], "along_depth_in_each_trial", "{v}");
+    assert!(num(&v["shrink"]) >= 0.15, "{v}");
+    let half_window_m = num(&step["half_window_m"]);
+    assert!((0.000_05..=0.002).contains(&half_window_m), "{v}");
 }
 
 #[test]
@@ -397,6 +402,13 @@ fn another_form_of_the_physics_is_still_named() {
         } else {
             0.15
         };
+        // The alternate form's cutting wanders along each trial's path
+        // about its trend: named either way.
+        let along = out["verdict"]["effects"][0]["law"] == "along_depth_in_each_trial";
+        if effect == "depth_dependent_cutting" && along {
+            assert_named_along_depth(&out);
+            continue;
+        }
         assert_named(&out, effect, least);
     }
 }

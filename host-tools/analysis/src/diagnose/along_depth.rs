@@ -43,7 +43,14 @@ pub fn cutting_along_depth(data: &[Prepared], baseline: &Scored) -> Scored {
     let trials: Vec<Cut> = data
         .iter()
         .enumerate()
-        .map(|(j, p)| Cut::of(p, heldout_residual(data, baseline, j)))
+        .map(|(j, p)| {
+            let residual_n = heldout_residual(data, baseline, j);
+            debug_assert!({
+                let sse: f64 = residual_n.iter().map(|r| r * r).sum();
+                (sse - baseline.per_trial[j].0).abs() <= 1e-6 * sse.max(1e-12)
+            });
+            Cut::of(p, residual_n)
+        })
         .collect();
     let best = HALF_WINDOWS_M
         .iter()
@@ -118,8 +125,11 @@ struct Cut {
 
 impl Cut {
     fn of(p: &Prepared, residual_n: Vec<f64>) -> Self {
+        // Advancing with the cutting on: at rest the nominal holds the
+        // tip's force, at one depth, and a dwell's samples are no profile.
+        let cuts = |i: usize| p.cutting[i] > 0.5 && p.velocity.v_mps[i] >= p.params.half_band_mps;
         let mut by_depth: Vec<(f64, usize)> = (0..p.trial.len())
-            .filter(|&i| p.cutting[i] > 0.5)
+            .filter(|&i| cuts(i))
             .map(|i| (p.trial.x_m[i], i))
             .collect();
         by_depth.sort_by(|a, b| a.0.total_cmp(&b.0));

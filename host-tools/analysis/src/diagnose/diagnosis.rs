@@ -122,7 +122,11 @@ pub struct Step {
     /// How the effect was fitted: `shared` (a law whose parameters the
     /// trials share, judged on withheld ones) or `along_depth_in_each_trial`
     /// (cutting free along each trial's own path, `depth_dependent_cutting`
-    /// only: a heterogeneous tissue).
+    /// only: a heterogeneous tissue). The latter's held-out RMS is each
+    /// withheld trial's cutting samples predicted from its own others
+    /// nearby in depth (leave-one-out), as its spread is fitted on it;
+    /// it is judged against the baseline alone, is then the only step,
+    /// and `candidates` still lists the shared law's own score.
     pub law: &'static str,
     /// Along depth in each trial: the half-width of the depth window
     /// each cutting sample's profile is the mean over, m.

@@ -989,24 +989,29 @@ impl Beyond {
 /// with the needle moving back through it (a needle that starts again
 /// from rest, slower, holds less by Karnopp's law too), landing on a force
 /// still pulling (kinetic friction goes on; a needle let go of reads
-/// zero): the mean of the 25 samples after it below zero by three
-/// of its standard errors. (Kinetic friction on a slow withdrawal can be
-/// a few noise sd; five samples could not tell it from zero, and the
-/// tent's pull was then read as friction.) The largest such snap in `f`;
-/// `None`: it never stuck.
+/// zero, the trial's tare): the mean of the 25 samples after the snap's
+/// three below zero by three of its standard errors and by half a noise
+/// sd (the tare taken on the approach leaves a few mN, under half the
+/// noise sd of the rigs in the book). Kinetic friction on a slow
+/// withdrawal can be a few noise sd: five samples could not tell it from
+/// zero, and the tent's pull was then read as friction. The largest such
+/// snap in `f`; `None`: it never stuck.
 pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize> {
-    let least_n = 10.0 * noise_n.max(1e-4);
+    let noise_n = noise_n.max(1e-4);
+    let least_n = 10.0 * noise_n;
     let mut best: Option<(usize, f64)> = None;
     let end = f.len().min(x.len());
-    for i in start + 3..end.saturating_sub(5) {
+    for i in start + 3..end.saturating_sub(8) {
         let (low_at, low) = (i - 3..i)
             .map(|j| (j, f[j]))
             .fold((i, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
         let rise = f[i] - low;
-        let landing = &f[i..(i + LANDING_SAMPLES).min(end)];
+        // Past the snap's own samples: one spread over several still
+        // rises through the first few.
+        let landing = &f[i + 3..(i + 3 + LANDING_SAMPLES).min(end)];
         let after = landing.iter().sum::<f64>() / landing.len() as f64;
-        let standard_error_n = noise_n.max(1e-4) / (landing.len() as f64).sqrt();
-        let pulling = low <= -least_n && after <= -3.0 * standard_error_n;
+        let standard_error_n = noise_n / (landing.len() as f64).sqrt();
+        let pulling = low <= -least_n && after <= -(3.0 * standard_error_n).max(0.5 * noise_n);
         let moving = x[low_at.saturating_sub(3)] > x[low_at] && x[low_at] > x[i];
         if rise >= least_n && pulling && moving && best.is_none_or(|b| rise > b.1) {
             // The first sample past halfway up the snap, not the one after
@@ -1318,6 +1323,44 @@ mod tests {
 
     fn liver() -> Trial {
         crate::sim::insertion(&LIVER1, &crate::sim::Plan::PAPER).0
+    }
+
+    /// A withdrawal's tent pulling to −0.6 N, snapping back at sample 100
+    /// onto `landing_n` with noise of sd 5 mN (a fixed ±1 sequence), the
+    /// needle moving back 20 µm a sample throughout.
+    fn tent_snapping_onto(landing_n: f64) -> (Vec<f64>, Vec<f64>) {
+        let noise = |k: u32| {
+            if (k.wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
+                0.005
+            } else {
+                -0.005
+            }
+        };
+        let f = (0..200u32)
+            .map(|k| {
+                let level = if k < 100 {
+                    -0.006 * f64::from(k)
+                } else {
+                    landing_n
+                };
+                level + noise(k)
+            })
+            .collect();
+        let x = (0..200).map(|k| 0.03 - 2e-5 * f64::from(k)).collect();
+        (f, x)
+    }
+
+    /// A slip lands on friction still pulling two noise sd (what a slow
+    /// withdrawal of liver leaves), found where the snap is; a let-go
+    /// lands on zero, or on a tare offset of a fifth of a noise sd: no slip.
+    #[test]
+    fn a_slip_lands_on_a_pull_a_let_go_on_the_zero() {
+        let (f, x) = tent_snapping_onto(-0.010);
+        assert_eq!(slipped(&f, &x, 0, 0.005), Some(100));
+        for zero_n in [0.0, -0.001, 0.001] {
+            let (f, x) = tent_snapping_onto(zero_n);
+            assert_eq!(slipped(&f, &x, 0, 0.005), None, "{zero_n}");
+        }
     }
 
     #[test]
