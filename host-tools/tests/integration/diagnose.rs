@@ -8,7 +8,7 @@ use std::process::Command;
 use needle_analysis::diagnose::{
     diagnose, heldout_rms_with_displacement, load, Nominal, TissueShift,
 };
-use needle_analysis::sim::{effects, Dataset, Form, ProtocolKind, Sensor};
+use needle_analysis::sim::{effects, Dataset, Form, ProtocolKind, Rig, Sensor};
 use needle_holder::model::params::{tissue, LIVER1};
 use serde_json::Value;
 
@@ -19,6 +19,11 @@ const SENSOR: Sensor = Sensor {
 };
 
 fn simulate(dir: &Path, effect_list: &str, form: Form, seed: u64) {
+    simulate_on(dir, (effect_list, form, seed), Rig::default());
+}
+
+/// Ten liver trials with `effect_list` in `form` at `seed` on `rig`.
+fn simulate_on(dir: &Path, (effect_list, form, seed): (&str, Form, u64), rig: Rig) {
     let list = effects::parse_list(effect_list).unwrap();
     Dataset {
         tissue_name: "liver1",
@@ -29,16 +34,25 @@ fn simulate(dir: &Path, effect_list: &str, form: Form, seed: u64) {
         sensor: SENSOR,
         through: false,
         form,
-        rig: Default::default(),
+        rig,
     }
     .write(dir)
     .unwrap();
 }
 
 fn diagnosis(effect_list: &str, form: Form, seed: u64) -> Value {
+    diagnosis_on((effect_list, form, seed), Rig::default())
+}
+
+/// [`simulate_on`]'s dataset, diagnosed.
+fn diagnosis_on(case: (&str, Form, u64), rig: Rig) -> Value {
     let dir = tempfile::tempdir().unwrap();
-    simulate(dir.path(), effect_list, form, seed);
-    let (_, data) = load(dir.path(), None).unwrap();
+    simulate_on(dir.path(), case, rig);
+    diagnosis_of(dir.path())
+}
+
+fn diagnosis_of(dir: &Path) -> Value {
+    let (_, data) = load(dir, None).unwrap();
     serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap()
 }
 
@@ -259,22 +273,11 @@ fn a_tare_left_on_each_trial_is_no_effect() {
 fn a_slip_onto_friction_within_the_noise_is_still_a_slip() {
     for seed in [5, 1] {
         let dir = tempfile::tempdir().unwrap();
-        Dataset {
-            tissue_name: "liver1",
-            tissue: &LIVER1,
-            effects: &[],
-            trials: 10,
-            seed,
-            sensor: SENSOR,
-            through: false,
-            form: Form::Standard,
-            rig: needle_analysis::sim::Rig {
-                protocol: ProtocolKind::InsertDwellWithdraw,
-                ..Default::default()
-            },
-        }
-        .write(dir.path())
-        .unwrap();
+        let rig = Rig {
+            protocol: ProtocolKind::InsertDwellWithdraw,
+            ..Default::default()
+        };
+        simulate_on(dir.path(), ("", Form::Standard, seed), rig);
         let fit = needle_analysis::fit::fit_dataset(dir.path()).unwrap();
         let bn = fit.bn_ns_per_m2.value.unwrap();
         assert!(
@@ -282,9 +285,7 @@ fn a_slip_onto_friction_within_the_noise_is_still_a_slip() {
             "seed {seed}: b_n {bn} against {}",
             LIVER1.bn_ns_per_m2
         );
-        let (_, data) = load(dir.path(), None).unwrap();
-        let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
-        assert_named(&out, "none", 0.0);
+        assert_named(&diagnosis_of(dir.path()), "none", 0.0);
     }
 }
 
@@ -299,7 +300,7 @@ fn spread_alone_is_none(tissue_name: &'static str, seed: u64, tare_sd_n: f64) ->
         sensor: SENSOR,
         through: false,
         form: Form::Standard,
-        rig: needle_analysis::sim::Rig {
+        rig: Rig {
             spread: 0.2,
             tare_sd_n,
             ..Default::default()
@@ -332,30 +333,15 @@ fn spread_alone_is_none(tissue_name: &'static str, seed: u64, tare_sd_n: f64) ->
 /// little of the gap.
 #[test]
 fn cutting_that_wanders_along_each_path_is_named() {
-    use needle_analysis::sim::Rig;
     for protocol in [ProtocolKind::Paper, ProtocolKind::InsertDwellWithdraw] {
-        let dir = tempfile::tempdir().unwrap();
-        Dataset {
-            tissue_name: "liver1",
-            tissue: &LIVER1,
-            effects: &effects::parse_list("depth_dependent_cutting=0").unwrap(),
-            trials: 10,
-            seed: 5,
-            sensor: SENSOR,
-            through: false,
-            form: Form::Alternate,
-            rig: Rig {
-                protocol,
-                jitter: true,
-                spread: 0.15,
-                ..Default::default()
-            },
-        }
-        .write(dir.path())
-        .unwrap();
-        let (_, data) = load(dir.path(), None).unwrap();
-        let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
-        assert_named_along_depth(&out);
+        let rig = Rig {
+            protocol,
+            jitter: true,
+            spread: 0.15,
+            ..Default::default()
+        };
+        let case = ("depth_dependent_cutting=0", Form::Alternate, 5);
+        assert_named_along_depth(&diagnosis_on(case, rig));
     }
 }
 

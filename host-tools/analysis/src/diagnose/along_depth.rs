@@ -21,9 +21,9 @@
 //! Written here: a running mean over sorted depths is a few lines, no
 //! smoothing crate fits the leave-one-out form.
 
-use super::crossval::{folds, Gram, PerTrial};
+use super::crossval::{folds, PerTrial};
 use super::prepare::{Prepared, PHASES};
-use super::{columns, Scored, NOMINAL_CORRECTIONS, SPREAD};
+use super::{add_terms, columns, grams, total, Scored, Supports, NOMINAL_CORRECTIONS, SPREAD};
 
 /// Half-widths of the depth window tried, m: from a fraction of a
 /// bevel's length to a few millimetres (a tissue's layers).
@@ -95,24 +95,22 @@ pub fn profile(p: &Prepared, residual_n: Vec<f64>, half_m: f64) -> Vec<f64> {
 /// corrections from the other trials (its fold's), its own spread fitted
 /// on it.
 fn heldout_residual(data: &[Prepared], baseline: &Scored, j: usize) -> Vec<f64> {
-    let p = &data[j];
-    let cols = columns(p, &[]);
-    let mut g = Gram::new(cols.len());
-    let mut row = vec![0.0; cols.len()];
-    for i in 0..p.trial.len() {
-        for (r, c) in row.iter_mut().zip(&cols) {
-            *r = c[i];
-        }
-        g.add(&row, p.residual_n[i]);
-    }
+    let trial = std::slice::from_ref(&data[j]);
+    let cols = vec![columns(&data[j], &[])];
+    let sums = total(&grams(trial, &cols, &Supports::all(trial, &cols))[0]);
     let per = PerTrial {
         own: &SPREAD,
         ridged: NOMINAL_CORRECTIONS.len(),
     };
     let shared = &baseline.fold_theta[j % folds(data.len())];
-    let theta = per.for_trial(&g, shared);
-    (0..p.trial.len())
-        .map(|i| p.residual_n[i] - cols.iter().zip(&theta).map(|(c, t)| c[i] * t).sum::<f64>())
+    let theta = per.for_trial(&sums, shared);
+    let mut fitted = vec![0.0; data[j].trial.len()];
+    add_terms(&mut fitted, &cols[0], &theta);
+    data[j]
+        .residual_n
+        .iter()
+        .zip(fitted)
+        .map(|(r, f)| r - f)
         .collect()
 }
 

@@ -585,14 +585,19 @@ fn fitted_and_baseline(mut data: Vec<Prepared>) -> (Vec<Prepared>, Scored) {
     let baseline = score(&data, &[], None);
     for (p, theta) in data.iter_mut().zip(&baseline.trial_theta) {
         let mut fitted = p.nominal_n.clone();
-        for (col, th) in columns(p, &[]).iter().zip(theta) {
-            for (f, c) in fitted.iter_mut().zip(col) {
-                *f += th * c;
-            }
-        }
+        add_terms(&mut fitted, &columns(p, &[]), theta);
         p.fitted_n = fitted;
     }
     (data, baseline)
+}
+
+/// `Σ θ_k·col_k` added to `into`, column by column.
+fn add_terms(into: &mut [f64], cols: &[Vec<f64>], theta: &[f64]) {
+    for (col, th) in cols.iter().zip(theta) {
+        for (f, c) in into.iter_mut().zip(col) {
+            *f += th * c;
+        }
+    }
 }
 
 /// Shrink of held-out RMS and the paired t of per-trial improvements,
@@ -1437,17 +1442,8 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> (Vec<f64>, String) {
         train.merge(&total(g));
     }
     let theta = train.solve();
-    let cols = columns(&data[0], &set);
-    let mut augmented: Vec<f64> = (0..data[0].trial.len())
-        .map(|i| {
-            data[0].nominal_n[i]
-                + cols
-                    .iter()
-                    .zip(&theta)
-                    .map(|(c, th)| c[i] * th)
-                    .sum::<f64>()
-        })
-        .collect();
+    let mut augmented = data[0].nominal_n.clone();
+    add_terms(&mut augmented, &columns(&data[0], &set), &theta);
     if let (Some(half_m), Some(step)) = (along_depth, v.effects.first()) {
         let p = &data[0];
         let left: Vec<f64> = (0..p.trial.len())
