@@ -23,7 +23,17 @@ fn simulate(dir: &Path, effect_list: &str, form: Form, seed: u64) {
 }
 
 /// Ten liver trials with `effect_list` in `form` at `seed` on `rig`.
-fn simulate_on(dir: &Path, (effect_list, form, seed): (&str, Form, u64), rig: Rig) {
+fn simulate_on(dir: &Path, case: (&str, Form, u64), rig: Rig) {
+    simulate_with(dir, case, rig, SENSOR);
+}
+
+/// [`simulate_on`] with a load cell of its own.
+fn simulate_with(
+    dir: &Path,
+    (effect_list, form, seed): (&str, Form, u64),
+    rig: Rig,
+    sensor: Sensor,
+) {
     let list = effects::parse_list(effect_list).unwrap();
     Dataset {
         tissue_name: "liver1",
@@ -31,7 +41,7 @@ fn simulate_on(dir: &Path, (effect_list, form, seed): (&str, Form, u64), rig: Ri
         effects: &list,
         trials: 10,
         seed,
-        sensor: SENSOR,
+        sensor,
         through: false,
         form,
         rig,
@@ -286,6 +296,39 @@ fn a_slip_onto_friction_within_the_noise_is_still_a_slip() {
             LIVER1.bn_ns_per_m2
         );
         assert_named(&diagnosis_of(dir.path()), "none", 0.0);
+    }
+}
+
+/// Insert–dwell–withdraw into liver whose every trial is 20 % its own
+/// (stiffness, cutting, friction): the sample on which the stage stops
+/// lies on either side of the stop to the encoder, and the force settles
+/// it — against the trial's own levels either side, not the nominal's,
+/// which the trial's spread moves by as much as the step between them.
+/// Judged by the nominal's levels, one stop sample in three trials read
+/// as still cutting, 0.3 N off, and the dataset was `unexplained` (8.0 mN
+/// on a 5 mN floor at 500 Hz, 18.9 on 12 at 100 Hz).
+#[test]
+fn a_stop_is_placed_by_the_trials_own_levels_either_side() {
+    for (rate_hz, noise_n) in [(500.0, 0.005), (100.0, 0.012)] {
+        let dir = tempfile::tempdir().unwrap();
+        let rig = Rig {
+            protocol: ProtocolKind::InsertDwellWithdraw,
+            spread: 0.2,
+            ..Default::default()
+        };
+        let sensor = Sensor {
+            rate_hz,
+            noise_n,
+            ..SENSOR
+        };
+        simulate_with(dir.path(), ("", Form::Standard, 5), rig, sensor);
+        let out = diagnosis_of(dir.path());
+        assert_named(&out, "none", 0.0);
+        let (left, noise) = (
+            num(&out["verdict"]["heldout_rms_after_n"]),
+            num(&out["noise_floor_n"]),
+        );
+        assert!(left <= 1.1 * noise, "{rate_hz} Hz: {left} on {noise}");
     }
 }
 

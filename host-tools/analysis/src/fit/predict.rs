@@ -134,17 +134,127 @@ pub fn predict_each(
 ) -> usize {
     let puncture = last_loaded_sample(geometry, trial);
     debug_assert_eq!(x_m.len(), trial.len(), "a position for every sample");
-    let mut model = Inside::at_puncture(params, geometry, v, trial.t_s.get(puncture).copied());
+    let inside = || Inside::at_puncture(params, geometry, v, trial.t_s.get(puncture).copied());
+    if v.force_sd_n <= 0.0 || v.uncertain.is_empty() {
+        pass(inside(), (trial, x_m), puncture, each);
+        return puncture;
+    }
+    // Where the measured force fits neither side's level of a jump, the
+    // levels are moved to the trial's own, which the first pass shows.
+    let mut first = Vec::with_capacity(trial.len());
+    let contested = pass(inside(), (trial, x_m), puncture, &mut |_, s| first.push(*s)).contested;
+    let shifts = if contested.is_empty() {
+        Vec::new()
+    } else {
+        let total: Vec<f64> = first.iter().map(SampleParts::total_n).collect();
+        level_shifts(trial, v, &total, puncture, &contested)
+    };
+    if shifts.iter().all(Option::is_none) {
+        for (i, s) in first.iter().enumerate() {
+            each(i, s);
+        }
+    } else {
+        let mut model = inside();
+        model.shifts = shifts;
+        pass(model, (trial, x_m), puncture, each);
+    }
+    puncture
+}
+
+/// One pass of the model along the trial, the loading curve up to
+/// `puncture` and `model` past it.
+fn pass<'a>(
+    mut model: Inside<'a>,
+    (trial, x_m): (&Trial, &[f64]),
+    puncture: usize,
+    each: &mut dyn FnMut(usize, &SampleParts),
+) -> Inside<'a> {
     for (i, &x) in x_m.iter().enumerate().take(trial.len()) {
         let s = if i <= puncture {
-            loading(params, geometry, x)
+            loading(model.params, model.geometry, x)
         } else {
             model.step(i, x, (trial.t_s[i], trial.f_n[i]))
         };
         each(i, &s);
     }
-    puncture
+    model
 }
+
+/// How far the trial's own force stands from the model's on either side
+/// of each uncertain sample (in `v.uncertain`'s order): [this side, the
+/// other side], for the `contested` samples (whose force fit neither
+/// side's level) where the difference is significant on either side,
+/// else `None`. A trial's tissue is its own: its held force or cutting differs
+/// from the nominal's by its spread (30 % of the cutting in the paper's
+/// liver), by as much as the step between the two sides. Judged by the
+/// nominal's own levels, a stop whose held force the nominal puts low
+/// reads as still cutting. The model's miss at the nearest sure samples
+/// either side (up to [`SURE_SAMPLES`] of them within [`SURE_WITHIN`], past
+/// the puncture) moves each side's level by the trial's own, the model
+/// carrying the force's trend between them.
+fn level_shifts(
+    trial: &Trial,
+    v: &NeedleVelocity,
+    total_n: &[f64],
+    puncture: usize,
+    contested: &[usize],
+) -> Vec<Option<[f64; 2]>> {
+    let mut sorted = v.uncertain.clone();
+    sorted.sort_by_key(|u| u.0);
+    let uncertain = |k: usize| sorted.binary_search_by_key(&k, |u| u.0).is_ok();
+    let n = trial.len();
+    // The mean miss at the nearest sure samples, how many, and the
+    // nearest.
+    let miss = |ks: &mut dyn Iterator<Item = usize>| -> Option<(f64, usize, usize)> {
+        let ks: Vec<usize> = ks
+            .filter(|&k| k > puncture && k < n && !uncertain(k))
+            .take(SURE_SAMPLES)
+            .collect();
+        let m = ks.len();
+        (m > 0).then(|| {
+            let sum: f64 = ks.iter().map(|&k| trial.f_n[k] - total_n[k]).sum();
+            (sum / m as f64, m, ks[0])
+        })
+    };
+    sorted
+        .iter()
+        .map(|&(i, v_other, _)| {
+            if !contested.contains(&i) {
+                return None;
+            }
+            let (before, m_b, k_b) = miss(&mut (i.saturating_sub(SURE_WITHIN)..i).rev())?;
+            let (after, m_a, _) = miss(&mut (i + 1..=i + SURE_WITHIN))?;
+            let bar = |m: usize| 3.0 * v.force_sd_n / (m as f64).sqrt();
+            if before.abs() < bar(m_b) && after.abs() < bar(m_a) {
+                return None;
+            }
+            // This side is the one whose velocity the sure sample before
+            // shares (the samples between may be uncertain themselves).
+            let vb = v.v_mps[k_b];
+            let here_before = (v.v_mps[i] - vb).abs() <= (v_other - vb).abs();
+            Some(if here_before {
+                [before, after]
+            } else {
+                [after, before]
+            })
+        })
+        .collect()
+}
+
+/// How many noise sd from a side's level the force at an uncertain
+/// sample may stand and still fit it: past this on both sides, the
+/// trial's own levels are looked up ([`level_shifts`]).
+const FITS_LEVEL_SD: f64 = 4.0;
+
+/// How far from an uncertain sample, in samples, the sure ones that
+/// measure the trial's own force either side of its jump may lie: a
+/// rest's edge at 100 Hz leaves runs of six uncertain samples.
+const SURE_WITHIN: usize = 8;
+
+/// How many sure samples either side are averaged: a few, so that their
+/// noise adds little to the sample's own, and near enough that the
+/// model's trend carries them to it.
+const SURE_SAMPLES: usize = 3;
 
 /// The capsule's force with the tip at `x_m`, up to the puncture.
 fn loading(params: &TissueParams, geometry: &TrialFit, x_m: f64) -> SampleParts {
@@ -184,6 +294,11 @@ struct Inside<'a> {
     /// the whole list at every sample was a tenth of the model's time).
     uncertain: Vec<(usize, f64, f64)>,
     next_uncertain: usize,
+    /// The trial's own levels either side of each uncertain sample, as
+    /// shifts of the model's ([`level_shifts`]); empty for none.
+    shifts: Vec<Option<[f64; 2]>>,
+    /// The uncertain samples whose force fit neither side's level.
+    contested: Vec<usize>,
 }
 
 impl<'a> Inside<'a> {
@@ -220,6 +335,8 @@ impl<'a> Inside<'a> {
             cutting: true,
             uncertain,
             next_uncertain: 0,
+            shifts: Vec::new(),
+            contested: Vec::new(),
         }
     }
 
@@ -343,11 +460,22 @@ impl<'a> Inside<'a> {
             self.last_basis,
         );
         let other_cutting_n = self.tip_n(at, v_other, other.friction_n);
-        let model_n = [
+        let mut model_n = [
             here.friction_n + s.cutting_n,
             other.friction_n + other_cutting_n,
         ];
-        let w = other_side_odds(prior, f_n, model_n, self.v.force_sd_n);
+        let mut sd_n = self.v.force_sd_n;
+        if let Some(Some(shift)) = self.shifts.get(self.next_uncertain) {
+            model_n[0] += shift[0];
+            model_n[1] += shift[1];
+            // Each level now carries the mean noise of its sure samples.
+            sd_n *= (1.0 + 1.0 / SURE_SAMPLES as f64).sqrt();
+        }
+        let fits = |m: f64| (f_n - m).abs() <= FITS_LEVEL_SD * sd_n;
+        if !fits(model_n[0]) && !fits(model_n[1]) {
+            self.contested.push(i);
+        }
+        let w = other_side_odds(prior, f_n, model_n, sd_n);
         let mix = |a: f64, b: f64| (1.0 - w) * a + w * b;
         s.friction_n = mix(here.friction_n, other.friction_n);
         for (k, b) in s.friction_basis.iter_mut().enumerate() {
@@ -761,6 +889,51 @@ mod tests {
         // the nearer side, and the odds stay a probability.
         let far = other_side_odds(0.5, -0.13, sides, 0.005);
         assert!(far > 0.99 && far <= 1.0, "{far}");
+    }
+
+    #[test]
+    fn a_sides_level_is_the_trials_own_at_the_sure_samples_on_that_side() {
+        // Moving to sample 7, at rest from 10; 8 and 9 read at rest by
+        // the encoder but may still move (a stage creeping to its stop).
+        // The model misses the trial's moving force by +0.40 N and its
+        // held force by -0.06 N.
+        let n = 20;
+        let v_mps: Vec<f64> = (0..n).map(|i| if i < 8 { 1e-3 } else { 0.0 }).collect();
+        let moving = |i: usize| i < 10;
+        let total_n: Vec<f64> = (0..n).map(|i| if moving(i) { 0.9 } else { 0.6 }).collect();
+        let f_n: Vec<f64> = (0..n)
+            .map(|i| total_n[i] + if moving(i) { 0.4 } else { -0.06 })
+            .collect();
+        let trial = Trial {
+            t_s: (0..n).map(|i| i as f64 * 0.002).collect(),
+            x_m: vec![0.0; n],
+            f_n,
+        };
+        let v = NeedleVelocity {
+            v_mps,
+            uncertain: vec![(8, 1e-3, 0.5), (9, 1e-3, 0.5)],
+            force_sd_n: 0.005,
+            ..NeedleVelocity::default()
+        };
+        let close = |a: Option<[f64; 2]>, b: [f64; 2]| {
+            a.is_some_and(|a| (a[0] - b[0]).abs() < 1e-9 && (a[1] - b[1]).abs() < 1e-9)
+        };
+        // Both read at rest: this side's level is the rest's own, the
+        // other side's the motion's — for 9 too, whose sample before is
+        // itself uncertain and at rest: the side is judged by the sure
+        // sample before (7, moving).
+        let shifts = level_shifts(&trial, &v, &total_n, 0, &[8, 9]);
+        assert!(close(shifts[0], [-0.06, 0.4]), "{shifts:?}");
+        assert!(close(shifts[1], [-0.06, 0.4]), "{shifts:?}");
+        // Not contested: no shift; the model's own levels stand.
+        assert_eq!(level_shifts(&trial, &v, &total_n, 0, &[8])[1], None);
+        // Where the model meets the trial's levels, no shift either.
+        let met = Trial {
+            f_n: total_n.clone(),
+            ..trial
+        };
+        let none = level_shifts(&met, &v, &total_n, 0, &[8, 9]);
+        assert!(none.iter().all(Option::is_none), "{none:?}");
     }
 
     #[test]
