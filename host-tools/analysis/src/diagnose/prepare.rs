@@ -193,7 +193,7 @@ pub fn prepare(
     // While the withdrawing needle drags the tissue along, the force is
     // the tent's (the stick's own corrections, per trial), not kinetic
     // friction.
-    let stick = stick(&trial, &phase, &parts.friction_n, geometry.noise_n);
+    let stick = stick(&trial, &phase, &parts.friction_n, &geometry);
     let mut parts = parts;
     for i in stick.clone() {
         nominal_n[i] = 0.0;
@@ -397,7 +397,7 @@ pub fn stick(
     trial: &Trial,
     phase: &[usize],
     friction_n: &[f64],
-    noise_n: f64,
+    geometry: &TrialFit,
 ) -> std::ops::Range<usize> {
     let Some(first) = phase.iter().position(|&p| p == WITHDRAWAL) else {
         return 0..0;
@@ -417,7 +417,11 @@ pub fn stick(
     {
         start -= 1;
     }
-    crate::fit::trial::slipped(&trial.f_n[..end], &trial.x_m, start, noise_n)
+    let deep = (
+        geometry.puncture_x_m,
+        crate::fit::trial::free_level_n(trial, geometry.contact_x_m),
+    );
+    crate::fit::trial::slipped(&trial.f_n[..end], &trial.x_m, start, geometry.noise_n, deep)
         .map_or(0..0, |s| start..s)
 }
 

@@ -418,7 +418,7 @@ pub fn fit_trial(trial: &Trial) -> Result<TrialFit> {
         advancing,
         rests,
         stuck,
-    } = strokes(trial, &v, (ip, start), noise_n);
+    } = strokes(trial, &v, (ip, start, contact_x_m), noise_n);
     let x_s2 = x[ip];
     let inward = track.iter().filter(|s| s.1 > 0.0).count() >= MIN_STROKE_SAMPLES;
     let dwell = dwell_relaxation(trial, &v, ip);
@@ -658,7 +658,13 @@ struct Strokes {
 }
 
 /// [`Strokes`] from sample `start` on, the puncture at `ip`.
-fn strokes(trial: &Trial, v: &[f64], (ip, start): (usize, usize), noise_n: f64) -> Strokes {
+fn strokes(
+    trial: &Trial,
+    v: &[f64],
+    (ip, start, contact_x_m): (usize, usize, f64),
+    noise_n: f64,
+) -> Strokes {
+    let free_n = free_level_n(trial, contact_x_m);
     let (x, f) = (&trial.x_m, &trial.f_n);
     let rate = trial.rate_hz();
     let mut deepest = x[ip];
@@ -689,7 +695,7 @@ fn strokes(trial: &Trial, v: &[f64], (ip, start): (usize, usize), noise_n: f64) 
         .unwrap_or(0);
     let retreat = (last_forward..trial.len()).find(|&i| v[i] <= -SLIDING_MPS);
     let stuck = retreat
-        .and_then(|r| slipped(f, x, r, noise_n).map(|s| r..s))
+        .and_then(|r| slipped(f, x, r, noise_n, (x[ip], free_n)).map(|s| r..s))
         .unwrap_or(0..0);
     for i in start..trial.len() {
         let new_tissue = x[i] >= deepest;
@@ -994,13 +1000,32 @@ impl Beyond {
 /// sd (the tare taken on the approach leaves a few mN, under half the
 /// noise sd of the rigs in the book). Kinetic friction on a slow
 /// withdrawal can be a few noise sd: five samples could not tell it from
-/// zero, and the tent's pull was then read as friction. The largest such
+/// zero, and the tent's pull was then read as friction. A snap with the
+/// tip deeper than `puncture_x_m` is a slip whatever it lands on: the
+/// tissue lets go of a needle only as its tip comes out past the relaxed
+/// surface, which lies short of where the capsule gave way (liver's
+/// kinetic friction at 1 mm/s is a noise sd or so, and a slip 20 mm deep
+/// read as a let-go put the tent's pull into the friction line) — if it
+/// is the first snap and does not land pushing against `free_n`, what
+/// the load cell reads with the needle free ([`free_level_n`]; a drifting
+/// bridge moves it off zero), which no slip does (a tissue moving out
+/// faster than the needle flips the friction's sign). The largest such
 /// snap in `f`; `None`: it never stuck.
-pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize> {
+pub fn slipped(
+    f: &[f64],
+    x: &[f64],
+    start: usize,
+    noise_n: f64,
+    (puncture_x_m, free_n): (f64, f64),
+) -> Option<usize> {
     let noise_n = noise_n.max(1e-4);
     let least_n = 10.0 * noise_n;
     let mut best: Option<(usize, f64)> = None;
     let end = f.len().min(x.len());
+    // The samples of the first snap (a rise of `least_n` from a pull, the
+    // needle moving back): the tent stretched through the dwell slips
+    // there, and only there may a landing on zero be its slip.
+    let mut first_snap: Option<std::ops::Range<usize>> = None;
     for i in start + 3..end.saturating_sub(8) {
         let (low_at, low) = (i - 3..i)
             .map(|j| (j, f[j]))
@@ -1011,9 +1036,21 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
         let landing = &f[i + 3..(i + 3 + LANDING_SAMPLES).min(end)];
         let after = landing.iter().sum::<f64>() / landing.len() as f64;
         let standard_error_n = noise_n / (landing.len() as f64).sqrt();
-        let pulling = low <= -least_n && after <= -(3.0 * standard_error_n).max(0.5 * noise_n);
+        let within_n = (3.0 * standard_error_n).max(0.5 * noise_n);
+        let lands_pulling = after <= -within_n;
         let moving = x[low_at.saturating_sub(3)] > x[low_at] && x[low_at] > x[i];
-        if rise >= least_n && pulling && moving && best.is_none_or(|b| rise > b.1) {
+        let snap = rise >= least_n && low <= -least_n && moving;
+        if snap && first_snap.is_none() {
+            first_snap = Some(i..i + 3);
+        }
+        // Deep in the tissue, the first snap landing within the noise of
+        // the free needle's level is a slip too; one that pushes past it
+        // is no slip at all (the tissue moving out faster than the
+        // needle), nor are later snaps of a friction whose sign a moving
+        // tissue flips.
+        let first = first_snap.as_ref().is_some_and(|r| r.contains(&i));
+        let deep = first && x[i] > puncture_x_m && after - free_n <= within_n;
+        if snap && (lands_pulling || deep) && best.is_none_or(|b| rise > b.1) {
             // The first sample past halfway up the snap, not the one after
             // the deepest pull: which of the last stuck samples reads
             // deepest is the noise's choice.
@@ -1028,6 +1065,20 @@ pub fn slipped(f: &[f64], x: &[f64], start: usize, noise_n: f64) -> Option<usize
 /// Samples after a snap whose mean says whether the needle still pulls
 /// ([`slipped`]).
 const LANDING_SAMPLES: usize = 25;
+
+/// What the load cell reads with the needle free after the withdrawal:
+/// the median of the trial's last 25 samples, where the
+/// trial ends with the needle back before its contact point; 0 where it
+/// does not.
+pub fn free_level_n(trial: &Trial, contact_x_m: f64) -> f64 {
+    let n = trial.len();
+    if n < LANDING_SAMPLES || trial.x_m[n - 1] >= contact_x_m {
+        return 0.0;
+    }
+    let mut last = trial.f_n[n - LANDING_SAMPLES..].to_vec();
+    last.sort_by(f64::total_cmp);
+    last[LANDING_SAMPLES / 2]
+}
 
 /// Where a withdrawing needle was let go with a snap (`out` in time
 /// order): the last sample still pulling by ten noise sd, followed at once
@@ -1352,15 +1403,35 @@ mod tests {
 
     /// A slip lands on friction still pulling two noise sd (what a slow
     /// withdrawal of liver leaves), found where the snap is; a let-go
-    /// lands on zero, or on a tare offset of a fifth of a noise sd: no slip.
+    /// lands on zero, or on a tare offset of a fifth of a noise sd: no
+    /// slip, unless the tip is still deep in the tissue.
     #[test]
     fn a_slip_lands_on_a_pull_a_let_go_on_the_zero() {
         let (f, x) = tent_snapping_onto(-0.010);
-        assert_eq!(slipped(&f, &x, 0, 0.005), Some(100));
+        // The snap at 28 mm, the capsule punctured at 30 mm: the tip may
+        // be out past the relaxed surface.
+        let punctured_m = 0.03;
+        assert_eq!(slipped(&f, &x, 0, 0.005, (punctured_m, 0.0)), Some(100));
         for zero_n in [0.0, -0.001, 0.001] {
             let (f, x) = tent_snapping_onto(zero_n);
-            assert_eq!(slipped(&f, &x, 0, 0.005), None, "{zero_n}");
+            assert_eq!(
+                slipped(&f, &x, 0, 0.005, (punctured_m, 0.0)),
+                None,
+                "{zero_n}"
+            );
+            // Punctured at 15 mm, the tip 13 mm past it is still in the
+            // tissue: a slip, landing within the noise of zero.
+            assert_eq!(
+                slipped(&f, &x, 0, 0.005, (0.015, 0.0)),
+                Some(100),
+                "{zero_n}"
+            );
         }
+        // A landing that pushes is no slip, however deep — pushing against
+        // what the load cell reads with the needle free.
+        let (f, x) = tent_snapping_onto(0.010);
+        assert_eq!(slipped(&f, &x, 0, 0.005, (0.015, 0.0)), None);
+        assert_eq!(slipped(&f, &x, 0, 0.005, (0.015, 0.012)), Some(100));
     }
 
     #[test]
