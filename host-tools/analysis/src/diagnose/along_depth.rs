@@ -14,10 +14,10 @@
 //!
 //! Free along depth in every trial, such a profile takes up part of any
 //! effect's residual along an insertion at steady speed (where depth and
-//! time go together), so it is tried only once the shared candidates
-//! leave a gap, and named only if it takes [`MOST_OF_GAP_ALONG_DEPTH`] of
-//! it (`super::diagnose`): an effect whose residual lies mostly where
-//! the tip cuts, as a function of depth there.
+//! time go together), so it is tried only where no shared candidate is
+//! significant and a gap is left, and named only if it takes
+//! [`MOST_OF_GAP_ALONG_DEPTH`] of it (`super::diagnose`): an effect whose
+//! residual lies mostly where the tip cuts, as a function of depth there.
 //! Written here: a running mean over sorted depths is a few lines, no
 //! smoothing crate fits the leave-one-out form.
 

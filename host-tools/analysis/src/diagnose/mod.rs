@@ -1138,7 +1138,11 @@ pub fn diagnose_with_progress(
         None => Vec::new(),
     };
     let (mut law, mut half_window_m) = ("shared", None);
-    if leaves_unexplained(&baseline, &steps, noise) {
+    // A profile free in every trial is the last resort: it is not tried
+    // over a shared law that holds on the withheld trials (its free
+    // profile would take that effect's residual along the insertion,
+    // where depth and time go together, and name cutting for it).
+    if steps.is_empty() && leaves_unexplained(&baseline, &steps, noise) {
         progress("trying a cutting force free along depth in each trial");
         if let Some(along) = cutting_along_depth(data, &baseline, bar) {
             half_window_m = Some(along.1.grid_value);
