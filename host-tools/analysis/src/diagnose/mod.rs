@@ -1142,7 +1142,7 @@ pub fn diagnose_with_progress(
     // over a shared law that holds on the withheld trials (its free
     // profile would take that effect's residual along the insertion,
     // where depth and time go together, and name cutting for it).
-    if steps.is_empty() && leaves_unexplained(&baseline, &steps, noise) {
+    if steps.is_empty() && baseline.rms() > EXPLAINED_FACTOR * noise {
         progress("trying a cutting force free along depth in each trial");
         if let Some(along) = cutting_along_depth(data, &baseline, bar) {
             half_window_m = Some(along.1.grid_value);
@@ -1219,14 +1219,6 @@ pub fn diagnose_with_progress(
         },
         skipped: None,
     }
-}
-
-/// Whether `steps` leave a gap the verdict would call `unexplained`: open,
-/// and mostly not taken by them.
-fn leaves_unexplained(baseline: &Scored, steps: &[(usize, Scored)], noise_n: f64) -> bool {
-    let left = steps.last().map_or(baseline, |(_, s)| s);
-    left.rms() > EXPLAINED_FACTOR * noise_n
-        && (steps.is_empty() || gap_taken(baseline.rms(), left.rms(), noise_n) < MOST_OF_GAP)
 }
 
 /// [`along_depth::cutting_along_depth`] as the one step of the verdict,

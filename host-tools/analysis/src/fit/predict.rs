@@ -181,7 +181,8 @@ fn pass<'a>(
 }
 
 /// How far the trial's own force stands from the model's on either side
-/// of each uncertain sample (in `v.uncertain`'s order): [this side, the
+/// of each uncertain sample (sorted by sample, as `Inside` meets them):
+/// [this side, the
 /// other side], for the `contested` samples (whose force fit neither
 /// side's level) where the difference is significant on either side,
 /// else `None`. A trial's tissue is its own: its held force or cutting differs
@@ -189,9 +190,10 @@ fn pass<'a>(
 /// liver), by as much as the step between the two sides. Judged by the
 /// nominal's own levels, a stop whose held force the nominal puts low
 /// reads as still cutting. The model's miss at the nearest sure samples
-/// either side (up to [`SURE_SAMPLES`] of them within [`SURE_WITHIN`], past
-/// the puncture) moves each side's level by the trial's own, the model
-/// carrying the force's trend between them.
+/// either side (up to [`SURE_SAMPLES`] of them, past the puncture, within
+/// two velocity windows and those samples: a rest's edge leaves a run of
+/// up to two windows of uncertain samples) moves each side's level by the
+/// trial's own, the model carrying the force's trend between them.
 fn level_shifts(
     trial: &Trial,
     v: &NeedleVelocity,
@@ -202,7 +204,8 @@ fn level_shifts(
     let mut sorted = v.uncertain.clone();
     sorted.sort_by_key(|u| u.0);
     let uncertain = |k: usize| sorted.binary_search_by_key(&k, |u| u.0).is_ok();
-    let n = trial.len();
+    let n = trial.len().min(total_n.len());
+    let reach = 2 * window_samples(trial.rate_hz()) + SURE_SAMPLES;
     // The mean miss at the nearest sure samples, how many, and the
     // nearest.
     let miss = |ks: &mut dyn Iterator<Item = usize>| -> Option<(f64, usize, usize)> {
@@ -219,11 +222,10 @@ fn level_shifts(
     sorted
         .iter()
         .map(|&(i, v_other, _)| {
-            if !contested.contains(&i) {
-                return None;
-            }
-            let (before, m_b, k_b) = miss(&mut (i.saturating_sub(SURE_WITHIN)..i).rev())?;
-            let (after, m_a, _) = miss(&mut (i + 1..=i + SURE_WITHIN))?;
+            // Met in sample order, so sorted.
+            contested.binary_search(&i).ok()?;
+            let (before, m_b, k_b) = miss(&mut (i.saturating_sub(reach)..i).rev())?;
+            let (after, m_a, _) = miss(&mut (i + 1..=i + reach))?;
             let bar = |m: usize| 3.0 * v.force_sd_n / (m as f64).sqrt();
             if before.abs() < bar(m_b) && after.abs() < bar(m_a) {
                 return None;
@@ -245,11 +247,6 @@ fn level_shifts(
 /// sample may stand and still fit it: past this on both sides, the
 /// trial's own levels are looked up ([`level_shifts`]).
 const FITS_LEVEL_SD: f64 = 4.0;
-
-/// How far from an uncertain sample, in samples, the sure ones that
-/// measure the trial's own force either side of its jump may lie: a
-/// rest's edge at 100 Hz leaves runs of six uncertain samples.
-const SURE_WITHIN: usize = 8;
 
 /// How many sure samples either side are averaged: a few, so that their
 /// noise adds little to the sample's own, and near enough that the

@@ -1001,7 +1001,7 @@ impl Beyond {
 /// noise sd of the rigs in the book). Kinetic friction on a slow
 /// withdrawal can be a few noise sd: five samples could not tell it from
 /// zero, and the tent's pull was then read as friction. A snap with the
-/// tip deeper than `puncture_x_m` is a slip whatever it lands on: the
+/// tip deeper than `puncture_x_m` can be no let-go: the
 /// tissue lets go of a needle only as its tip comes out past the relaxed
 /// surface, which lies short of where the capsule gave way (liver's
 /// kinetic friction at 1 mm/s is a noise sd or so, and a slip 20 mm deep
@@ -1067,12 +1067,12 @@ pub fn slipped(
 const LANDING_SAMPLES: usize = 25;
 
 /// What the load cell reads with the needle free after the withdrawal:
-/// the median of the trial's last 25 samples, where the
-/// trial ends with the needle back before its contact point; 0 where it
-/// does not.
+/// the median of the trial's last 25 samples, where all of them have the
+/// needle back before its contact point; 0 (the tare) where they do not.
 pub fn free_level_n(trial: &Trial, contact_x_m: f64) -> f64 {
     let n = trial.len();
-    if n < LANDING_SAMPLES || trial.x_m[n - 1] >= contact_x_m {
+    let last_x = || trial.x_m[n - LANDING_SAMPLES..].iter();
+    if n < LANDING_SAMPLES || last_x().any(|&x| x >= contact_x_m) {
         return 0.0;
     }
     let mut last = trial.f_n[n - LANDING_SAMPLES..].to_vec();
@@ -1427,6 +1427,19 @@ mod tests {
                 "{zero_n}"
             );
         }
+        // Only the first snap: a second one deep in the tissue, landing on
+        // zero, is a moving tissue's friction flipping, not the tent's slip
+        // (the first landed pushing).
+        let (pushed, _) = tent_snapping_onto(0.010);
+        let f: Vec<f64> = (0..260)
+            .map(|k| match k {
+                0..130 => pushed[k],
+                130..160 => 0.010 - 0.61 * (k - 130) as f64 / 30.0,
+                _ => pushed[k - 60] - 0.010,
+            })
+            .collect();
+        let x: Vec<f64> = (0..260).map(|k| 0.03 - 2e-5 * k as f64).collect();
+        assert_eq!(slipped(&f, &x, 0, 0.005, (0.015, 0.0)), None);
         // A landing that pushes is no slip, however deep — pushing against
         // what the load cell reads with the needle free.
         let (f, x) = tent_snapping_onto(0.010);
