@@ -288,15 +288,21 @@ fn a_slip_onto_friction_within_the_noise_is_still_a_slip() {
             ..Default::default()
         };
         simulate_on(dir.path(), ("", Form::Standard, seed), rig);
-        let fit = needle_analysis::fit::fit_dataset(dir.path()).unwrap();
-        let bn = fit.bn_ns_per_m2.value.unwrap();
-        assert!(
-            (bn / LIVER1.bn_ns_per_m2 - 1.0).abs() <= 0.05,
-            "seed {seed}: b_n {bn} against {}",
-            LIVER1.bn_ns_per_m2
-        );
+        assert_fitted_bn_within(dir.path(), 0.05, &format!("seed {seed}"));
         assert_named(&diagnosis_of(dir.path()), "none", 0.0);
     }
+}
+
+/// `needle fit`'s withdrawal damping b_n on the liver trials in `dir` is
+/// liver 1's within `tolerance` (relative); `case` names it on failure.
+fn assert_fitted_bn_within(dir: &Path, tolerance: f64, case: &str) {
+    let fit = needle_analysis::fit::fit_dataset(dir).unwrap();
+    let bn = fit.bn_ns_per_m2.value.unwrap();
+    let truth = LIVER1.bn_ns_per_m2;
+    assert!(
+        (bn / truth - 1.0).abs() <= tolerance,
+        "{case}: b_n {bn} against {truth}"
+    );
 }
 
 /// Liver with Dahl's presliding (his exponent 2) on insert–dwell–withdraw
@@ -323,13 +329,7 @@ fn a_snap_deep_in_the_tissue_is_a_slip_not_a_let_go() {
     };
     let case = ("presliding_hysteresis", Form::Literature, 2);
     simulate_with(dir.path(), case, rig, sensor);
-    let fit = needle_analysis::fit::fit_dataset(dir.path()).unwrap();
-    let bn = fit.bn_ns_per_m2.value.unwrap();
-    assert!(
-        (bn / LIVER1.bn_ns_per_m2 - 1.0).abs() <= 0.15,
-        "b_n {bn} against {}",
-        LIVER1.bn_ns_per_m2
-    );
+    assert_fitted_bn_within(dir.path(), 0.15, "Dahl, literature form");
     let out = diagnosis_of(dir.path());
     let left = num(&out["verdict"]["heldout_rms_after_n"]);
     assert!(

@@ -142,12 +142,13 @@ pub fn predict_each(
     // Where the measured force fits neither side's level of a jump, the
     // levels are moved to the trial's own, which the first pass shows.
     let mut first = Vec::with_capacity(trial.len());
-    let contested = pass(inside(), (trial, x_m), puncture, &mut |_, s| first.push(*s)).contested;
-    let shifts = if contested.is_empty() {
+    let seen = pass(inside(), (trial, x_m), puncture, &mut |_, s| first.push(*s));
+    let shifts = if seen.contested.is_empty() {
         Vec::new()
     } else {
         let total: Vec<f64> = first.iter().map(SampleParts::total_n).collect();
-        level_shifts(trial, v, &total, puncture, &contested)
+        let uncertain = (&seen.uncertain[..], &seen.contested[..]);
+        level_shifts(trial, v, &total, puncture, uncertain)
     };
     if shifts.iter().all(Option::is_none) {
         for (i, s) in first.iter().enumerate() {
@@ -181,11 +182,10 @@ fn pass<'a>(
 }
 
 /// How far the trial's own force stands from the model's on either side
-/// of each uncertain sample (sorted by sample, as `Inside` meets them):
-/// [this side, the
-/// other side], for the `contested` samples (whose force fit neither
-/// side's level) where the difference is significant on either side,
-/// else `None`. A trial's tissue is its own: its held force or cutting differs
+/// of each uncertain sample (`sorted` by sample, as `Inside` meets them):
+/// [this side, the other side], for the `contested` samples (whose force
+/// fit neither side's level) where the difference is significant on
+/// either side, else `None`. A trial's tissue is its own: its held force or cutting differs
 /// from the nominal's by its spread (30 % of the cutting in the paper's
 /// liver), by as much as the step between the two sides. Judged by the
 /// nominal's own levels, a stop whose held force the nominal puts low
@@ -199,10 +199,8 @@ fn level_shifts(
     v: &NeedleVelocity,
     total_n: &[f64],
     puncture: usize,
-    contested: &[usize],
+    (sorted, contested): (&[(usize, f64, f64)], &[usize]),
 ) -> Vec<Option<[f64; 2]>> {
-    let mut sorted = v.uncertain.clone();
-    sorted.sort_by_key(|u| u.0);
     let uncertain = |k: usize| sorted.binary_search_by_key(&k, |u| u.0).is_ok();
     let n = trial.len().min(total_n.len());
     let reach = 2 * window_samples(trial.rate_hz()) + SURE_SAMPLES;
@@ -919,17 +917,20 @@ mod tests {
         // other side's the motion's — for 9 too, whose sample before is
         // itself uncertain and at rest: the side is judged by the sure
         // sample before (7, moving).
-        let shifts = level_shifts(&trial, &v, &total_n, 0, &[8, 9]);
+        let shifts = level_shifts(&trial, &v, &total_n, 0, (&v.uncertain, &[8, 9]));
         assert!(close(shifts[0], [-0.06, 0.4]), "{shifts:?}");
         assert!(close(shifts[1], [-0.06, 0.4]), "{shifts:?}");
         // Not contested: no shift; the model's own levels stand.
-        assert_eq!(level_shifts(&trial, &v, &total_n, 0, &[8])[1], None);
+        assert_eq!(
+            level_shifts(&trial, &v, &total_n, 0, (&v.uncertain, &[8]))[1],
+            None
+        );
         // Where the model meets the trial's levels, no shift either.
         let met = Trial {
             f_n: total_n.clone(),
             ..trial
         };
-        let none = level_shifts(&met, &v, &total_n, 0, &[8, 9]);
+        let none = level_shifts(&met, &v, &total_n, 0, (&v.uncertain, &[8, 9]));
         assert!(none.iter().all(Option::is_none), "{none:?}");
     }
 

@@ -1075,9 +1075,7 @@ pub fn free_level_n(trial: &Trial, contact_x_m: f64) -> f64 {
     if n < LANDING_SAMPLES || last_x().any(|&x| x >= contact_x_m) {
         return 0.0;
     }
-    let mut last = trial.f_n[n - LANDING_SAMPLES..].to_vec();
-    last.sort_by(f64::total_cmp);
-    last[LANDING_SAMPLES / 2]
+    median(trial.f_n[n - LANDING_SAMPLES..].to_vec())
 }
 
 /// Where a withdrawing needle was let go with a snap (`out` in time
