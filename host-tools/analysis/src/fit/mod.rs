@@ -19,7 +19,9 @@ use self::report::{mean_sd, AtSpeeds, Bound, DwellSummary, LawFit, LayerSummary}
 pub use self::report::{Estimate, FitReport};
 use self::report::{PunctureMargins, StiffnessLaws, TrialGeometry};
 pub use self::tissue::FittedTissue;
-pub use self::trial::{fit_tared, fit_trial, TrialFit, RELAXATION_PRIOR};
+pub use self::trial::{
+    fit_tared, fit_trial, fit_trial_at, puncture_index_at, Falls, TrialFit, RELAXATION_PRIOR,
+};
 use needle_io::trial::{Skipped, Trial};
 
 #[derive(Debug, clap::Args)]
