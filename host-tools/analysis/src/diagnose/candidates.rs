@@ -707,8 +707,11 @@ fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
 /// harmonics at every sample, at the search rate and at the full one).
 fn tissue_motion_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize, Columns)) {
     // The phase is searched on the trial at the search rate, the columns
-    // made at the full one.
+    // made at the full one; the moved model has the trial's loading curve
+    // where the tissue's frame has it, up to its sudden fall.
     let coarse = p.for_search();
+    let sudden = p.at_sudden_fall();
+    let coarse_sudden = sudden.for_search();
     let t0 = p.trial.t_s[0];
     // Frequency by frequency, so that one frequency's harmonics are kept.
     let mut order: Vec<usize> = (0..grid.len()).collect();
@@ -735,8 +738,9 @@ fn tissue_motion_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize,
         let best = (0..MOTION_PHASES)
             .map(|k| {
                 let shift = sine(k);
-                let (moved, ..) =
-                    moved_model(coarse, &coarse.params, &|i| shift.at_harmonics(coarse_h[i]));
+                let (moved, ..) = moved_model(coarse_sudden, &coarse.params, &|i| {
+                    shift.at_harmonics(coarse_h[i])
+                });
                 // The loading curve's column is not searched.
                 let sse: f64 = (0..coarse.trial.len())
                     .filter(|&i| coarse.phase[i] != LOADING)
@@ -747,15 +751,23 @@ fn tissue_motion_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize,
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .map_or(0, |b| b.0);
         let shift = sine(best);
-        each(gi, moved_nominal(p, &|i| shift.at_harmonics(full_h[i])));
+        each(
+            gi,
+            moved_nominal(p, sudden, &|i| shift.at_harmonics(full_h[i])),
+        );
     }
 }
 
 /// Columns of [`tissue_motion`] for one tissue displacement and velocity
-/// `shift(i)` at sample i.
-fn moved_nominal(p: &Prepared, shift: &dyn Fn(usize) -> (f64, f64)) -> Vec<Vec<f64>> {
+/// `shift(i)` at sample i, the model moved with `sudden`'s geometry
+/// ([`Prepared::at_sudden_fall`]).
+fn moved_nominal(
+    p: &Prepared,
+    sudden: &Prepared,
+    shift: &dyn Fn(usize) -> (f64, f64),
+) -> Vec<Vec<f64>> {
     let n = p.trial.len();
-    let (moved, relative_x_m, contact_x_m) = moved_model(p, &p.params, shift);
+    let (moved, relative_x_m, contact_x_m) = moved_model(sudden, &p.params, shift);
     // The polynomial's own offset stands for an error in that contact.
     let mut cols = vec![vec![0.0; n]; 5];
     for i in 0..n {

@@ -953,12 +953,29 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
     // The displacement is fitted at the search rate, applied at the full
     // one. (Finding the nominal at the search rate too, and only the last
     // round at the full one, left 0.56 N of a 0.15 N gap at 100 Hz.)
-    let searched: Vec<Prepared> = data.iter().map(|p| p.for_search().clone()).collect();
+    let searched: Vec<Prepared> = data
+        .iter()
+        .map(|p| p.at_sudden_fall().for_search().clone())
+        .collect();
+    // The first round from the nominal as the trials' sudden falls have
+    // it: a loading curve that runs on past a sag is not cut track.
+    let first = if refit_params {
+        let fits: Vec<_> = data
+            .iter()
+            .map(|p| (PathBuf::from(&p.file), p.at_sudden_fall().geometry.clone()))
+            .collect();
+        nominal_params(&fits, Vec::new()).map_or(data[0].params, |mut params| {
+            params.relaxation = data[0].params.relaxation;
+            params
+        })
+    } else {
+        data[0].params
+    };
     let round = |last: Option<&(Scored, Vec<Prepared>, Vec<TissueShift>)>| {
         // Each round from the nominal and displacements the last one kept.
         let (params, start) = match last {
             Some((_, prepared, shifts)) => (prepared[0].params, Some(&shifts[..])),
-            None => (data[0].params, None),
+            None => (first, None),
         };
         let found = motion::fit_shifts(&searched, &params, k, start);
         let prepared = moved_into(data, &found, refit_params)?;

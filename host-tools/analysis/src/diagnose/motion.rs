@@ -26,7 +26,8 @@ use needle_holder::model::params::TissueParams;
 
 use super::prepare::{relaxed_surface, Prepared, LOADING};
 use crate::fit::lsq::Lsq;
-use crate::fit::predict::{predict_total_at, NeedleVelocity};
+use crate::fit::predict::{predict_each, NeedleVelocity, SampleParts};
+use crate::fit::tissue::CUTTING_PRIOR_N;
 
 /// Breathing frequencies searched, Hz (6 to 40 breaths a minute).
 const FREQ_FROM_HZ: f64 = 0.1;
@@ -167,6 +168,21 @@ pub fn moved_model(
     params: &TissueParams,
     shift: &dyn Fn(usize) -> (f64, f64),
 ) -> (Vec<f64>, Vec<f64>, f64) {
+    let mut total = vec![0.0; p.trial.len()];
+    let (relative_x_m, contact_x_m) =
+        moved_parts(p, params, shift, &mut |i, s| total[i] = s.total_n());
+    (total, relative_x_m, contact_x_m)
+}
+
+/// [`moved_model`] term by term: each sample's parts handed to `each`;
+/// returns the needle's positions in the tissue's frame and the contact
+/// point there.
+fn moved_parts(
+    p: &Prepared,
+    params: &TissueParams,
+    shift: &dyn Fn(usize) -> (f64, f64),
+    each: &mut dyn FnMut(usize, &SampleParts),
+) -> (Vec<f64>, f64) {
     let trial = &p.trial;
     let n = trial.len();
     let mut relative_x_m = trial.x_m.clone();
@@ -201,8 +217,8 @@ pub fn moved_model(
     // found again in the tissue's frame has each trial's own again, by
     // `relaxed_surfaces`, read in that frame.)
     geometry.relaxed_x_m = relaxed_surface(&geometry, params.relaxation);
-    let model = predict_total_at(params, &geometry, (trial, &relative_x_m), &v_rel);
-    (model, relative_x_m, geometry.contact_x_m)
+    predict_each(params, &geometry, (trial, &relative_x_m), &v_rel, each);
+    (relative_x_m, geometry.contact_x_m)
 }
 
 /// The depth at which the nominal's loading law reaches `force_n`, by
@@ -238,9 +254,45 @@ fn residuals(
     harmonics: &mut Harmonics,
 ) -> Vec<f64> {
     let h = harmonics.follow(shift, &p.trial.t_s);
-    let (model, ..) = moved_model(p, params, &|i| shift.at_harmonics(h[i]));
-    samples.iter().map(|&i| p.trial.f_n[i] - model[i]).collect()
+    let n = p.trial.len();
+    let mut parts = vec![SampleParts::default(); n];
+    moved_parts(p, params, &|i| shift.at_harmonics(h[i]), &mut |i, s| {
+        parts[i] = *s
+    });
+    // The trial's own cutting force and friction coefficients: the pooled
+    // nominal misses a trial's by the tissue's spread (15–30 %), and one
+    // fitted in the encoder's frame of a moving tissue by far more (the
+    // skin phantom's b_p 35 times its own); a displacement fitted against the wrong
+    // levels moves the tissue to make up the difference. The force is
+    // linear in them (the friction in (c_p, b_p, c_n, b_n) through its
+    // basis), so for each displacement they are solved, not searched.
+    let mut levels = Lsq::<5>::default();
+    for &i in samples {
+        let s = &parts[i];
+        let [b0, b1, b2, b3] = s.friction_basis;
+        levels.add([s.cutting_n, b0, b1, b2, b3], p.trial.f_n[i] - s.total_n());
+    }
+    let own = levels.solve_damped(LEVEL_RIDGE, 5).unwrap_or([0.0; 5]);
+    samples
+        .iter()
+        .map(|&i| {
+            let s = &parts[i];
+            let friction: f64 = s
+                .friction_basis
+                .iter()
+                .zip(&own[1..])
+                .map(|(b, d)| b * d)
+                .sum();
+            p.trial.f_n[i] - s.total_n() - own[0] * s.cutting_n - friction
+        })
+        .collect()
 }
+
+/// Ridge on a trial's own levels in [`residuals`], as a share of each
+/// level's own weight: enough to hold a level the displacement leaves
+/// unseen (no cutting in a trial's fitted samples), too little to bias
+/// one it shows.
+const LEVEL_RIDGE: f64 = 1e-3;
 
 /// Huber's loss with its corner at `c`: quadratic within, linear beyond.
 /// The model's force has cliffs (the whole cutting force on or off as the
@@ -279,14 +331,14 @@ fn periodogram_freqs_hz() -> impl Iterator<Item = f64> {
 /// A trial's residual's periodogram over the breathing band, normalised
 /// to its own total (each trial has one vote, however long).
 fn periodogram(p: &Prepared, samples: &[usize]) -> Vec<f64> {
-    let mean = samples.iter().map(|&i| p.residual_n[i]).sum::<f64>() / samples.len().max(1) as f64;
+    let detrended = detrended_by_phase(p, samples);
     let bins = periodogram_freqs_hz().count();
     let (mut re, mut im) = (vec![0.0; bins], vec![0.0; bins]);
     // Each sample's phasor e^(−iωt) from bin to bin is a rotation by the
     // step's: two sin_cos a sample instead of one a sample and bin (0.2 s
     // of a 10-trial tissue-motion diagnosis).
-    for &i in samples {
-        let (t, r) = (p.trial.t_s[i], p.residual_n[i] - mean);
+    for (&i, &r) in samples.iter().zip(&detrended) {
+        let t = p.trial.t_s[i];
         let (mut s, mut c) = (TAU * FREQ_FROM_HZ * t).sin_cos();
         let (ds, dc) = (TAU * FREQ_STEP_HZ * t).sin_cos();
         for (a, b) in re.iter_mut().zip(&mut im) {
@@ -300,31 +352,81 @@ fn periodogram(p: &Prepared, samples: &[usize]) -> Vec<f64> {
     spectrum.into_iter().map(|s| s / total).collect()
 }
 
-/// The breathing frequency outside trial j's fold: the peak of the other
-/// folds' summed periodograms, between bins by a parabola, rad/s.
-fn periodogram_peak(spectra: &[Vec<f64>], j: usize, folds: usize) -> f64 {
+/// The residual at `samples` less a straight line fitted over each run of
+/// one phase: the nominal misses each phase of a protocol by its own level
+/// and slope (a cutting force too low along the insertion, a holding force
+/// in the dwell), steps a breath apart or slower whose spectrum would
+/// crowd the breathing band's lowest bins; breathing is what varies
+/// within a phase.
+fn detrended_by_phase(p: &Prepared, samples: &[usize]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(samples.len());
+    let mut start = 0;
+    while start < samples.len() {
+        let phase = p.phase[samples[start]];
+        let end = samples[start..]
+            .iter()
+            .position(|&i| p.phase[i] != phase)
+            .map_or(samples.len(), |k| start + k);
+        let run = &samples[start..end];
+        let t0 = p.trial.t_s[run[0]];
+        let mut line = Lsq::<2>::default();
+        for &i in run {
+            line.add([1.0, p.trial.t_s[i] - t0], p.residual_n[i]);
+        }
+        // A run of one sample has no slope: its own level.
+        let [a, b] = line.solve().unwrap_or([p.residual_n[run[0]], 0.0]);
+        out.extend(
+            run.iter()
+                .map(|&i| p.residual_n[i] - a - b * (p.trial.t_s[i] - t0)),
+        );
+        start = end;
+    }
+    out
+}
+
+/// Candidate breathing frequencies outside trial j's fold, rad/s: the
+/// [`PEAKS`] highest peaks of the other folds' summed periodograms (each
+/// between bins by a parabola; a maximum at the band's edge is the flank
+/// of something outside it, not a peak), and half of each that lies in
+/// the band. The highest peak alone is not the breathing: a model whose
+/// cutting switches on and off with the relative velocity leaves the
+/// breathing's harmonics in the residual, and a second harmonic in the
+/// motion itself (a sharper inhale) can outweigh the fundamental. The
+/// model's own fit at each chooses ([`fit_shifts`]).
+fn breathing_frequencies(spectra: &[Vec<f64>], j: usize, folds: usize) -> Vec<f64> {
     let mut sum = vec![0.0; spectra[0].len()];
     for (i, s) in spectra.iter().enumerate() {
         if i % folds != j % folds || spectra.len() == 1 {
             sum.iter_mut().zip(s).for_each(|(a, b)| *a += b);
         }
     }
-    let k = (0..sum.len())
-        .max_by(|&a, &b| sum[a].total_cmp(&sum[b]))
-        .unwrap_or(0);
-    let offset = if k > 0 && k + 1 < sum.len() {
+    let mut peaks: Vec<usize> = (1..sum.len().saturating_sub(1))
+        .filter(|&k| sum[k] > sum[k - 1] && sum[k] >= sum[k + 1])
+        .collect();
+    peaks.sort_by(|&a, &b| sum[b].total_cmp(&sum[a]));
+    let mut hz: Vec<f64> = Vec::new();
+    for k in peaks.into_iter().take(PEAKS) {
         let (l, c, r) = (sum[k - 1], sum[k], sum[k + 1]);
         let den = l - 2.0 * c + r;
-        if den < 0.0 {
+        let offset = if den < 0.0 {
             (0.5 * (l - r) / den).clamp(-0.5, 0.5)
         } else {
             0.0
+        };
+        let f = FREQ_FROM_HZ + FREQ_STEP_HZ * (k as f64 + offset);
+        hz.push(f);
+        if f / 2.0 >= FREQ_FROM_HZ {
+            hz.push(f / 2.0);
         }
-    } else {
-        0.0
-    };
-    TAU * (FREQ_FROM_HZ + FREQ_STEP_HZ * (k as f64 + offset))
+    }
+    if hz.is_empty() {
+        hz.push(0.5 * (FREQ_FROM_HZ + FREQ_TO_HZ));
+    }
+    hz.into_iter().map(|f| TAU * f).collect()
 }
+
+/// Periodogram peaks tried as the breathing frequency.
+const PEAKS: usize = 3;
 
 /// Where LM starts: the best sinusoids of a grid of amplitudes and phases
 /// at `omega`, one per amplitude, the [`STARTS`] best of those.
@@ -375,6 +477,8 @@ const GRID_PHASES: usize = 16;
 /// Starts of the first LM per trial: the force is far from linear in the
 /// displacement, and one start can stop at the wrong flip of friction.
 const STARTS: usize = 3;
+/// Starts per candidate frequency where there are several.
+const STARTS_PER_FREQUENCY: usize = 2;
 
 /// Levenberg–Marquardt from `start` over its four coefficients, and its
 /// frequency too when `free_omega`.
@@ -506,8 +610,9 @@ fn median_outside(values: &[f64], j: usize, folds: usize) -> f64 {
 /// frequency is the median of the other folds' own estimates (trial j in
 /// fold j mod `folds`), its phase and shape its own. Each trial's own fit
 /// is the best of several starts ([`best_of`]): the best sinusoids of a
-/// grid at the other folds' periodogram frequency (or at `start`'s, a
-/// round before under another nominal) and `start` itself. The force is
+/// grid at each of the other folds' candidate frequencies
+/// ([`breathing_frequencies`]; or at `start`'s, a round before under
+/// another nominal) and `start` itself. The force is
 /// far from linear in the displacement: friction flips with the tissue's
 /// velocity, and a local search from one start stops at the wrong flip
 /// (at seed 11, two trials of ten at a fifth of the true amplitude).
@@ -517,6 +622,14 @@ pub fn fit_shifts(
     folds: usize,
     start: Option<&[TissueShift]>,
 ) -> Vec<TissueShift> {
+    // The model's cutting is a shape here, its level each trial's own
+    // ([`residuals`]): a nominal fitted in the encoder's frame whose cut
+    // track the motion hid (cutting fitted as none) still cuts.
+    let shape = TissueParams {
+        cutting_force_n: params.cutting_force_n.max(CUTTING_PRIOR_N),
+        ..*params
+    };
+    let params = &shape;
     let samples: Vec<Vec<usize>> = data.iter().map(fitted_samples).collect();
     let spectra: Vec<Vec<f64>> = match start {
         Some(_) => Vec::new(),
@@ -533,15 +646,24 @@ pub fn fit_shifts(
             // Each round starts again from the grid as well as from the
             // round before: under a better nominal, a trial stuck at the
             // wrong flip of friction has a better start there.
-            let omega = start.map_or_else(
-                || periodogram_peak(&spectra, j, folds),
-                |s| s[j].omega_rad_s,
+            let omegas = start.map_or_else(
+                || breathing_frequencies(&spectra, j, folds),
+                |s| vec![s[j].omega_rad_s],
             );
-            let mut grid = grid_starts(p, params, omega, &samples[j]).into_iter();
+            let per_frequency = if omegas.len() > 1 {
+                STARTS_PER_FREQUENCY
+            } else {
+                STARTS
+            };
+            let mut grid = omegas.iter().flat_map(|&w| {
+                grid_starts(p, params, w, &samples[j])
+                    .into_iter()
+                    .take(per_frequency)
+            });
             let first = match start {
                 Some(s) => s[j],
                 None => grid.next().unwrap_or(TissueShift {
-                    omega_rad_s: omega,
+                    omega_rad_s: omegas[0],
                     t_ref_s: 0.0,
                     coeffs_m: [0.0; 4],
                 }),
@@ -565,6 +687,35 @@ pub fn fit_shifts(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The candidates are the highest peaks and half of each (a
+    /// fundamental whose second harmonic is the peak), never a maximum at
+    /// the band's edge, and trial j's are the other folds' alone.
+    #[test]
+    fn breathing_candidates_are_the_peaks_and_their_halves() {
+        let bins = periodogram_freqs_hz().count();
+        let bin = |f_hz: f64| ((f_hz - FREQ_FROM_HZ) / FREQ_STEP_HZ).round() as usize;
+        // Falling from the band's lowest bin (a trend's flank), a peak at
+        // 0.4 Hz and a lower one at 0.21 Hz.
+        let mut spectrum: Vec<f64> = (0..bins).map(|k| 1.0 / (1.0 + k as f64)).collect();
+        spectrum[bin(0.4)] += 3.0;
+        spectrum[bin(0.21)] += 2.0;
+        // Trial 0's own spectrum, in its own fold, peaks elsewhere.
+        let mut own = vec![0.0; bins];
+        own[bin(0.55)] = 100.0;
+        let spectra = vec![own, spectrum.clone(), spectrum];
+        let hz: Vec<f64> = breathing_frequencies(&spectra, 0, 3)
+            .iter()
+            .map(|w| w / TAU)
+            .collect();
+        let near = |f: f64| hz.iter().any(|h| (h - f).abs() < FREQ_STEP_HZ);
+        assert!(near(0.4) && near(0.2) && near(0.21), "{hz:?}");
+        assert!(!near(FREQ_FROM_HZ) && !near(0.55), "{hz:?}");
+        assert!(
+            (hz[0] - 0.4).abs() < FREQ_STEP_HZ,
+            "the highest first: {hz:?}"
+        );
+    }
 
     #[test]
     fn the_velocity_is_the_displacements_derivative() {

@@ -9,7 +9,7 @@ use crate::fit::jumps::Jump;
 use crate::fit::predict::{
     last_loaded_sample, predict_each, predict_parts_at, NeedleVelocity, Parts,
 };
-use crate::fit::TrialFit;
+use crate::fit::{fit_trial_at, puncture_index_at, Falls, TrialFit};
 use needle_io::trial::Trial;
 
 /// Phases (book, *Names*): outside before contact, up to the
@@ -110,6 +110,8 @@ pub struct Prepared {
     /// [`Self::for_search`]'s trial, made on first use: the searches ask
     /// for it once per grid value.
     search: std::sync::OnceLock<Box<Prepared>>,
+    /// [`Self::at_sudden_fall`]'s trial where it differs, made on first use.
+    sudden: std::sync::OnceLock<Option<Box<Prepared>>>,
 }
 
 impl Prepared {
@@ -145,6 +147,29 @@ impl Prepared {
             p.fitted_n = needle_io::trial::every(&self.fitted_n, step);
             Box::new(p)
         })
+    }
+
+    /// This trial prepared with its puncture at its first sudden fall
+    /// ([`Falls::Sudden`]) where that is not where `needle fit` put it
+    /// (itself where it is): a tissue that moves away faster than the
+    /// needle advances sags the loading curve as a wall rolling over does,
+    /// and the tissue's motion is looked for with the loading curve where
+    /// it is in the tissue's frame.
+    pub fn at_sudden_fall(&self) -> &Prepared {
+        let sudden = self.sudden.get_or_init(|| {
+            let sudden = puncture_index_at(&self.trial, Falls::Sudden);
+            if sudden.is_none_or(|i| i == self.geometry.puncture_index) {
+                return None;
+            }
+            let mut g = fit_trial_at(&self.trial, Falls::Sudden).ok()?;
+            g.tare_n = self.geometry.tare_n;
+            relaxed_surfaces(&mut [&mut g], self.params.relaxation);
+            let (trial, v) = (self.trial.clone(), self.velocity.clone());
+            let mut p = prepare(self.file.clone(), trial, g, &self.params, v);
+            p.fitted_n = self.fitted_n.clone();
+            Some(Box::new(p))
+        });
+        sudden.as_deref().unwrap_or(self)
     }
 
     /// The needle touches tissue at sample `i`: loading, or after the
@@ -228,6 +253,7 @@ pub fn prepare(
         structures,
         trial,
         search: Default::default(),
+        sudden: Default::default(),
     }
 }
 

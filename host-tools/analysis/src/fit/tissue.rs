@@ -220,6 +220,10 @@ fn value_of(
     value
 }
 
+/// The paper's liver cutting force, N: the prior of a cutting force the
+/// data do not give.
+pub const CUTTING_PRIOR_N: f64 = 0.94;
+
 /// What a value the data do not give is written as: never 0 where 0 means
 /// another tissue (no static band holds nothing at rest, which a needle
 /// standing in tissue and holding a force shows it does). The static band
@@ -239,7 +243,7 @@ fn prior(key: &str, keys_before: &[&str], written_before: &[f64]) -> f64 {
         "dp_n_per_m" => 30.4,
         "bp_ns_per_m2" => 904.0,
         "bn_ns_per_m2" => 458.0,
-        "cutting_force_n" => 0.94,
+        "cutting_force_n" => CUTTING_PRIOR_N,
         _ => 0.0,
     }
 }
