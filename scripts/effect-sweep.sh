@@ -16,7 +16,7 @@ seed=${1:?usage: scripts/effect-sweep.sh SEED [OUT]}
 out=${2:-/dev/stdout}
 cd "$(dirname "$0")/.."
 cargo build --release -q -p host-tools
-needle=target/release/needle
+needle=${CARGO_TARGET_DIR:-target}/release/needle
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 : > "$work/lines"
@@ -27,22 +27,27 @@ for proto in paper insert-dwell-withdraw; do
     for form in standard alternate literature; do
       [ "$effect" = none ] && [ "$form" != standard ] && continue
       d="$work/$proto-$effect-$form"
-      effects=()
-      [ "$effect" != none ] && effects=(--effects "$effect")
-      "$needle" simulate --out "$d" --trials 10 --seed "$seed" --rate-hz "$rate" \
-        --noise-n "$noise" --protocol "$proto" --spread 0.15 --jitter \
-        "${effects[@]}" --effect-form "$form" > /dev/null 2>&1
-      "$needle" diagnose "$d" 2> /dev/null | python3 -c '
+      hidden=$effect
+      [ "$effect" = none ] && hidden=""
+      # A case that fails is a line of its own, not the end of the sweep.
+      if ! "$needle" simulate --out "$d" --trials 10 --seed "$seed" --rate-hz "$rate" \
+          --noise-n "$noise" --protocol "$proto" --spread 0.15 --jitter \
+          --effects "$hidden" --effect-form "$form" > /dev/null 2> "$work/err" ||
+        ! "$needle" diagnose "$d" > "$work/json" 2> "$work/err"; then
+        echo "ERR $proto $effect $form: $(tail -1 "$work/err")" >> "$work/lines"
+        continue
+      fi
+      python3 -c '
 import json, sys
 hidden, proto, form = sys.argv[1:4]
 d = json.load(sys.stdin)
 v = d["verdict"]
-mn = lambda x: round(x * 1e3, 1)
+mn = lambda x: "-" if x is None else round(x * 1e3, 1)
 steps = ">".join(e["effect"] for e in v["effects"]) or "-"
 ok = "ok" if v["effect"] == hidden else "BAD"
 print(ok, proto, hidden, form, v["effect"], steps, mn(d["baseline"]["heldout_rms_n"]),
       mn(v["heldout_rms_after_n"]), mn(d["noise_floor_n"]))
-' "$effect" "$proto" "$form" >> "$work/lines"
+' "$effect" "$proto" "$form" < "$work/json" >> "$work/lines"
     done
   done
 done

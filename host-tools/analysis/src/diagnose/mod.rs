@@ -959,7 +959,7 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
         .collect();
     // The first round from the nominal as the trials' sudden falls have
     // it: a loading curve that runs on past a sag is not cut track.
-    let first = if refit_params {
+    let first_params = if refit_params {
         let fits: Vec<_> = data
             .iter()
             .map(|p| (PathBuf::from(&p.file), p.at_sudden_fall().geometry.clone()))
@@ -975,7 +975,7 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
         // Each round from the nominal and displacements the last one kept.
         let (params, start) = match last {
             Some((_, prepared, shifts)) => (prepared[0].params, Some(&shifts[..])),
-            None => (first, None),
+            None => (first_params, None),
         };
         let found = motion::fit_shifts(&searched, &params, k, start);
         let prepared = moved_into(data, &found, refit_params)?;

@@ -17,8 +17,10 @@
 //! The fit is Levenberg–Marquardt on the measured force against the
 //! nominal model evaluated in the moving tissue, with finite-difference
 //! derivatives, over the samples after the puncture (the loading curve is
-//! what the backfit refits). Written here rather than taken from a crate:
-//! the Rust LM crates bring nalgebra, a large build for five unknowns.
+//! what the backfit refits), each trial's own cutting force and friction
+//! coefficients solved for each displacement tried (`residuals`).
+//! Written here rather than taken from a crate: the Rust LM crates bring
+//! nalgebra, a large build for five unknowns.
 
 use std::f64::consts::TAU;
 
@@ -254,8 +256,7 @@ fn residuals(
     harmonics: &mut Harmonics,
 ) -> Vec<f64> {
     let h = harmonics.follow(shift, &p.trial.t_s);
-    let n = p.trial.len();
-    let mut parts = vec![SampleParts::default(); n];
+    let mut parts = vec![SampleParts::default(); p.trial.len()];
     moved_parts(p, params, &|i| shift.at_harmonics(h[i]), &mut |i, s| {
         parts[i] = *s
     });
@@ -265,28 +266,52 @@ fn residuals(
     // skin phantom's b_p 35 times its own); a displacement fitted against the wrong
     // levels moves the tissue to make up the difference. The force is
     // linear in them (the friction in (c_p, b_p, c_n, b_n) through its
-    // basis), so for each displacement they are solved, not searched.
-    let mut levels = Lsq::<5>::default();
-    for &i in samples {
-        let s = &parts[i];
-        let [b0, b1, b2, b3] = s.friction_basis;
-        levels.add([s.cutting_n, b0, b1, b2, b3], p.trial.f_n[i] - s.total_n());
-    }
-    let own = levels.solve_damped(LEVEL_RIDGE, 5).unwrap_or([0.0; 5]);
-    samples
+    // basis), so for each displacement they are solved, not searched:
+    // by least squares, then once more with Huber's weights of what that
+    // left, so the cliffs a misplaced switch leaves weigh on the levels
+    // no more than on the loss.
+    let corner_n = HUBER_CORNER_NOISE_SD * p.noise_n;
+    let nominal_r: Vec<f64> = samples
         .iter()
-        .map(|&i| {
+        .map(|&i| p.trial.f_n[i] - parts[i].total_n())
+        .collect();
+    let mut weights = vec![1.0; samples.len()];
+    let mut r = nominal_r.clone();
+    for _ in 0..2 {
+        let deltas = level_deltas(&parts, samples, &nominal_r, &weights);
+        // A trial's cutting pushes; it never pulls.
+        let cutting_gain = deltas[0].max(-1.0);
+        for ((e, &i), r0) in r.iter_mut().zip(samples).zip(&nominal_r) {
             let s = &parts[i];
-            let friction: f64 = s
+            let friction_n: f64 = s
                 .friction_basis
                 .iter()
-                .zip(&own[1..])
+                .zip(&deltas[1..])
                 .map(|(b, d)| b * d)
                 .sum();
-            p.trial.f_n[i] - s.total_n() - own[0] * s.cutting_n - friction
-        })
-        .collect()
+            *e = r0 - cutting_gain * s.cutting_n - friction_n;
+        }
+        weights = r.iter().map(|&e| huber_weight(e, corner_n)).collect();
+    }
+    r
 }
+
+/// The changes to the cutting force (as a share of the model's) and to
+/// (c_p, b_p, c_n, b_n) that best take up `r`, the residual of the model
+/// at `samples`, each sample weighed by `weights`.
+fn level_deltas(parts: &[SampleParts], samples: &[usize], r: &[f64], weights: &[f64]) -> [f64; 5] {
+    let mut levels = Lsq::<5>::default();
+    for ((&i, &e), &w) in samples.iter().zip(r).zip(weights) {
+        let s = &parts[i];
+        let [b0, b1, b2, b3] = s.friction_basis;
+        let w = w.sqrt();
+        levels.add([s.cutting_n, b0, b1, b2, b3].map(|c| w * c), w * e);
+    }
+    levels.solve_damped(LEVEL_RIDGE, 5).unwrap_or([0.0; 5])
+}
+
+/// Corner of Huber's loss in the displacement's fit, in noise sd.
+const HUBER_CORNER_NOISE_SD: f64 = 3.0;
 
 /// Ridge on a trial's own levels in [`residuals`], as a share of each
 /// level's own weight: enough to hold a level the displacement leaves
@@ -405,6 +430,13 @@ fn breathing_frequencies(spectra: &[Vec<f64>], j: usize, folds: usize) -> Vec<f6
         .collect();
     peaks.sort_by(|&a, &b| sum[b].total_cmp(&sum[a]));
     let mut hz: Vec<f64> = Vec::new();
+    // Within two bins a candidate is the same breathing (a peak at twice
+    // another's frequency has its half there).
+    let mut push = |f: f64| {
+        if f >= FREQ_FROM_HZ && hz.iter().all(|h| (h - f).abs() > 2.0 * FREQ_STEP_HZ) {
+            hz.push(f);
+        }
+    };
     for k in peaks.into_iter().take(PEAKS) {
         let (l, c, r) = (sum[k - 1], sum[k], sum[k + 1]);
         let den = l - 2.0 * c + r;
@@ -414,11 +446,11 @@ fn breathing_frequencies(spectra: &[Vec<f64>], j: usize, folds: usize) -> Vec<f6
             0.0
         };
         let f = FREQ_FROM_HZ + FREQ_STEP_HZ * (k as f64 + offset);
-        hz.push(f);
-        if f / 2.0 >= FREQ_FROM_HZ {
-            hz.push(f / 2.0);
-        }
+        push(f);
+        push(f / 2.0);
     }
+    // A flat or monotonic spectrum has no peak: the band's middle, which
+    // the model's own fit then moves.
     if hz.is_empty() {
         hz.push(0.5 * (FREQ_FROM_HZ + FREQ_TO_HZ));
     }
@@ -474,10 +506,12 @@ fn grid_starts(
 /// Phases of the start grid: LM finds the phase between them.
 const GRID_PHASES: usize = 16;
 
-/// Starts of the first LM per trial: the force is far from linear in the
+/// Starts from the grid at one frequency (a round after the first, at
+/// the frequency it found): the force is far from linear in the
 /// displacement, and one start can stop at the wrong flip of friction.
 const STARTS: usize = 3;
-/// Starts per candidate frequency where there are several.
+/// Starts from the grid at each of several candidate frequencies (the
+/// first round).
 const STARTS_PER_FREQUENCY: usize = 2;
 
 /// Levenberg–Marquardt from `start` over its four coefficients, and its
@@ -509,7 +543,7 @@ fn refine(
             1e-6 / (s.amplitude_m().max(1e-4) * half_span_s.max(1.0))
         }
     };
-    let corner_n = 3.0 * p.noise_n;
+    let corner_n = HUBER_CORNER_NOISE_SD * p.noise_n;
     let mut shift = start;
     let mut harmonics = Harmonics::new();
     let mut r = residuals(p, params, &shift, samples, &mut harmonics);
@@ -646,16 +680,16 @@ pub fn fit_shifts(
             // Each round starts again from the grid as well as from the
             // round before: under a better nominal, a trial stuck at the
             // wrong flip of friction has a better start there.
-            let omegas = start.map_or_else(
+            let omegas_rad_s = start.map_or_else(
                 || breathing_frequencies(&spectra, j, folds),
                 |s| vec![s[j].omega_rad_s],
             );
-            let per_frequency = if omegas.len() > 1 {
+            let per_frequency = if omegas_rad_s.len() > 1 {
                 STARTS_PER_FREQUENCY
             } else {
                 STARTS
             };
-            let mut grid = omegas.iter().flat_map(|&w| {
+            let mut grid = omegas_rad_s.iter().flat_map(|&w| {
                 grid_starts(p, params, w, &samples[j])
                     .into_iter()
                     .take(per_frequency)
@@ -663,7 +697,7 @@ pub fn fit_shifts(
             let first = match start {
                 Some(s) => s[j],
                 None => grid.next().unwrap_or(TissueShift {
-                    omega_rad_s: omegas[0],
+                    omega_rad_s: omegas_rad_s[0],
                     t_ref_s: 0.0,
                     coeffs_m: [0.0; 4],
                 }),
@@ -688,18 +722,22 @@ pub fn fit_shifts(
 mod tests {
     use super::*;
 
-    /// The candidates are the highest peaks and half of each (a
-    /// fundamental whose second harmonic is the peak), never a maximum at
-    /// the band's edge, and trial j's are the other folds' alone.
+    /// The candidates are the highest peaks, each between bins by a
+    /// parabola, and half of each (a fundamental whose second harmonic is
+    /// the peak), never a maximum at the band's edge nor one candidate
+    /// twice, and trial j's are the other folds' alone.
     #[test]
     fn breathing_candidates_are_the_peaks_and_their_halves() {
         let bins = periodogram_freqs_hz().count();
         let bin = |f_hz: f64| ((f_hz - FREQ_FROM_HZ) / FREQ_STEP_HZ).round() as usize;
-        // Falling from the band's lowest bin (a trend's flank), a peak at
-        // 0.4 Hz and a lower one at 0.21 Hz.
-        let mut spectrum: Vec<f64> = (0..bins).map(|k| 1.0 / (1.0 + k as f64)).collect();
-        spectrum[bin(0.4)] += 3.0;
-        spectrum[bin(0.21)] += 2.0;
+        // Falling from the band's lowest bin (a trend's flank); a peak at
+        // 0.44 Hz leaning towards the bin above, one at 0.22 Hz (its
+        // half), and a lower one at 0.3 Hz.
+        let mut spectrum: Vec<f64> = (0..bins).map(|k| 1e-3 / (1.0 + k as f64)).collect();
+        spectrum[bin(0.44)] += 3.0;
+        spectrum[bin(0.44) + 1] += 1.5;
+        spectrum[bin(0.22)] += 2.0;
+        spectrum[bin(0.3)] += 1.0;
         // Trial 0's own spectrum, in its own fold, peaks elsewhere.
         let mut own = vec![0.0; bins];
         own[bin(0.55)] = 100.0;
@@ -708,13 +746,20 @@ mod tests {
             .iter()
             .map(|w| w / TAU)
             .collect();
-        let near = |f: f64| hz.iter().any(|h| (h - f).abs() < FREQ_STEP_HZ);
-        assert!(near(0.4) && near(0.2) && near(0.21), "{hz:?}");
-        assert!(!near(FREQ_FROM_HZ) && !near(0.55), "{hz:?}");
-        assert!(
-            (hz[0] - 0.4).abs() < FREQ_STEP_HZ,
-            "the highest first: {hz:?}"
-        );
+        // The parabola through 0, 3, 1.5 peaks a sixth of a bin above.
+        let top_hz = 0.44 + FREQ_STEP_HZ / 6.0;
+        assert!((hz[0] - top_hz).abs() < 1e-5, "the highest first: {hz:?}");
+        let near = |f: f64| {
+            hz.iter()
+                .filter(|h| (*h - f).abs() < 2.0 * FREQ_STEP_HZ)
+                .count()
+        };
+        assert_eq!(near(0.22), 1, "the half and the 0.22 Hz peak once: {hz:?}");
+        for f in [0.11, 0.3, 0.15] {
+            assert_eq!(near(f), 1, "{f}: {hz:?}");
+        }
+        assert_eq!(near(FREQ_FROM_HZ) + near(0.55), 0, "{hz:?}");
+        assert_eq!(hz.len(), 5, "{hz:?}");
     }
 
     #[test]

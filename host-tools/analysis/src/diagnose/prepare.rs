@@ -108,9 +108,12 @@ pub struct Prepared {
     pub stick: std::ops::Range<usize>,
     pub noise_n: f64,
     /// [`Self::for_search`]'s trial, made on first use: the searches ask
-    /// for it once per grid value.
+    /// for it once per grid value. Copied with the struct (a backfit's
+    /// copies reuse it): a copy whose trial, geometry or parameters are
+    /// then changed is to be prepared again, not edited.
     search: std::sync::OnceLock<Box<Prepared>>,
-    /// [`Self::at_sudden_fall`]'s trial where it differs, made on first use.
+    /// [`Self::at_sudden_fall`]'s trial where it differs, made on first
+    /// use; copied as `search` is.
     sudden: std::sync::OnceLock<Option<Box<Prepared>>>,
 }
 
@@ -129,6 +132,9 @@ impl Prepared {
             .map(|i| self.trial.f_n[i] - model_n[i])
             .collect();
         self.nominal_n = model_n;
+        // The thinned copies hold the nominal they were made with.
+        self.search = Default::default();
+        self.sudden = Default::default();
         Ok(())
     }
 
@@ -157,17 +163,23 @@ impl Prepared {
     /// it is in the tissue's frame.
     pub fn at_sudden_fall(&self) -> &Prepared {
         let sudden = self.sudden.get_or_init(|| {
+            // Against the rule `needle fit` has on the same samples (a
+            // backfit's geometry was found on its cleaned force).
             let sudden = puncture_index_at(&self.trial, Falls::Sudden);
-            if sudden.is_none_or(|i| i == self.geometry.puncture_index) {
+            if sudden.is_none() || sudden == puncture_index_at(&self.trial, Falls::AnyFall) {
                 return None;
             }
             let mut g = fit_trial_at(&self.trial, Falls::Sudden).ok()?;
             g.tare_n = self.geometry.tare_n;
             relaxed_surfaces(&mut [&mut g], self.params.relaxation);
             let (trial, v) = (self.trial.clone(), self.velocity.clone());
-            let mut p = prepare(self.file.clone(), trial, g, &self.params, v);
-            p.fitted_n = self.fitted_n.clone();
-            Some(Box::new(p))
+            Some(Box::new(prepare(
+                self.file.clone(),
+                trial,
+                g,
+                &self.params,
+                v,
+            )))
         });
         sudden.as_deref().unwrap_or(self)
     }

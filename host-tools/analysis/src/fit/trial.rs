@@ -184,9 +184,9 @@ fn noise(f: &[f64]) -> f64 {
     1.4826 * median(d) / std::f64::consts::SQRT_2
 }
 
-/// The capsule puncture: the first sharp fall (below 60 % of the running
-/// peak, or by a tenth of it and twenty noise sd within three samples;
-/// the peak well above noise) with the needle further in than at the
+/// The capsule puncture: the first of `falls` (below 60 % of the running
+/// peak, or by a tenth of it and twenty noise sd within three samples —
+/// only the latter for [`Falls::Sudden`]; the peak well above noise) with the needle further in than at the
 /// peak — a force that falls at rest (a tissue relaxing through a dwell,
 /// cutting stopping with the needle) is no puncture, and neither is a
 /// spike without a loading curve before it (a holder's inertia as the
