@@ -342,12 +342,11 @@ fn a_snap_deep_in_the_tissue_is_a_slip_not_a_let_go() {
 /// Breathing that outruns a 1 mm/s needle (1.5 mm at 0.25 Hz, up to 2.4
 /// mm/s) on insert–dwell–withdraw at 100 Hz, each trial 15 % its own:
 /// the loading curve sags as the tissue draws away, which `needle fit`
-/// takes for a wall rolling over (4 of 10 trials punctured seconds early,
-/// the cutting force fitted as none). The tissue's motion is looked for
+/// takes for a wall rolling over (4 of 10 trials punctured seconds early
+/// at seed 1, the cutting force fitted as none). The tissue's motion is looked for
 /// with the puncture at the sudden fall, each trial's cutting and
 /// friction its own, and the breathing frequency chosen by the model
-/// among the periodogram's peaks and their halves. Before, both forms
-/// were `unexplained` (216 and 316 mN left on a 12 mN floor).
+/// among the periodogram's peaks and their halves.
 #[test]
 fn breathing_that_outruns_the_needle_is_named() {
     for form in [Form::Standard, Form::Alternate] {
@@ -367,9 +366,52 @@ fn breathing_that_outruns_the_needle_is_named() {
         let out = diagnosis_of(dir.path());
         let v = &out["verdict"];
         assert_eq!(v["effect"], "tissue_motion", "{form:?}: {v}");
-        let left = num(&v["effects"][0]["heldout_rms_after_n"]);
-        assert!(left <= 2.5 * num(&out["noise_floor_n"]), "{form:?}: {v}");
+        let (left, floor) = (
+            num(&v["effects"][0]["heldout_rms_after_n"]),
+            num(&out["noise_floor_n"]),
+        );
+        eprintln!(
+            "breathing, {form:?}: {:.1} mN left by tissue_motion, floor {:.1} mN",
+            left * 1e3,
+            floor * 1e3
+        );
+        // At most three floors, as for the paper's protocol (above).
+        assert!(left <= 3.0 * floor, "{form:?}: {v}");
     }
+}
+
+/// A bridge warming through the body it is bonded to: its drift starts
+/// flat and accelerates (the literature form, the standard rate reached
+/// at 20 s), 0.27 N by the end of a minute-long insert–dwell–withdraw
+/// trial, all of it in the needle-free samples the model holds at zero.
+/// A steady or settling drift takes two fifths of the gap and not the
+/// same share in every trial (paired t 2.5); a drift lagging a steady
+/// warming takes it all.
+#[test]
+fn a_drift_that_accelerates_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = Rig {
+        protocol: ProtocolKind::InsertDwellWithdraw,
+        spread: 0.15,
+        jitter: true,
+        ..Default::default()
+    };
+    let sensor = Sensor {
+        rate_hz: 100.0,
+        noise_n: 0.012,
+        ..SENSOR
+    };
+    simulate_with(
+        dir.path(),
+        ("sensor_drift", Form::Literature, 1),
+        rig,
+        sensor,
+    );
+    let out = diagnosis_of(dir.path());
+    let v = &out["verdict"];
+    assert_eq!(v["effect"], "sensor_drift", "{v}");
+    let left = num(&v["heldout_rms_after_n"]);
+    assert!(left <= 1.2 * num(&out["noise_floor_n"]), "{v}");
 }
 
 /// Insert–dwell–withdraw into liver whose every trial is 20 % its own

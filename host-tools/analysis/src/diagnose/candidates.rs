@@ -141,8 +141,8 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
     Candidate {
         effect: "sensor_drift",
-        grid_name: "settling_tau_s",
-        grid: &[0.0, 10.0, 30.0, 100.0],
+        grid_name: "thermal_tau_s",
+        grid: &[0.0, 10.0, 30.0, 100.0, -10.0, -30.0, -100.0],
         linear: &["rate_n_per_s"],
         columns: drift,
         on_grid: None,
@@ -646,13 +646,17 @@ fn lag(mut signal: Vec<f64>, tau_s: f64, rate_hz: f64) -> Vec<f64> {
     signal
 }
 
-/// An offset growing in time since the recording began: at a steady
-/// rate (`tau_s` 0), or settling to a new zero with time constant `tau_s`
-/// as a bridge warms up (a first-order thermal approach over tens of
-/// seconds), τ·(1 − e^{−t/τ}) so the coefficient is the rate at the start
-/// in either case.
+/// An offset growing in time since the recording began, as a bridge's
+/// temperature moves it: at a steady rate (`tau_s` 0); settling to a new
+/// zero with time constant `tau_s` > 0, τ·(1 − e^{−t/τ}) (a first-order
+/// approach over tens of seconds), the coefficient its rate at the start;
+/// or, `tau_s` < 0, lagging a steady warming by |τ|, t − |τ|·(1 −
+/// e^{−t/|τ|}): the gauge warms through the body it is bonded to, so its
+/// drift starts flat and accelerates (as t²/2|τ| at first) towards the
+/// rate, the coefficient.
 fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let t0 = p.trial.t_s.first().copied().unwrap_or(0.0);
+    let lag_s = -tau_s;
     vec![p
         .trial
         .t_s
@@ -661,6 +665,8 @@ fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
             let t = t - t0;
             if tau_s > 0.0 {
                 tau_s * (1.0 - (-t / tau_s).exp())
+            } else if lag_s > 0.0 {
+                t - lag_s * (1.0 - (-t / lag_s).exp())
             } else {
                 t
             }
