@@ -50,6 +50,24 @@ fn simulate_with(
     .unwrap();
 }
 
+/// [`simulate_with`] as real rigs record (book, *What real recordings look like*):
+/// insert–dwell–withdraw at 100 Hz with a 12 mN load cell, clock jitter,
+/// each trial's tissue 15 % its own.
+fn simulate_as_rigs_record(dir: &Path, case: (&str, Form, u64)) {
+    let rig = Rig {
+        protocol: ProtocolKind::InsertDwellWithdraw,
+        spread: 0.15,
+        jitter: true,
+        ..Default::default()
+    };
+    let sensor = Sensor {
+        rate_hz: 100.0,
+        noise_n: 0.012,
+        ..SENSOR
+    };
+    simulate_with(dir, case, rig, sensor);
+}
+
 fn diagnosis(effect_list: &str, form: Form, seed: u64) -> Value {
     diagnosis_on((effect_list, form, seed), Rig::default())
 }
@@ -316,19 +334,7 @@ fn assert_fitted_bn_within(dir: &Path, tolerance: f64, case: &str) {
 #[test]
 fn a_snap_deep_in_the_tissue_is_a_slip_not_a_let_go() {
     let dir = tempfile::tempdir().unwrap();
-    let rig = Rig {
-        protocol: ProtocolKind::InsertDwellWithdraw,
-        spread: 0.15,
-        jitter: true,
-        ..Default::default()
-    };
-    let sensor = Sensor {
-        rate_hz: 100.0,
-        noise_n: 0.012,
-        ..SENSOR
-    };
-    let case = ("presliding_hysteresis", Form::Literature, 2);
-    simulate_with(dir.path(), case, rig, sensor);
+    simulate_as_rigs_record(dir.path(), ("presliding_hysteresis", Form::Literature, 2));
     assert_fitted_bn_within(dir.path(), 0.15, "Dahl, literature form");
     let out = diagnosis_of(dir.path());
     let left = num(&out["verdict"]["heldout_rms_after_n"]);
@@ -351,18 +357,7 @@ fn a_snap_deep_in_the_tissue_is_a_slip_not_a_let_go() {
 fn breathing_that_outruns_the_needle_is_named() {
     for form in [Form::Standard, Form::Alternate] {
         let dir = tempfile::tempdir().unwrap();
-        let rig = Rig {
-            protocol: ProtocolKind::InsertDwellWithdraw,
-            spread: 0.15,
-            jitter: true,
-            ..Default::default()
-        };
-        let sensor = Sensor {
-            rate_hz: 100.0,
-            noise_n: 0.012,
-            ..SENSOR
-        };
-        simulate_with(dir.path(), ("tissue_motion", form, 1), rig, sensor);
+        simulate_as_rigs_record(dir.path(), ("tissue_motion", form, 1));
         let out = diagnosis_of(dir.path());
         let v = &out["verdict"];
         assert_eq!(v["effect"], "tissue_motion", "{form:?}: {v}");
@@ -390,23 +385,7 @@ fn breathing_that_outruns_the_needle_is_named() {
 #[test]
 fn a_drift_that_accelerates_is_named() {
     let dir = tempfile::tempdir().unwrap();
-    let rig = Rig {
-        protocol: ProtocolKind::InsertDwellWithdraw,
-        spread: 0.15,
-        jitter: true,
-        ..Default::default()
-    };
-    let sensor = Sensor {
-        rate_hz: 100.0,
-        noise_n: 0.012,
-        ..SENSOR
-    };
-    simulate_with(
-        dir.path(),
-        ("sensor_drift", Form::Literature, 1),
-        rig,
-        sensor,
-    );
+    simulate_as_rigs_record(dir.path(), ("sensor_drift", Form::Literature, 1));
     let out = diagnosis_of(dir.path());
     let v = &out["verdict"];
     assert_eq!(v["effect"], "sensor_drift", "{v}");

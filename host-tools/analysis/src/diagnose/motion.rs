@@ -277,7 +277,10 @@ fn residuals(
         .collect();
     let mut weights = vec![1.0; samples.len()];
     let mut r = nominal_r.clone();
-    for _ in 0..2 {
+    for pass in 0..2 {
+        if pass > 0 {
+            weights = r.iter().map(|&e| huber_weight(e, corner_n)).collect();
+        }
         let deltas = level_deltas(&parts, samples, &nominal_r, &weights);
         // A trial's cutting pushes; it never pulls.
         let cutting_gain = deltas[0].max(-1.0);
@@ -291,7 +294,6 @@ fn residuals(
                 .sum();
             *e = r0 - cutting_gain * s.cutting_n - friction_n;
         }
-        weights = r.iter().map(|&e| huber_weight(e, corner_n)).collect();
     }
     r
 }

@@ -186,8 +186,8 @@ fn noise(f: &[f64]) -> f64 {
 
 /// The capsule puncture: the first of `falls` (below 60 % of the running
 /// peak, or by a tenth of it and twenty noise sd within three samples —
-/// only the latter for [`Falls::Sudden`]; the peak well above noise) with the needle further in than at the
-/// peak — a force that falls at rest (a tissue relaxing through a dwell,
+/// only the latter for [`Falls::Sudden`]; the peak well above noise) with
+/// the needle further in than at the peak — a force that falls at rest (a tissue relaxing through a dwell,
 /// cutting stopping with the needle) is no puncture, and neither is a
 /// spike without a loading curve before it (a holder's inertia as the
 /// drive sets off, a knock); returns the peak's index and the first
