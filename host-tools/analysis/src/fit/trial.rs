@@ -445,7 +445,14 @@ pub fn fit_trial_at(trial: &Trial, falls: Falls) -> Result<TrialFit> {
         stuck,
     } = strokes(trial, &v, (ip, start, contact_x_m), noise_n);
     let x_s2 = x[ip];
-    let inward = track.iter().filter(|s| s.1 > 0.0).count() >= MIN_STROKE_SAMPLES;
+    // Inward strokes inside the tissue: a needle withdrawn past the
+    // surface of a tissue that moves on (breathing) strokes inward
+    // outside it, where no friction acts.
+    let inward = track
+        .iter()
+        .filter(|s| s.1 > 0.0 && s.0 > contact_x_m)
+        .count()
+        >= MIN_STROKE_SAMPLES;
     let dwell = dwell_relaxation(trial, &v, ip);
     let friction = if inward {
         both_ways(&track, &advancing, contact_x_m, x_s2, noise_n)?
@@ -1589,6 +1596,29 @@ mod tests {
         assert_eq!(any.0, sag_peak);
         let sudden = puncture_index_at(&trial, Falls::Sudden);
         assert_eq!(sudden, Some(fracture));
+    }
+
+    /// A needle withdrawn from a tissue that moves on (breathing) strokes
+    /// inward again outside it, where nothing touches it: those strokes
+    /// are no friction to fit both ways, and the trial fits as without
+    /// them.
+    #[test]
+    fn strokes_inward_outside_the_tissue_leave_the_fit_one_way() {
+        let plain = liver();
+        let mut moving = plain.clone();
+        let (t_end, x_end) = (plain.t_s[plain.len() - 1], plain.x_m[plain.len() - 1]);
+        for k in 1..=1000 {
+            let t = k as f64 / 500.0;
+            moving.t_s.push(t_end + t);
+            moving
+                .x_m
+                .push(x_end + 0.0004 * (1.0 - (std::f64::consts::TAU * 0.5 * t).cos()));
+            moving.f_n.push(0.0);
+        }
+        let (a, b) = (fit_trial(&plain).unwrap(), fit_trial(&moving).unwrap());
+        let near = |p: f64, q: f64| (p - q).abs() <= 1e-3 * p.abs().max(1e-3);
+        assert!(near(a.cutting_force_n, b.cutting_force_n));
+        assert!(near(a.cp_n_per_m, b.cp_n_per_m) && near(a.bp_ns_per_m2, b.bp_ns_per_m2));
     }
 
     /// A load cell zeroed 0.1 N high, more than the 46 mN above which
