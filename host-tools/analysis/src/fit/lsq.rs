@@ -22,24 +22,42 @@ impl<const N: usize> Default for Lsq<N> {
 }
 
 impl<const N: usize> Lsq<N> {
-    /// From sums already made: ΦᵀΦ, Φᵀy, yᵀy.
+    /// From sums already made: ΦᵀΦ (symmetric; its upper triangle is
+    /// read), Φᵀy, yᵀy.
     pub fn from_sums(ata: [[f64; N]; N], aty: [f64; N], yy: f64) -> Self {
         Self { ata, aty, yy }
     }
 
+    /// One row. Only ΦᵀΦ's upper triangle is summed ([`Self::gram`]
+    /// mirrors it), and a zero in `phi` adds nothing: the tissue-motion
+    /// fit's rows are half zeros, and this was most of its time.
     pub fn add(&mut self, phi: [f64; N], y: f64) {
-        for i in 0..N {
-            for j in 0..N {
-                self.ata[i][j] += phi[i] * phi[j];
+        for (i, &p) in phi.iter().enumerate() {
+            if p == 0.0 {
+                continue;
             }
-            self.aty[i] += phi[i] * y;
+            for (a, q) in self.ata[i][i..].iter_mut().zip(&phi[i..]) {
+                *a += p * q;
+            }
+            self.aty[i] += p * y;
         }
         self.yy += y * y;
     }
 
+    /// ΦᵀΦ, its lower triangle mirrored from the upper.
+    fn gram(&self) -> [[f64; N]; N] {
+        let mut m = self.ata;
+        for (i, row) in m.iter_mut().enumerate() {
+            for (j, a) in row.iter_mut().enumerate().take(i) {
+                *a = self.ata[j][i];
+            }
+        }
+        m
+    }
+
     /// The coefficients, or `None` when the system is singular.
     pub fn solve(&self) -> Option<[f64; N]> {
-        let mut m = self.ata;
+        let mut m = self.gram();
         let mut b = self.aty;
         for col in 0..N {
             let pivot = (col..N).max_by(|&a, &c| m[a][col].abs().total_cmp(&m[c][col].abs()))?;
@@ -67,7 +85,10 @@ impl<const N: usize> Lsq<N> {
     /// with each diagonal term raised by `lambda` times itself (the rest
     /// held at 0), or `None` when singular even so.
     pub fn solve_damped(&self, lambda: f64, free: usize) -> Option<[f64; N]> {
-        let mut damped = self.clone();
+        let mut damped = Self {
+            ata: self.gram(),
+            ..self.clone()
+        };
         for i in 0..N {
             if i < free {
                 let d = self.ata[i][i];
@@ -86,11 +107,12 @@ impl<const N: usize> Lsq<N> {
 
     /// Sum of squared residuals at `c` (from the accumulated sums).
     pub fn sse(&self, c: &[f64; N]) -> f64 {
+        let ata = self.gram();
         let mut s = self.yy;
         for i in 0..N {
             s -= 2.0 * c[i] * self.aty[i];
             for j in 0..N {
-                s += c[i] * c[j] * self.ata[i][j];
+                s += c[i] * c[j] * ata[i][j];
             }
         }
         s.max(0.0)
