@@ -6,7 +6,7 @@ use std::path::Path;
 use std::process::Command;
 
 use needle_analysis::diagnose::{
-    diagnose, heldout_rms_with_displacement, load, Nominal, TissueShift,
+    diagnose, heldout_rms_with_displacement, load, Nominal, PhaseWander, TissueShift,
 };
 use needle_analysis::sim::{effects, Dataset, Form, ProtocolKind, Rig, Sensor};
 use needle_holder::model::params::{tissue, LIVER1};
@@ -189,6 +189,7 @@ fn tissue_motions_fitted_displacement_does_nearly_as_well_as_the_true_one() {
         omega_rad_s: std::f64::consts::TAU * freq_hz,
         t_ref_s: 0.0,
         coeffs_m: [amplitude_m, 0.0, 0.0, 0.0],
+        wander: PhaseWander::NONE,
     };
     let known = heldout_rms_with_displacement(&data, &vec![truth; data.len()]).unwrap();
     let noise = num(&out["noise_floor_n"]);
@@ -352,10 +353,18 @@ fn a_snap_deep_in_the_tissue_is_a_slip_not_a_let_go() {
 /// at seed 1, the cutting force fitted as none). The tissue's motion is looked for
 /// with the puncture at the sudden fall, each trial's cutting and
 /// friction its own, and the breathing frequency chosen by the model
-/// among the periodogram's peaks and their halves.
+/// among the periodogram's peaks and their halves; a period that wanders
+/// from breath to breath, with the phase free at knots a breath apart
+/// and the loading curve's own record of where the breath was.
 #[test]
 fn breathing_that_outruns_the_needle_is_named() {
-    for form in [Form::Standard, Form::Alternate] {
+    // The literature form's period wanders by ±20 % over 30 s: a
+    // steady phase strays by 1.5 rad over a trial.
+    for (form, most_floors) in [
+        (Form::Standard, 2.0),
+        (Form::Alternate, 2.0),
+        (Form::Literature, 4.0),
+    ] {
         let dir = tempfile::tempdir().unwrap();
         simulate_as_rigs_record(dir.path(), ("tissue_motion", form, 1));
         let out = diagnosis_of(dir.path());
@@ -370,8 +379,7 @@ fn breathing_that_outruns_the_needle_is_named() {
             left * 1e3,
             floor * 1e3
         );
-        // At most three floors, as for the paper's protocol (above).
-        assert!(left <= 3.0 * floor, "{form:?}: {v}");
+        assert!(left <= most_floors * floor, "{form:?}: {v}");
     }
 }
 

@@ -9,7 +9,7 @@
 
 use std::f64::consts::TAU;
 
-use super::motion::{harmonics_along, moved_model, TissueShift};
+use super::motion::{harmonics_along, moved_model, PhaseWander, TissueShift};
 use super::prepare::{Prepared, LOADING};
 
 /// A candidate's columns for one trial, one vector per linear parameter.
@@ -726,19 +726,23 @@ fn tissue_motion_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize,
     let (mut kept_omega, mut coarse_h, mut full_h) = (f64::NAN, Vec::new(), Vec::new());
     for gi in order {
         let (f_hz, amplitude_m) = motion_at(grid[gi]);
-        let omega_rad_s = TAU * f_hz;
-        if kept_omega != omega_rad_s {
-            kept_omega = omega_rad_s;
-            coarse_h = harmonics_along(omega_rad_s, t0, &coarse.trial.t_s);
-            full_h = harmonics_along(omega_rad_s, t0, &p.trial.t_s);
+        let steady = TissueShift {
+            omega_rad_s: TAU * f_hz,
+            t_ref_s: t0,
+            coeffs_m: [0.0; 4],
+            wander: PhaseWander::NONE,
+        };
+        if kept_omega != steady.omega_rad_s {
+            kept_omega = steady.omega_rad_s;
+            coarse_h = harmonics_along(&steady, &coarse.trial.t_s);
+            full_h = harmonics_along(&steady, &p.trial.t_s);
         }
         // A·sin(ωt + φ) = A·cos φ·sin ωt + A·sin φ·cos ωt.
         let sine = |k: usize| {
             let (s, c) = (TAU * k as f64 / MOTION_PHASES as f64).sin_cos();
             TissueShift {
-                omega_rad_s,
-                t_ref_s: t0,
                 coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
+                ..steady
             }
         };
         let best = (0..MOTION_PHASES)

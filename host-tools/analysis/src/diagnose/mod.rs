@@ -30,7 +30,7 @@ mod report;
 pub use diagnosis::{
     Baseline, ByPhase, CandidateScore, Diagnosis, PhaseShare, Place, ResidualTests, Step, Verdict,
 };
-pub use motion::TissueShift;
+pub use motion::{PhaseWander, TissueShift};
 
 use std::path::{Path, PathBuf};
 
@@ -42,7 +42,7 @@ use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram, PerTrial};
 use self::prepare::{prepare, Prepared, DWELL, LOADING, PHASES, WITHDRAWAL};
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
-use crate::fit::{fit_tared, fit_trial, TrialFit};
+use crate::fit::{fit_tared, fit_trial, fit_trial_at, Falls, TrialFit};
 use needle_io::trial::Trial;
 
 /// Least held-out shrink that can name an effect.
@@ -1032,7 +1032,10 @@ fn moved_into(
         .zip(shifts)
         .map(|(p, s)| {
             let moved = s.apply(&p.trial);
-            let geometry = fit_trial(&moved).ok()?;
+            // The puncture at the sudden fall, as the displacement was
+            // searched: where a breath's phase is known only roughly
+            // before the puncture, the moved loading curve still sags.
+            let geometry = fit_trial_at(&moved, Falls::Sudden).ok()?;
             Some(Refit {
                 kept: moved.clone(),
                 seen: moved,

@@ -57,18 +57,27 @@ pub struct TissueShift {
     pub t_ref_s: f64,
     /// sin, cos of the fundamental, sin, cos of the second harmonic, m.
     pub coeffs_m: [f64; 4],
+    /// How the breathing's phase strays from the steady ω·(t − t_ref).
+    pub wander: PhaseWander,
 }
 
 impl TissueShift {
     /// Displacement (m) and velocity (m/s) at `t_s`.
     pub fn at(&self, t_s: f64) -> (f64, f64) {
-        self.at_harmonics(harmonics(self.omega_rad_s * (t_s - self.t_ref_s)))
+        self.at_harmonics(self.phase_at(t_s))
     }
 
-    /// [`Self::at`] from the harmonics' sines and cosines there
-    /// (`harmonics_along`).
-    pub fn at_harmonics(&self, [s1, c1, s2, c2]: [f64; 4]) -> (f64, f64) {
-        let w = self.omega_rad_s;
+    /// sin, cos of the phase and of twice it at `t_s`, and the phase's
+    /// rate there, rad/s.
+    fn phase_at(&self, t_s: f64) -> [f64; 5] {
+        let (stray_rad, stray_rate) = self.wander.at(t_s);
+        let [s1, c1, s2, c2] = harmonics(self.omega_rad_s * (t_s - self.t_ref_s) + stray_rad);
+        [s1, c1, s2, c2, self.omega_rad_s + stray_rate]
+    }
+
+    /// [`Self::at`] from the harmonics' sines and cosines there and the
+    /// phase's rate (`harmonics_along`).
+    pub fn at_harmonics(&self, [s1, c1, s2, c2, w]: [f64; 5]) -> (f64, f64) {
         let [a, b, c, d] = self.coeffs_m;
         (
             a * s1 + b * c1 + c * s2 + d * c2,
@@ -76,15 +85,23 @@ impl TissueShift {
         )
     }
 
-    /// Peak-to-peak half amplitude over one period, m.
+    /// Peak-to-peak half amplitude over one breath, m.
     pub fn amplitude_m(&self) -> f64 {
-        let period = TAU / self.omega_rad_s.max(1e-9);
         let (lo, hi) = (0..64)
-            .map(|k| self.at(self.t_ref_s + period * k as f64 / 64.0).0)
+            .map(|k| {
+                let [s1, c1, s2, c2] = harmonics(TAU * k as f64 / 64.0);
+                self.at_harmonics([s1, c1, s2, c2, 0.0]).0
+            })
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
                 (l.min(v), h.max(v))
             });
         (hi - lo) / 2.0
+    }
+
+    /// The tissue's fastest speed, m/s (a breath's fastest, at the
+    /// fastest the phase runs).
+    fn fastest_mps(&self) -> f64 {
+        self.amplitude_m() * (self.omega_rad_s.abs() + self.wander.steepest_rad_s())
     }
 
     /// The needle's velocity relative to the tissue: the measured one less
@@ -98,7 +115,7 @@ impl TissueShift {
         for u in &mut v.uncertain {
             u.1 -= self.at(t_s[u.0]).1;
         }
-        let fastest_mps = self.amplitude_m() * self.omega_rad_s;
+        let fastest_mps = self.fastest_mps();
         v.sd_mps = relative_velocity_sd(measured.encoder_step_m, fastest_mps);
         v.tissue_sd_m = TISSUE_VELOCITY_SD * self.amplitude_m();
         v
@@ -120,23 +137,112 @@ fn harmonics(theta: f64) -> [f64; 4] {
     [s1, c1, 2.0 * s1 * c1, c1 * c1 - s1 * s1]
 }
 
-/// sin, cos of both harmonics of `omega_rad_s` at every time of `t_s`,
-/// phases referred to `t_ref_s`.
-pub fn harmonics_along(omega_rad_s: f64, t_ref_s: f64, t_s: &[f64]) -> Vec<[f64; 4]> {
-    t_s.iter()
-        .map(|t| harmonics(omega_rad_s * (t - t_ref_s)))
-        .collect()
+/// sin, cos of both harmonics of `shift`'s phase at every time of `t_s`,
+/// and the phase's rate there ([`TissueShift::at_harmonics`]'s argument).
+pub fn harmonics_along(shift: &TissueShift, t_s: &[f64]) -> Vec<[f64; 5]> {
+    t_s.iter().map(|&t| shift.phase_at(t)).collect()
 }
 
-/// The harmonics of a frequency at every sample of a trial, for the last
-/// two frequencies asked: `sin_cos` was a third of the fit's time, four of
-/// its five Jacobian columns hold the frequency, and a free frequency's
-/// column and step alternate with the point they start from.
-struct Harmonics {
-    /// (ω, reference time, sin/cos of both harmonics per sample), the
-    /// most recent first.
-    kept: Vec<(f64, f64, Vec<[f64; 4]>)>,
+/// Most knots of a [`PhaseWander`].
+const MAX_KNOTS: usize = 32;
+
+/// A breathing period that changes from breath to breath: the phase's
+/// departure from the steady ω·(t − t_ref), linear between knots about a
+/// breath apart and held beyond the first and last, rad. No knots: no
+/// departure. A subject's breaths differ in length (by 10–30 % from one
+/// to the next at rest, more under stress), so over a trial of ten
+/// breaths the phase strays by radians from any one frequency; the
+/// period's changes are the subject's, like the phase, found on each
+/// trial.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhaseWander {
+    /// Time of the first knot, s.
+    pub t0_s: f64,
+    /// Time between knots, s.
+    pub step_s: f64,
+    /// Knots in use.
+    pub knots: usize,
+    /// The phase's departure at each knot, rad.
+    pub phase_rad: [f64; MAX_KNOTS],
 }
+
+impl PhaseWander {
+    /// A steady breath.
+    pub const NONE: Self = Self {
+        t0_s: 0.0,
+        step_s: 1.0,
+        knots: 0,
+        phase_rad: [0.0; MAX_KNOTS],
+    };
+
+    /// Knots about `period_s` apart over `from_s..to_s` (farther apart
+    /// when [`MAX_KNOTS`] would not reach), each where `self` has the
+    /// phase then.
+    fn over(&self, from_s: f64, to_s: f64, period_s: f64) -> Self {
+        let span_s = (to_s - from_s).max(0.0);
+        let knots = ((span_s / period_s.max(1e-3)).ceil() as usize + 1).clamp(2, MAX_KNOTS);
+        let step_s = (span_s / (knots - 1) as f64).max(1e-3);
+        let mut phase_rad = [0.0; MAX_KNOTS];
+        for (k, p) in phase_rad.iter_mut().take(knots).enumerate() {
+            *p = self.at(from_s + step_s * k as f64).0;
+        }
+        Self {
+            t0_s: from_s,
+            step_s,
+            knots,
+            phase_rad,
+        }
+    }
+
+    /// The departure (rad) and its rate (rad/s) at `t_s`.
+    pub fn at(&self, t_s: f64) -> (f64, f64) {
+        if self.knots < 2 {
+            return (
+                self.phase_rad[0] * f64::from(u8::from(self.knots == 1)),
+                0.0,
+            );
+        }
+        let last = (self.knots - 1) as f64;
+        let u = (t_s - self.t0_s) / self.step_s;
+        let k = (u.clamp(0.0, last).floor() as usize).min(self.knots - 2);
+        let (a, b) = (self.phase_rad[k], self.phase_rad[k + 1]);
+        let frac = u.clamp(0.0, last) - k as f64;
+        let rate = if (0.0..=last).contains(&u) {
+            (b - a) / self.step_s
+        } else {
+            0.0
+        };
+        (a + frac * (b - a), rate)
+    }
+
+    /// Knot k's share of the departure at `t_s` (a hat one step wide
+    /// each side; the end knots hold beyond).
+    fn weight(&self, k: usize, t_s: f64) -> f64 {
+        let u = ((t_s - self.t0_s) / self.step_s).clamp(0.0, (self.knots - 1) as f64);
+        (1.0 - (u - k as f64).abs()).max(0.0)
+    }
+
+    /// The fastest the departure runs, rad/s.
+    fn steepest_rad_s(&self) -> f64 {
+        self.phase_rad[..self.knots]
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs() / self.step_s)
+            .fold(0.0, f64::max)
+    }
+}
+
+/// The harmonics of a phase at every sample of a trial, for the last two
+/// phases asked: `sin_cos` was a third of the fit's time, four of its five
+/// Jacobian columns hold the phase, and a free frequency's column and step
+/// alternate with the point they start from.
+struct Harmonics {
+    /// (ω, reference time, wander; [`harmonics_along`] them), the most
+    /// recent first.
+    kept: Vec<(Phase, Vec<[f64; 5]>)>,
+}
+
+/// What a [`TissueShift`]'s phase depends on.
+type Phase = (f64, f64, PhaseWander);
 
 impl Harmonics {
     fn new() -> Self {
@@ -144,17 +250,16 @@ impl Harmonics {
     }
 
     /// The harmonics for `shift` along `t_s`.
-    fn follow(&mut self, shift: &TissueShift, t_s: &[f64]) -> &[[f64; 4]] {
-        let key = (shift.omega_rad_s, shift.t_ref_s);
-        match self.kept.iter().position(|k| (k.0, k.1) == key) {
+    fn follow(&mut self, shift: &TissueShift, t_s: &[f64]) -> &[[f64; 5]] {
+        let key = (shift.omega_rad_s, shift.t_ref_s, shift.wander);
+        match self.kept.iter().position(|k| k.0 == key) {
             Some(i) => self.kept[..=i].rotate_right(1),
             None => {
-                let at = harmonics_along(key.0, key.1, t_s);
-                self.kept.insert(0, (key.0, key.1, at));
+                self.kept.insert(0, (key, harmonics_along(shift, t_s)));
                 self.kept.truncate(2);
             }
         }
-        &self.kept[0].2
+        &self.kept[0].1
     }
 }
 
@@ -239,8 +344,17 @@ fn depth_at(params: &TissueParams, force_n: f64) -> f64 {
     0.5 * (lo + hi)
 }
 
-/// Samples the motion is fitted on: in tissue after the puncture.
+/// Samples the motion is fitted on: in tissue, the loading curve's too
+/// (a breath whose period wanders is where it was during the loading
+/// only by the loading's own record).
 fn fitted_samples(p: &Prepared) -> Vec<usize> {
+    (0..p.trial.len()).filter(|&i| p.in_tissue(i)).collect()
+}
+
+/// Samples whose spectrum shows the breathing: in tissue after the
+/// puncture (the loading curve's own rise would crowd the band's lowest
+/// bins).
+fn spectral_samples(p: &Prepared) -> Vec<usize> {
     (0..p.trial.len())
         .filter(|&i| p.in_tissue(i) && p.phase[i] != LOADING)
         .collect()
@@ -257,19 +371,36 @@ fn residuals(
 ) -> Vec<f64> {
     let h = harmonics.follow(shift, &p.trial.t_s);
     let mut parts = vec![SampleParts::default(); p.trial.len()];
-    moved_parts(p, params, &|i| shift.at_harmonics(h[i]), &mut |i, s| {
-        parts[i] = *s
-    });
+    let (relative_x_m, contact_x_m) =
+        moved_parts(p, params, &|i| shift.at_harmonics(h[i]), &mut |i, s| {
+            parts[i] = *s
+        });
     // The trial's own cutting force and friction coefficients: the pooled
     // nominal misses a trial's by the tissue's spread (15–30 %), and one
     // fitted in the encoder's frame of a moving tissue by far more (the
     // skin phantom's b_p 35 times its own); a displacement fitted against the wrong
-    // levels moves the tissue to make up the difference. The force is
-    // linear in them (the friction in (c_p, b_p, c_n, b_n) through its
-    // basis), so for each displacement they are solved, not searched:
-    // by least squares, then once more with Huber's weights of what that
-    // left, so the cliffs a misplaced switch leaves weigh on the levels
-    // no more than on the loss.
+    // levels moves the tissue to make up the difference. So is the loading
+    // curve's shape in the tissue's frame beyond the nominal's (fitted
+    // against the needle's position, which the motion bends): a step at
+    // contact, the depth and its square. The force is linear in them (the
+    // friction in (c_p, b_p, c_n, b_n) through its basis), so for each
+    // displacement they are solved, not searched: by least squares, then
+    // once more with Huber's weights of what that left, so the cliffs a
+    // misplaced switch leaves weigh on the levels no more than on the loss.
+    let rows: Vec<[f64; LEVELS]> = samples
+        .iter()
+        .map(|&i| {
+            let s = &parts[i];
+            let [b0, b1, b2, b3] = s.friction_basis;
+            let d_mm = 1e3 * (relative_x_m[i] - contact_x_m);
+            let [l0, l1, l2] = if p.phase[i] == LOADING && d_mm > 0.0 {
+                [1.0, d_mm, d_mm * d_mm]
+            } else {
+                [0.0; 3]
+            };
+            [s.cutting_n, b0, b1, b2, b3, l0, l1, l2]
+        })
+        .collect();
     let corner_n = HUBER_CORNER_NOISE_SD * p.noise_n;
     let nominal_r: Vec<f64> = samples
         .iter()
@@ -281,35 +412,34 @@ fn residuals(
         if pass > 0 {
             weights = r.iter().map(|&e| huber_weight(e, corner_n)).collect();
         }
-        let deltas = level_deltas(&parts, samples, &nominal_r, &weights);
+        let mut deltas = level_deltas(&rows, &nominal_r, &weights);
         // A trial's cutting pushes; it never pulls.
-        let cutting_gain = deltas[0].max(-1.0);
-        for ((e, &i), r0) in r.iter_mut().zip(samples).zip(&nominal_r) {
-            let s = &parts[i];
-            let friction_n: f64 = s
-                .friction_basis
-                .iter()
-                .zip(&deltas[1..])
-                .map(|(b, d)| b * d)
-                .sum();
-            *e = r0 - cutting_gain * s.cutting_n - friction_n;
+        deltas[0] = deltas[0].max(-1.0);
+        for ((e, row), r0) in r.iter_mut().zip(&rows).zip(&nominal_r) {
+            let levels_n: f64 = row.iter().zip(&deltas).map(|(c, d)| c * d).sum();
+            *e = r0 - levels_n;
         }
     }
     r
 }
 
-/// The changes to the cutting force (as a share of the model's) and to
-/// (c_p, b_p, c_n, b_n) that best take up `r`, the residual of the model
-/// at `samples`, each sample weighed by `weights`.
-fn level_deltas(parts: &[SampleParts], samples: &[usize], r: &[f64], weights: &[f64]) -> [f64; 5] {
-    let mut levels = Lsq::<5>::default();
-    for ((&i, &e), &w) in samples.iter().zip(r).zip(weights) {
-        let s = &parts[i];
-        let [b0, b1, b2, b3] = s.friction_basis;
+/// A trial's own levels in [`residuals`]: the cutting force (as a share
+/// of the model's), (c_p, b_p, c_n, b_n), and the loading curve's step,
+/// slope and curvature (per mm of depth in the tissue's frame).
+const LEVELS: usize = 8;
+
+/// The changes to the levels ([`LEVELS`]; `rows`, their columns at each
+/// sample) that best take up `r`, the residual of the model there, each
+/// sample weighed by `weights`.
+fn level_deltas(rows: &[[f64; LEVELS]], r: &[f64], weights: &[f64]) -> [f64; LEVELS] {
+    let mut levels = Lsq::<LEVELS>::default();
+    for ((row, &e), &w) in rows.iter().zip(r).zip(weights) {
         let w = w.sqrt();
-        levels.add([s.cutting_n, b0, b1, b2, b3].map(|c| w * c), w * e);
+        levels.add(row.map(|c| w * c), w * e);
     }
-    levels.solve_damped(LEVEL_RIDGE, 5).unwrap_or([0.0; 5])
+    levels
+        .solve_damped(LEVEL_RIDGE, LEVELS)
+        .unwrap_or([0.0; LEVELS])
 }
 
 /// Corner of Huber's loss in the displacement's fit, in noise sd.
@@ -484,6 +614,7 @@ fn grid_starts(
                             omega_rad_s: omega,
                             t_ref_s,
                             coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
+                            wander: PhaseWander::NONE,
                         };
                         // Squared: far from the displacement every sample is off
                         // by more than the noise, and Huber's loss would be an
@@ -596,6 +727,158 @@ fn refine(
     (shift, loss)
 }
 
+/// Levenberg–Marquardt over `shift`'s four coefficients and its phase's
+/// departure at knots about a breath apart ([`PhaseWander`]), from the
+/// departure `shift` has. A knot's Jacobian column is the model's
+/// change with the whole phase (one evaluation) times the knot's share
+/// at each sample: a breath's force depends on where the breath is then,
+/// and little on the phase's rate, which a knot's change also moves
+/// (the step is tried on the model itself, so an approximate column
+/// costs iterations, not accuracy). Each knot's change from the last is
+/// weighed against the data as what a period that varies from breath
+/// to breath would give ([`BREATH_PERIOD_CV`]), and each knot against a
+/// half turn from the steady phase (the coefficients' rotation does the
+/// same as a shift of every knot, and the data cannot tell the two).
+fn refine_wander(
+    p: &Prepared,
+    params: &TissueParams,
+    shift: TissueShift,
+    samples: &[usize],
+) -> TissueShift {
+    let (Some(&first), Some(&last)) = (samples.first(), samples.last()) else {
+        return shift;
+    };
+    let period_s = TAU / shift.omega_rad_s.abs().max(1e-3);
+    let t_s = &p.trial.t_s;
+    let mut shift = TissueShift {
+        wander: shift.wander.over(t_s[first], t_s[last], period_s),
+        ..shift
+    };
+    let knots = shift.wander.knots;
+    let unknowns = 4 + knots;
+    let noise_n = p.noise_n.max(1e-6);
+    let prior = WanderPrior::new(&shift.wander, noise_n, period_s);
+    let corner_n = HUBER_CORNER_NOISE_SD * noise_n;
+    let mut harmonics = Harmonics::new();
+    let mut r = residuals(p, params, &shift, samples, &mut harmonics);
+    let mut loss = huber(&r, corner_n) + prior.loss(&shift.wander);
+    let mut lambda = 1e-3;
+    for _ in 0..ITERATIONS {
+        let column = |s: &TissueShift, h: f64, harmonics: &mut Harmonics| -> Vec<f64> {
+            let rk = residuals(p, params, s, samples, harmonics);
+            rk.iter().zip(&r).map(|(a, b)| (b - a) / h).collect()
+        };
+        let coeff_cols: Vec<Vec<f64>> = (0..4)
+            .map(|k| {
+                let mut s = shift;
+                s.coeffs_m[k] += 1e-6;
+                column(&s, 1e-6, &mut harmonics)
+            })
+            .collect();
+        let whole_phase = {
+            let mut s = shift;
+            let h = 1e-6 / shift.amplitude_m().max(1e-4);
+            s.wander.phase_rad[..knots].iter_mut().for_each(|p| *p += h);
+            column(&s, h, &mut harmonics)
+        };
+        let mut normal = Lsq::<WANDER_UNKNOWNS>::default();
+        for (n, &i) in samples.iter().enumerate() {
+            let w = huber_weight(r[n], corner_n).sqrt();
+            let mut row = [0.0; WANDER_UNKNOWNS];
+            for (k, col) in coeff_cols.iter().enumerate() {
+                row[k] = w * col[n];
+            }
+            for k in 0..knots {
+                row[4 + k] = w * shift.wander.weight(k, t_s[i]) * whole_phase[n];
+            }
+            normal.add(row, w * r[n]);
+        }
+        for (row, y) in prior.rows(&shift.wander) {
+            normal.add(row, y);
+        }
+        let mut improved = false;
+        while lambda < 1e6 {
+            let Some(delta) = normal.solve_damped(lambda, unknowns) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut next = shift;
+            for (k, d) in delta.iter().enumerate().take(unknowns) {
+                if k < 4 {
+                    next.coeffs_m[k] += d;
+                } else {
+                    next.wander.phase_rad[k - 4] += d;
+                }
+            }
+            let rn = residuals(p, params, &next, samples, &mut harmonics);
+            let loss_next = huber(&rn, corner_n) + prior.loss(&next.wander);
+            if loss_next < loss {
+                improved = 1.0 - loss_next / loss > 1e-5;
+                (shift, r, loss, lambda) = (next, rn, loss_next, (lambda / 10.0).max(1e-9));
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    shift
+}
+
+/// The unknowns of [`refine_wander`]: four coefficients, then the knots.
+const WANDER_UNKNOWNS: usize = 4 + MAX_KNOTS;
+
+/// What [`refine_wander`] weighs the knots against, as rows of its
+/// normal equations: each knot's change from the last against the
+/// spread of a breath's length ([`BREATH_PERIOD_CV`]), each knot against
+/// half a turn; both in noise sd, so they add to the data's squares.
+struct WanderPrior {
+    step_scale: f64,
+    level_scale: f64,
+}
+
+impl WanderPrior {
+    fn new(wander: &PhaseWander, noise_n: f64, period_s: f64) -> Self {
+        let step_sd_rad = TAU * BREATH_PERIOD_CV * (wander.step_s / period_s).sqrt();
+        Self {
+            step_scale: noise_n / step_sd_rad,
+            level_scale: noise_n / std::f64::consts::PI,
+        }
+    }
+
+    /// (row, residual) of each term at `w`: the residual is
+    /// 0 − scale·(the term's combination of knots).
+    fn rows(&self, w: &PhaseWander) -> Vec<([f64; WANDER_UNKNOWNS], f64)> {
+        let knot = |k: usize| 4 + k;
+        let steps = (1..w.knots).map(|k| {
+            let mut row = [0.0; WANDER_UNKNOWNS];
+            (row[knot(k)], row[knot(k - 1)]) = (self.step_scale, -self.step_scale);
+            (
+                row,
+                -self.step_scale * (w.phase_rad[k] - w.phase_rad[k - 1]),
+            )
+        });
+        let levels = (0..w.knots).map(|k| {
+            let mut row = [0.0; WANDER_UNKNOWNS];
+            row[knot(k)] = self.level_scale;
+            (row, -self.level_scale * w.phase_rad[k])
+        });
+        steps.chain(levels).collect()
+    }
+
+    /// Its share of the loss at `w` (half the sum of squares).
+    fn loss(&self, w: &PhaseWander) -> f64 {
+        self.rows(w).iter().map(|(_, y)| 0.5 * y * y).sum()
+    }
+}
+
+/// How much a breath's length differs from the last one's, as a share
+/// of the period (one standard deviation): 10–30 % at rest in the
+/// literature on breathing variability; the larger, so that the prior
+/// holds only what the data leave open.
+const BREATH_PERIOD_CV: f64 = 0.3;
+
 /// Most Levenberg–Marquardt iterations of a fit, and of a scouting one
 /// from each of several starts (the best of which is then fitted fully).
 const ITERATIONS: usize = 20;
@@ -671,8 +954,7 @@ pub fn fit_shifts(
         Some(_) => Vec::new(),
         None => data
             .iter()
-            .zip(&samples)
-            .map(|(p, s)| periodogram(p, s))
+            .map(|p| periodogram(p, &spectral_samples(p)))
             .collect(),
     };
     let own: Vec<TissueShift> = data
@@ -702,6 +984,7 @@ pub fn fit_shifts(
                     omega_rad_s: omegas_rad_s[0],
                     t_ref_s: 0.0,
                     coeffs_m: [0.0; 4],
+                    wander: PhaseWander::NONE,
                 }),
             };
             best_of(p, params, first, grid, &samples[j])
@@ -715,7 +998,8 @@ pub fn fit_shifts(
                 omega_rad_s: median_outside(&omegas, j, folds),
                 ..own[j]
             };
-            refine(p, params, at_fold, false, &samples[j], ITERATIONS).0
+            let steady = refine(p, params, at_fold, false, &samples[j], ITERATIONS).0;
+            refine_wander(p, params, steady, &samples[j])
         })
         .collect()
 }
@@ -764,12 +1048,47 @@ mod tests {
         assert_eq!(hz.len(), 5, "{hz:?}");
     }
 
+    /// The departure is the knots' weighted sum everywhere (the wander's
+    /// Jacobian columns rest on it), held beyond the end knots, and knots
+    /// laid out again keep the departure where they fall.
+    #[test]
+    fn a_wander_is_linear_between_knots_and_laid_out_again_keeps_its_phase() {
+        let mut w = PhaseWander {
+            t0_s: 2.0,
+            step_s: 4.0,
+            knots: 4,
+            ..PhaseWander::NONE
+        };
+        w.phase_rad[..4].copy_from_slice(&[0.5, -1.0, 2.0, 0.0]);
+        for t in [0.0, 2.0, 3.0, 6.0, 9.5, 14.0, 20.0] {
+            let summed: f64 = (0..w.knots).map(|k| w.weight(k, t) * w.phase_rad[k]).sum();
+            assert!((summed - w.at(t).0).abs() < 1e-12, "at {t}");
+        }
+        assert_eq!(w.at(0.0), (0.5, 0.0));
+        assert_eq!(w.at(30.0), (0.0, 0.0));
+        assert!((w.at(4.0).0 + 0.25).abs() < 1e-12 && (w.at(4.0).1 + 0.375).abs() < 1e-12);
+        assert!((w.steepest_rad_s() - 0.75).abs() < 1e-12);
+        // Over 3–13 s at a 4 s breath: four knots 3⅓ s apart.
+        let again = w.over(3.0, 13.0, 4.0);
+        assert_eq!(again.knots, 4);
+        for k in 0..again.knots {
+            let t = again.t0_s + again.step_s * k as f64;
+            assert!((again.phase_rad[k] - w.at(t).0).abs() < 1e-12, "knot {k}");
+        }
+        // More breaths than knots: the knots spread to reach.
+        let long = PhaseWander::NONE.over(0.0, 310.0, 1.0);
+        assert_eq!(long.knots, MAX_KNOTS);
+        assert!((long.step_s - 10.0).abs() < 1e-12);
+        assert_eq!(PhaseWander::NONE.at(5.0), (0.0, 0.0));
+    }
+
     #[test]
     fn the_velocity_is_the_displacements_derivative() {
         let shift = TissueShift {
             omega_rad_s: TAU * 0.25,
             t_ref_s: 3.0,
             coeffs_m: [0.0012, -0.0004, 0.0003, 0.0001],
+            wander: PhaseWander::NONE,
         };
         for t in [0.0, 1.3, 2.9, 7.7] {
             // The harmonics are those of the phase, the second by itself.
@@ -797,6 +1116,24 @@ mod tests {
             }
         }
         assert_eq!(kept.kept.len(), 2);
+        // A phase that wanders: the velocity is still the derivative,
+        // between knots and beyond them.
+        let mut wander = PhaseWander {
+            t0_s: 1.0,
+            step_s: 2.5,
+            knots: 3,
+            ..PhaseWander::NONE
+        };
+        wander.phase_rad[..3].copy_from_slice(&[0.4, -0.8, 0.3]);
+        let wandering = TissueShift { wander, ..shift };
+        for t in [0.2, 1.7, 3.1, 4.9, 7.3] {
+            let h = 1e-6;
+            let numeric = (wandering.at(t + h).0 - wandering.at(t - h).0) / (2.0 * h);
+            assert!(
+                (numeric - wandering.at(t).1).abs() < 1e-9,
+                "wandering, at {t}"
+            );
+        }
         // A pure sine of 1.2 mm has that half peak-to-peak amplitude.
         let sine = TissueShift {
             coeffs_m: [0.0012, 0.0, 0.0, 0.0],
