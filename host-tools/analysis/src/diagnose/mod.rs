@@ -1034,8 +1034,12 @@ fn moved_into(
             let moved = s.apply(&p.trial);
             // The puncture at the sudden fall, as the displacement was
             // searched: where a breath's phase is known only roughly
-            // before the puncture, the moved loading curve still sags.
-            let geometry = fit_trial_at(&moved, Falls::Sudden).ok()?;
+            // before the puncture, the moved loading curve still sags. A
+            // trial with no sudden fall (a wall that rolls over) keeps
+            // its fall, as `Prepared::at_sudden_fall` does.
+            let geometry = fit_trial_at(&moved, Falls::Sudden)
+                .or_else(|_| fit_trial(&moved))
+                .ok()?;
             Some(Refit {
                 kept: moved.clone(),
                 seen: moved,

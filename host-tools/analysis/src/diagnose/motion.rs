@@ -12,15 +12,18 @@
 //! (fundamental and second harmonic, four coefficients) are where the
 //! breathing was during that trial, found on each trial withheld or not,
 //! as its contact point is. Breathing is not a sine (a sharper inhale),
-//! hence the second harmonic.
+//! hence the second harmonic; nor is it steady (breaths differ in
+//! length), hence a phase that may wander from breath to breath
+//! ([`PhaseWander`]), also the trial's own.
 //!
 //! The fit is Levenberg–Marquardt on the measured force against the
 //! nominal model evaluated in the moving tissue, with finite-difference
-//! derivatives, over the samples after the puncture (the loading curve is
-//! what the backfit refits), each trial's own cutting force and friction
-//! coefficients solved for each displacement tried (`residuals`).
-//! Written here rather than taken from a crate: the Rust LM crates bring
-//! nalgebra, a large build for five unknowns.
+//! derivatives, over the samples in the tissue, the loading curve's
+//! included, each trial's own cutting force, friction coefficients and
+//! loading curve's shape solved for each displacement tried
+//! (`residuals`). Written here rather than taken from a crate: the Rust
+//! LM crates bring nalgebra, a large build for five unknowns (and, with
+//! the wander, at most 36 whose normal equations are as small).
 
 use std::f64::consts::TAU;
 
@@ -157,13 +160,13 @@ const MAX_KNOTS: usize = 32;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PhaseWander {
     /// Time of the first knot, s.
-    pub t0_s: f64,
-    /// Time between knots, s.
-    pub step_s: f64,
-    /// Knots in use.
-    pub knots: usize,
+    t0_s: f64,
+    /// Time between knots (at least 1 ms), s.
+    step_s: f64,
+    /// Knots in use, 0 or 2 to [`MAX_KNOTS`].
+    knots: usize,
     /// The phase's departure at each knot, rad.
-    pub phase_rad: [f64; MAX_KNOTS],
+    phase_rad: [f64; MAX_KNOTS],
 }
 
 impl PhaseWander {
@@ -180,7 +183,8 @@ impl PhaseWander {
     /// phase then.
     fn over(&self, from_s: f64, to_s: f64, period_s: f64) -> Self {
         let span_s = (to_s - from_s).max(0.0);
-        let knots = ((span_s / period_s.max(1e-3)).ceil() as usize + 1).clamp(2, MAX_KNOTS);
+        let breaths = (span_s / period_s.max(1e-3)).ceil().min(MAX_KNOTS as f64);
+        let knots = (breaths as usize + 1).clamp(2, MAX_KNOTS);
         let step_s = (span_s / (knots - 1) as f64).max(1e-3);
         let mut phase_rad = [0.0; MAX_KNOTS];
         for (k, p) in phase_rad.iter_mut().take(knots).enumerate() {
@@ -197,10 +201,7 @@ impl PhaseWander {
     /// The departure (rad) and its rate (rad/s) at `t_s`.
     pub fn at(&self, t_s: f64) -> (f64, f64) {
         if self.knots < 2 {
-            return (
-                self.phase_rad[0] * f64::from(u8::from(self.knots == 1)),
-                0.0,
-            );
+            return (0.0, 0.0);
         }
         let last = (self.knots - 1) as f64;
         let u = (t_s - self.t0_s) / self.step_s;

@@ -1,7 +1,7 @@
-//! Small linear least squares by normal equations (2–5 unknowns), the only
-//! regression the fits need. Written here: pulling a linear-algebra crate
-//! in for 3×3 systems (and the 5×5 steps of the tissue-motion fit) would
-//! cost more build time than these lines.
+//! Small linear least squares by normal equations (2–8 unknowns, and the
+//! tissue-motion fit's steps of at most 36), the only regression the fits
+//! need. Written here: pulling a linear-algebra crate in for 3×3 systems
+//! would cost more build time than these lines.
 
 /// Accumulates `y ≈ Σ c_k·φ_k` and solves for `c`.
 #[derive(Clone, Debug)]
