@@ -701,7 +701,8 @@ fn motion_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
 /// was fitted against the needle's position and is bent by the motion.
 /// φ is found on each trial, withheld or not, like the contact point: it
 /// is where the breathing was when the trial began, not a property of
-/// the tissue.
+/// the tissue; where it fits better, φ is found per window of two breaths
+/// ([`wandering`]): a breath's length varies.
 fn tissue_motion(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let mut cols = Vec::new();
     tissue_motion_on_grid(p, &[g], &mut |_, c| cols = c);
@@ -745,27 +746,94 @@ fn tissue_motion_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize,
                 ..steady
             }
         };
-        let best = (0..MOTION_PHASES)
+        // Each phase's squared error at every sample searched (the
+        // loading curve's column is not searched).
+        let errors: Vec<Vec<f64>> = (0..MOTION_PHASES)
             .map(|k| {
                 let shift = sine(k);
                 let (moved, ..) = moved_model(coarse_sudden, &coarse.params, &|i| {
                     shift.at_harmonics(coarse_h[i])
                 });
-                // The loading curve's column is not searched.
-                let sse: f64 = (0..coarse.trial.len())
-                    .filter(|&i| coarse.phase[i] != LOADING)
-                    .map(|i| (coarse.residual_n[i] - moved_less_nominal(coarse, &moved, i)).powi(2))
-                    .sum();
-                (k, sse)
+                (0..coarse.trial.len())
+                    .map(|i| match coarse.phase[i] {
+                        LOADING => 0.0,
+                        _ => (coarse.residual_n[i] - moved_less_nominal(coarse, &moved, i)).powi(2),
+                    })
+                    .collect()
             })
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map_or(0, |b| b.0);
-        let shift = sine(best);
-        each(
-            gi,
-            moved_nominal(p, sudden, &|i| shift.at_harmonics(full_h[i])),
-        );
+            .collect();
+        let steady_sse = |k: usize| errors[k].iter().sum::<f64>();
+        let best = (0..MOTION_PHASES)
+            .min_by(|&a, &b| steady_sse(a).total_cmp(&steady_sse(b)))
+            .unwrap_or(0);
+        let wander = wandering((coarse, coarse_sudden), &errors, steady, amplitude_m)
+            .filter(|w| w.1 < steady_sse(best));
+        let full_wander;
+        let (shift, h): (TissueShift, &[[f64; 5]]) = match wander {
+            Some((w, _)) => {
+                full_wander = harmonics_along(&w, &p.trial.t_s);
+                (w, &full_wander)
+            }
+            None => (sine(best), &full_h),
+        };
+        each(gi, moved_nominal(p, sudden, &|i| shift.at_harmonics(h[i])));
     }
+}
+
+/// Breaths a window of [`wandering`] spans.
+const MOTION_WINDOW_BREATHS: f64 = 2.0;
+
+/// A·sin(ωt + φ(t)) with φ the best of the grid's phases in each window of
+/// [`MOTION_WINDOW_BREATHS`] (`errors[k][i]`: phase k's squared error at
+/// sample i), linear between the windows' middles, and its squared error
+/// over the trial (the model moved with `coarse_sudden`'s geometry, as
+/// the grid's); `None` for a trial of one window. A breath's length
+/// varies, so over a trial its phase strays from any one frequency's (and
+/// from the grid's frequency, which is the nearest of five): one phase for
+/// the trial leaves the candidate under the others where the period
+/// wanders.
+fn wandering(
+    (coarse, coarse_sudden): (&Prepared, &Prepared),
+    errors: &[Vec<f64>],
+    steady: TissueShift,
+    amplitude_m: f64,
+) -> Option<(TissueShift, f64)> {
+    let t_s = &coarse.trial.t_s;
+    let window_s = MOTION_WINDOW_BREATHS * TAU / steady.omega_rad_s;
+    let window = |i: usize| ((t_s[i] - t_s[0]) / window_s) as usize;
+    let windows = window(t_s.len() - 1) + 1;
+    if windows < 2 {
+        return None;
+    }
+    // Each window's squared error at each phase.
+    let mut sums = vec![vec![0.0; errors.len()]; windows];
+    for (k, e) in errors.iter().enumerate() {
+        for (i, ei) in e.iter().enumerate() {
+            sums[window(i)][k] += ei;
+        }
+    }
+    let mut phases: Vec<f64> = Vec::with_capacity(windows);
+    for at in &sums {
+        let k = (0..at.len())
+            .min_by(|&a, &b| at[a].total_cmp(&at[b]))
+            .unwrap_or(0);
+        let phase = TAU * k as f64 / errors.len() as f64;
+        // Unwrapped: the turn nearest the window before's.
+        let last = phases.last().copied().unwrap_or(phase);
+        phases.push(phase + TAU * ((last - phase) / TAU).round());
+    }
+    let shift = TissueShift {
+        coeffs_m: [amplitude_m, 0.0, 0.0, 0.0],
+        wander: PhaseWander::through(t_s[0] + window_s / 2.0, window_s, &phases),
+        ..steady
+    };
+    let h = harmonics_along(&shift, t_s);
+    let (moved, ..) = moved_model(coarse_sudden, &coarse.params, &|i| shift.at_harmonics(h[i]));
+    let sse = (0..t_s.len())
+        .filter(|&i| coarse.phase[i] != LOADING)
+        .map(|i| (coarse.residual_n[i] - moved_less_nominal(coarse, &moved, i)).powi(2))
+        .sum();
+    Some((shift, sse))
 }
 
 /// Columns of [`tissue_motion`] for one tissue displacement and velocity

@@ -178,6 +178,23 @@ impl PhaseWander {
         phase_rad: [0.0; MAX_KNOTS],
     };
 
+    /// Knots `step_s` apart from `t0_s` with the departures `phase_rad`
+    /// (the first [`MAX_KNOTS`]); fewer than two: a steady breath.
+    pub fn through(t0_s: f64, step_s: f64, phase_rad: &[f64]) -> Self {
+        let knots = phase_rad.len().min(MAX_KNOTS);
+        if knots < 2 {
+            return Self::NONE;
+        }
+        let mut at = [0.0; MAX_KNOTS];
+        at[..knots].copy_from_slice(&phase_rad[..knots]);
+        Self {
+            t0_s,
+            step_s: step_s.max(1e-3),
+            knots,
+            phase_rad: at,
+        }
+    }
+
     /// Knots about `period_s` apart over `from_s..to_s` (farther apart
     /// when [`MAX_KNOTS`] would not reach), each where `self` has the
     /// phase then.
