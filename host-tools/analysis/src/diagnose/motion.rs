@@ -179,7 +179,7 @@ impl PhaseWander {
     };
 
     /// Knots `step_s` apart from `t0_s` with the departures `phase_rad`
-    /// (the first [`MAX_KNOTS`]); fewer than two: a steady breath.
+    /// (the first 32); fewer than two: a steady breath.
     pub fn through(t0_s: f64, step_s: f64, phase_rad: &[f64]) -> Self {
         let knots = phase_rad.len().min(MAX_KNOTS);
         if knots < 2 {
