@@ -787,7 +787,8 @@ const MOTION_WINDOW_BREATHS: f64 = 2.0;
 /// [`MOTION_WINDOW_BREATHS`] (`errors[k][i]`: phase k's squared error at
 /// sample i), linear between the windows' middles, and its squared error
 /// over the trial (the model moved with `coarse_sudden`'s geometry, as
-/// the grid's); `None` for a trial of one window. A breath's length
+/// the grid's); `None` for a trial of one window, or none that tells
+/// the phases apart. A breath's length
 /// varies, so over a trial its phase strays from any one frequency's (and
 /// from the grid's frequency, which is the nearest of five): one phase for
 /// the trial leaves the candidate under the others where the period
@@ -812,12 +813,23 @@ fn wandering(
             sums[window(i)][k] += ei;
         }
     }
+    // A window where every phase does as well (the approach, the loading
+    // curve, the needle out) says nothing: it keeps the nearest one's.
+    let chosen: Vec<Option<usize>> = sums
+        .iter()
+        .map(|at| {
+            let (lo, hi) = at
+                .iter()
+                .fold((f64::INFINITY, 0.0f64), |(l, h), &e| (l.min(e), h.max(e)));
+            (hi > lo).then(|| (0..at.len()).find(|&k| at[k] == lo).unwrap_or(0))
+        })
+        .collect();
+    let first = chosen.iter().flatten().next().copied()?;
     let mut phases: Vec<f64> = Vec::with_capacity(windows);
-    for at in &sums {
-        let k = (0..at.len())
-            .min_by(|&a, &b| at[a].total_cmp(&at[b]))
-            .unwrap_or(0);
-        let phase = TAU * k as f64 / errors.len() as f64;
+    let mut last_k = first;
+    for k in &chosen {
+        last_k = k.unwrap_or(last_k);
+        let phase = TAU * last_k as f64 / errors.len() as f64;
         // Unwrapped: the turn nearest the window before's.
         let last = phases.last().copied().unwrap_or(phase);
         phases.push(phase + TAU * ((last - phase) / TAU).round());
