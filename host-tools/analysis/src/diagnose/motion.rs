@@ -717,27 +717,21 @@ fn refine(
             }
             normal.add(row, w * r[i]);
         }
-        let mut improved = false;
         let loss = huber(&r, corner_n);
-        while lambda < 1e6 {
-            let Some(delta) = normal.solve_damped(lambda, unknowns) else {
-                lambda *= 10.0;
-                continue;
-            };
+        let step = damped_step(&normal, unknowns, &mut lambda, loss, |delta| {
             let mut next = shift;
             for (k, d) in delta.iter().enumerate().take(unknowns) {
                 next = with(&next, k, *d);
             }
             let rn = residuals(p, params, &next, samples, &mut harmonics);
             let loss_next = huber(&rn, corner_n);
-            if loss_next < loss {
-                improved = 1.0 - loss_next / loss > 1e-5;
-                (shift, r, lambda) = (next, rn, (lambda / 10.0).max(1e-9));
-                break;
-            }
-            lambda *= 10.0;
-        }
-        if !improved {
+            ((next, rn), loss_next)
+        });
+        let Some(((next, rn), loss_next)) = step else {
+            break;
+        };
+        (shift, r) = (next, rn);
+        if 1.0 - loss_next / loss <= 1e-5 {
             break;
         }
     }
@@ -814,12 +808,7 @@ fn refine_wander(
         for (row, y) in prior.rows(&shift.wander) {
             normal.add(row, y);
         }
-        let mut improved = false;
-        while lambda < 1e6 {
-            let Some(delta) = normal.solve_damped(lambda, unknowns) else {
-                lambda *= 10.0;
-                continue;
-            };
+        let step = damped_step(&normal, unknowns, &mut lambda, loss, |delta| {
             let mut next = shift;
             for (k, d) in delta.iter().enumerate().take(unknowns) {
                 if k < 4 {
@@ -830,13 +819,13 @@ fn refine_wander(
             }
             let rn = residuals(p, params, &next, samples, &mut harmonics);
             let loss_next = huber(&rn, corner_n) + prior.loss(&next.wander);
-            if loss_next < loss {
-                improved = 1.0 - loss_next / loss > 1e-5;
-                (shift, r, loss, lambda) = (next, rn, loss_next, (lambda / 10.0).max(1e-9));
-                break;
-            }
-            lambda *= 10.0;
-        }
+            ((next, rn), loss_next)
+        });
+        let Some(((next, rn), loss_next)) = step else {
+            break;
+        };
+        let improved = 1.0 - loss_next / loss > 1e-5;
+        (shift, r, loss) = (next, rn, loss_next);
         if !improved {
             break;
         }
@@ -896,6 +885,32 @@ impl WanderPrior {
 /// literature on breathing variability; the larger, so that the prior
 /// holds only what the data leave open.
 const BREATH_PERIOD_CV: f64 = 0.3;
+
+/// One Levenberg–Marquardt step on `normal`'s first `unknowns`: the
+/// damping raised tenfold until `try_delta`'s step (its new state and
+/// loss) lowers `loss`, then lowered tenfold; `None` when no step does
+/// by a damping of 10⁶.
+fn damped_step<const N: usize, T>(
+    normal: &Lsq<N>,
+    unknowns: usize,
+    lambda: &mut f64,
+    loss: f64,
+    mut try_delta: impl FnMut(&[f64; N]) -> (T, f64),
+) -> Option<(T, f64)> {
+    while *lambda < 1e6 {
+        let Some(delta) = normal.solve_damped(*lambda, unknowns) else {
+            *lambda *= 10.0;
+            continue;
+        };
+        let (next, loss_next) = try_delta(&delta);
+        if loss_next < loss {
+            *lambda = (*lambda / 10.0).max(1e-9);
+            return Some((next, loss_next));
+        }
+        *lambda *= 10.0;
+    }
+    None
+}
 
 /// Most Levenberg–Marquardt iterations of a fit, and of a scouting one
 /// from each of several starts (the best of which is then fitted fully).
