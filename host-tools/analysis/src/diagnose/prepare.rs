@@ -9,6 +9,7 @@ use crate::fit::jumps::Jump;
 use crate::fit::predict::{
     last_loaded_sample, predict_each, predict_parts_at, NeedleVelocity, Parts,
 };
+use crate::fit::tissue::CUTTING_PRIOR_N;
 use crate::fit::{fit_trial_at, puncture_index_at, Falls, TrialFit};
 use needle_io::trial::Trial;
 
@@ -211,6 +212,38 @@ impl Prepared {
     }
 }
 
+/// How much of the cutting force the nominal has on at each sample (0 to
+/// 1), from its cutting force `cutting_n`. A nominal fitted with no
+/// cutting force still cuts: one speed and no oscillation confound
+/// cutting with friction, `needle fit` takes no negative value, and a
+/// share read off a force of zero would leave each trial's own cutting
+/// level, and every candidate built on where the needle cuts, a column
+/// of zeros. The share is then read from the model with the prior
+/// cutting force ([`CUTTING_PRIOR_N`]).
+fn cutting_share(
+    params: &TissueParams,
+    geometry: &TrialFit,
+    trial: &Trial,
+    velocity: &NeedleVelocity,
+    cutting_n: &[f64],
+) -> Vec<f64> {
+    if params.cutting_force_n > 0.0 {
+        return cutting_n
+            .iter()
+            .map(|c| c / params.cutting_force_n)
+            .collect();
+    }
+    let with_prior = TissueParams {
+        cutting_force_n: CUTTING_PRIOR_N,
+        ..*params
+    };
+    predict_parts_at(&with_prior, geometry, trial, velocity.clone())
+        .cutting_n
+        .iter()
+        .map(|c| c / CUTTING_PRIOR_N)
+        .collect()
+}
+
 /// Prepare a trial against `params`, with its geometry as `needle fit`'s
 /// code found it and its relaxed surface as [`relaxed_surfaces`] placed
 /// it (`geometry.relaxed_x_m`), and the
@@ -238,6 +271,10 @@ pub fn prepare(
         parts.friction_basis[i] = [0.0; 4];
         parts.cutting_n[i] = 0.0;
     }
+    let mut cutting = cutting_share(params, &geometry, &trial, &velocity, &parts.cutting_n);
+    for i in stick.clone() {
+        cutting[i] = 0.0;
+    }
     let residual_n: Vec<f64> = (0..n).map(|i| trial.f_n[i] - nominal_n[i]).collect();
     let a_mps2 = acceleration(&trial);
     let structures = structures(&trial, params, &residual_n);
@@ -257,11 +294,7 @@ pub fn prepare(
         a_mps2,
         friction_n: parts.friction_n,
         length_m: parts.length_m,
-        cutting: parts
-            .cutting_n
-            .iter()
-            .map(|&c| c / params.cutting_force_n.max(f64::MIN_POSITIVE))
-            .collect(),
+        cutting,
         structures,
         trial,
         search: Default::default(),
