@@ -525,6 +525,40 @@ fn cutting_that_wanders_along_each_path_is_named() {
     }
 }
 
+/// Cutting loaded again after the puncture (the simulator's literature
+/// form: the layer beneath a ruptured capsule cuts at 40 % of its level
+/// at first, back within 5 % by 2.4 mm, and more with depth), recorded as
+/// real rigs record. On insert–dwell–withdraw `needle fit` finds no
+/// cutting force here (one speed confounds it with friction); the
+/// diagnosis still knows where the needle cuts, so each trial's own
+/// cutting level and the candidate have a column (`none`, 12.0 mN on
+/// 12.1, before: every cutting column was zero). Named on both protocols,
+/// and a reloading length chosen.
+#[test]
+fn cutting_loaded_again_after_the_puncture_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let case = ("depth_dependent_cutting", Form::Literature, 1);
+    simulate_as_rigs_record(dir.path(), case);
+    let paper = Rig {
+        jitter: true,
+        spread: 0.15,
+        ..Default::default()
+    };
+    for out in [diagnosis_of(dir.path()), diagnosis_on(case, paper)] {
+        let v = &out["verdict"];
+        assert_eq!(v["effect"], "depth_dependent_cutting", "{v}");
+        assert!(num(&v["shrink"]) >= 0.5, "{v}");
+        let chosen = out["candidates"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["effect"] == "depth_dependent_cutting")
+            .unwrap();
+        assert!(num(&chosen["params"]["reload_length_m"]) > 0.0, "{chosen}");
+        assert!(num(&chosen["params"]["reload_gain"]) > 0.2, "{chosen}");
+    }
+}
+
 /// The verdict names cutting along depth in each trial, tried after the
 /// shared candidates (whatever their ranking), with a real shrink and a
 /// window within the ones tried.

@@ -42,7 +42,8 @@ pub enum Form {
     /// viscoelasticity with a box spectrum (five branches, 0.05–20 s),
     /// Stribeck friction (a low-speed boost falling off by 0.5 mm/s), Dahl
     /// presliding with his exponent 2, walls stiffening exponentially
-    /// (Fung's collagen), cutting growing with the square root of depth, a
+    /// (Fung's collagen), cutting growing with the square root of depth
+    /// and loaded again over the first millimetres past the puncture, a
     /// load cell on a mount ringing at 8 Hz, a drift that accelerates as a
     /// bridge warms up, breathing whose period wanders by ±20 %.
     Literature,

@@ -27,6 +27,8 @@ pub(super) struct Needle<'a> {
     relaxed_surface_m: f64,
     /// The deepest the tip has been since the puncture (tissue frame), m.
     deepest_m: f64,
+    /// Where the capsule gave way (tissue frame), m.
+    punctured_m: f64,
     /// The friction law's memory of the last sliding direction.
     last_sliding: f64,
     /// The tip's cutting force when the needle last moved, N.
@@ -59,6 +61,7 @@ impl<'a> Needle<'a> {
             contact: Contact::Out,
             relaxed_surface_m: 0.0,
             deepest_m: 0.0,
+            punctured_m: 0.0,
             last_sliding: 0.0,
             last_cutting_n: 0.0,
             previous_m: 0.0,
@@ -115,6 +118,7 @@ impl<'a> Needle<'a> {
             self.contact = Contact::Inserted;
             self.relaxed_surface_m = s1 + self.tissue.relaxation * d;
             self.deepest_m = p_m;
+            self.punctured_m = p_m;
             truth.puncture_x_m = Some(x_m);
             truth.puncture_force_n = Some(f);
             truth.relaxed_surface_x_m = Some(self.relaxed_surface_m);
@@ -184,7 +188,8 @@ impl<'a> Needle<'a> {
         let friction = self.bristles.follow(effects, form, target, moved_m);
         let cutting = tissue.cutting_n(k.vr_mps, p_m >= self.deepest_m && p_m < far_m);
         let depth_m = p_m - self.protocol.surface_x_m;
-        let cutting = forces::deeper_cutting(effects, form, depth_m, cutting)
+        let past_puncture_m = self.deepest_m.max(p_m) - self.punctured_m;
+        let cutting = forces::deeper_cutting(effects, form, depth_m, past_puncture_m, cutting)
             * self.protocol.cutting_factor(depth_m);
         self.deepest_m = self.deepest_m.max(p_m);
         if k.vr_mps.abs() >= tissue.half_band_mps {
