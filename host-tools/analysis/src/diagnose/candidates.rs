@@ -11,6 +11,7 @@ use std::f64::consts::TAU;
 
 use super::motion::{harmonics_along, moved_model, PhaseWander, TissueShift};
 use super::prepare::{Prepared, LOADING};
+use crate::fit::lsq::Lsq;
 
 /// A candidate's columns for one trial, one vector per linear parameter.
 pub type Columns = Vec<Vec<f64>>;
@@ -605,29 +606,64 @@ fn depth_cutting(p: &Prepared, reload_m: f64) -> Vec<Vec<f64>> {
 /// A layer loaded again after the puncture: when a capsule ruptures the
 /// tissue ahead of the tip springs back, and the layer beneath must be
 /// compressed to its own cutting force before it cuts (real recordings
-/// fall to 20–45 % of the peak and climb 1.2–3.3× within the next 3 mm).
-/// The cutting force falls short of its level by a share of it that
-/// decays as e^{−s/λ} over s, the tip's deepest advance past the
-/// puncture (λ = `reload_m`: a length, since the tip must advance to load
-/// the layer however long that takes); the column is −cutting·e^{−s/λ},
-/// its gain the share. Zero at λ = 0.
+/// fall to 20–45 % of the peak and climb 1.2–3.3× within the next 3 mm,
+/// by how much a different amount in each insertion). The force falls
+/// short of its steady course by a deficit Δ that decays as e^{−s/λ}
+/// over s, the tip's deepest advance past the bottom of the fall
+/// (λ = `reload_m`: a length, since the tip must advance to load the
+/// layer however long that takes). Δ is each trial's own, read off its
+/// record: the steady course is the straight line through the force
+/// 3–6 mm past the fall ([`RELOADED_FROM_M`], beyond the recordings'
+/// 3 mm), carried back to the fall, and Δ is how far the bottom of the
+/// fall lies below it. The column is −Δ·e^{−s/λ} where the needle cuts,
+/// its gain 1 where the law holds. Zero at λ = 0, and in a trial that
+/// fell to no less than that line or has no such stretch of cutting.
 fn reloading(p: &Prepared, reload_m: f64) -> Vec<f64> {
     let n = p.trial.len();
     let mut col = vec![0.0; n];
     let Some(last_loading) = (0..n).rev().find(|&i| p.phase[i] == LOADING) else {
         return col;
     };
-    if reload_m <= 0.0 {
+    if reload_m <= 0.0 || last_loading + 1 >= n {
         return col;
     }
-    let x = &p.trial.x_m;
-    let mut deepest_m = x[last_loading];
-    for i in last_loading + 1..n {
+    let (x, f) = (&p.trial.x_m, &p.trial.f_n);
+    // A fall takes up to two samples: its bottom is the lowest of the
+    // three after the loading curve.
+    let bottom = (last_loading + 1..(last_loading + 4).min(n))
+        .min_by(|&i, &j| f[i].total_cmp(&f[j]))
+        .unwrap_or(last_loading + 1);
+    let past_m = |i: usize| x[i] - x[bottom];
+    let steady: Vec<usize> = (bottom..n)
+        .filter(|&i| {
+            p.cutting[i] > 0.5 && (RELOADED_FROM_M..=2.0 * RELOADED_FROM_M).contains(&past_m(i))
+        })
+        .collect();
+    let mut line = Lsq::<2>::default();
+    for &i in &steady {
+        line.add([1.0, past_m(i)], f[i]);
+    }
+    let count = steady.len();
+    let steady_at_fall_n = match line.solve() {
+        Some([level_n, _]) if count >= 5 => level_n,
+        _ => return col,
+    };
+    let deficit_n = steady_at_fall_n - f[bottom];
+    if deficit_n <= 3.0 * p.noise_n {
+        return col;
+    }
+    let mut deepest_m = x[bottom];
+    for i in bottom..n {
         deepest_m = deepest_m.max(x[i]);
-        col[i] = -p.cutting[i] * (-(deepest_m - x[last_loading]) / reload_m).exp();
+        col[i] = -deficit_n * p.cutting[i] * (-(deepest_m - x[bottom]) / reload_m).exp();
     }
     col
 }
+
+/// Past the fall by this much, a layer loaded again has long reached its
+/// steady course (the recordings: within 3 mm); [`reloading`] reads the
+/// course from here to twice as far.
+const RELOADED_FROM_M: f64 = 0.003;
 
 /// Acceleration two ways, each as the holder feels it through a mount
 /// or drive that spreads it over τ (first-order; τ = 0 is rigid): the
