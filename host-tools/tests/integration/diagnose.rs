@@ -529,11 +529,10 @@ fn cutting_that_wanders_along_each_path_is_named() {
 /// form: the layer beneath a ruptured capsule cuts at 40 % of its level
 /// at first, back within 5 % by 2.4 mm, and more with depth), recorded as
 /// real rigs record. On insert–dwell–withdraw `needle fit` finds no
-/// cutting force here (one speed confounds it with friction); the
-/// diagnosis still knows where the needle cuts, so each trial's own
-/// cutting level and the candidate have a column (`none`, 12.0 mN on
-/// 12.1, before: every cutting column was zero). Named on both protocols,
-/// and a reloading length chosen.
+/// cutting force here (one speed confounds it with friction), and the
+/// diagnosis must still know where the needle cuts. Named on both
+/// protocols, a reloading length chosen and the law's gain near 1 (each
+/// trial's deficit is its own reading).
 #[test]
 fn cutting_loaded_again_after_the_puncture_is_named() {
     let dir = tempfile::tempdir().unwrap();
@@ -555,7 +554,8 @@ fn cutting_loaded_again_after_the_puncture_is_named() {
             .find(|c| c["effect"] == "depth_dependent_cutting")
             .unwrap();
         assert!(num(&chosen["params"]["reload_length_m"]) > 0.0, "{chosen}");
-        assert!(num(&chosen["params"]["reload_gain"]) > 0.2, "{chosen}");
+        let gain = num(&chosen["params"]["reload_gain"]);
+        assert!((0.5..1.5).contains(&gain), "{chosen}");
     }
 }
 

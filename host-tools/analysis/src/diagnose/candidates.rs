@@ -123,7 +123,7 @@ pub const CANDIDATES: [Candidate; 8] = [
     Candidate {
         effect: "depth_dependent_cutting",
         grid_name: "reload_length_m",
-        grid: &[0.0, 0.0005, 0.001, 0.002],
+        grid: &[0.0, 0.000_25, 0.000_5, 0.001],
         linear: &[
             "cutting_per_m_n_per_m",
             "cutting_correction_n",
@@ -605,19 +605,22 @@ fn depth_cutting(p: &Prepared, reload_m: f64) -> Vec<Vec<f64>> {
 
 /// A layer loaded again after the puncture: when a capsule ruptures the
 /// tissue ahead of the tip springs back, and the layer beneath must be
-/// compressed to its own cutting force before it cuts (real recordings
+/// compressed to its own cutting force before it cuts. Real recordings
 /// fall to 20–45 % of the peak and climb 1.2–3.3× within the next 3 mm,
-/// by how much a different amount in each insertion). The force falls
-/// short of its steady course by a deficit Δ that decays as e^{−s/λ}
-/// over s, the tip's deepest advance past the bottom of the fall
-/// (λ = `reload_m`: a length, since the tip must advance to load the
-/// layer however long that takes). Δ is each trial's own, read off its
-/// record: the steady course is the straight line through the force
-/// 3–6 mm past the fall ([`RELOADED_FROM_M`], beyond the recordings'
-/// 3 mm), carried back to the fall, and Δ is how far the bottom of the
-/// fall lies below it. The column is −Δ·e^{−s/λ} where the needle cuts,
-/// its gain 1 where the law holds. Zero at λ = 0, and in a trial that
-/// fell to no less than that line or has no such stretch of cutting.
+/// by a different amount in each insertion. The force falls short of its
+/// steady course by a deficit Δ that decays as e^{−s/λ} over s, the
+/// tip's deepest advance past the bottom of the fall (λ = `reload_m`: a
+/// length, since the tip must advance to load the layer however long
+/// that takes). Δ is each trial's own, read off its record: the steady
+/// course is the straight line through the force the advancing needle
+/// cuts with 3–6 mm past the fall ([`RELOADED_FROM_M`]), carried back to
+/// the fall, and Δ is how far the bottom of the fall lies below it — so,
+/// like a wall's force, it is the withheld trial's own reading, and its
+/// held-out score is that of the law's shape and gain. The column is
+/// −Δ·e^{−s/λ} times the share of the cutting force the nominal has on,
+/// its gain 1 where the law holds. Zero at λ = 0, and in a trial whose
+/// fall lies within three noise sd of that line (or above it), or that
+/// does not cut along 1.5 mm of that stretch.
 fn reloading(p: &Prepared, reload_m: f64) -> Vec<f64> {
     let n = p.trial.len();
     let mut col = vec![0.0; n];
@@ -628,25 +631,31 @@ fn reloading(p: &Prepared, reload_m: f64) -> Vec<f64> {
         return col;
     }
     let (x, f) = (&p.trial.x_m, &p.trial.f_n);
-    // A fall takes up to two samples: its bottom is the lowest of the
-    // three after the loading curve.
-    let bottom = (last_loading + 1..(last_loading + 4).min(n))
+    // The bottom of the fall: the lowest force over the first
+    // [`FALL_ADVANCE_M`] past the loading curve, at any sample rate.
+    let fall_end = (last_loading + 1..n)
+        .find(|&i| x[i] - x[last_loading + 1] > FALL_ADVANCE_M)
+        .unwrap_or(n);
+    let bottom = (last_loading + 1..fall_end)
         .min_by(|&i, &j| f[i].total_cmp(&f[j]))
         .unwrap_or(last_loading + 1);
     let past_m = |i: usize| x[i] - x[bottom];
+    let cutting = |i: usize| p.cutting[i] > 0.5 && p.velocity.v_mps[i] >= p.params.half_band_mps;
     let steady: Vec<usize> = (bottom..n)
-        .filter(|&i| {
-            p.cutting[i] > 0.5 && (RELOADED_FROM_M..=2.0 * RELOADED_FROM_M).contains(&past_m(i))
-        })
+        .filter(|&i| cutting(i) && (RELOADED_FROM_M..=2.0 * RELOADED_FROM_M).contains(&past_m(i)))
         .collect();
+    let (Some(&first), Some(&last)) = (steady.first(), steady.last()) else {
+        return col;
+    };
+    if past_m(last) - past_m(first) < 0.5 * RELOADED_FROM_M {
+        return col;
+    }
     let mut line = Lsq::<2>::default();
     for &i in &steady {
         line.add([1.0, past_m(i)], f[i]);
     }
-    let count = steady.len();
-    let steady_at_fall_n = match line.solve() {
-        Some([level_n, _]) if count >= 5 => level_n,
-        _ => return col,
+    let Some([steady_at_fall_n, _]) = line.solve() else {
+        return col;
     };
     let deficit_n = steady_at_fall_n - f[bottom];
     if deficit_n <= 3.0 * p.noise_n {
@@ -660,10 +669,16 @@ fn reloading(p: &Prepared, reload_m: f64) -> Vec<f64> {
     col
 }
 
-/// Past the fall by this much, a layer loaded again has long reached its
-/// steady course (the recordings: within 3 mm); [`reloading`] reads the
-/// course from here to twice as far.
+/// Past the fall by this much, a layer loaded again has reached its
+/// steady course (the recordings: within 3 mm; the longest λ tried
+/// leaves 5 % of the deficit there); [`reloading`] reads the course from
+/// here to twice as far.
 const RELOADED_FROM_M: f64 = 0.003;
+
+/// A puncture's fall takes two samples at a real rig's 100 Hz: at 2 mm/s
+/// 40 µm of advance. Its bottom is looked for over this much, whatever
+/// the sample rate.
+const FALL_ADVANCE_M: f64 = 0.000_2;
 
 /// Acceleration two ways, each as the holder feels it through a mount
 /// or drive that spreads it over τ (first-order; τ = 0 is rigid): the
