@@ -797,7 +797,7 @@ const BACKFIT_TOL: f64 = 0.01;
 /// Rounds of a backfit in which the newest effect's grid value is found
 /// again ([`backfit_rounds`]).
 const REGRID_ROUNDS: usize = 2;
-/// Most rounds of [`backfit_tissue_frame`]: each fits the displacement of
+/// Most rounds of [`tissue_frame_rounds`]: each fits the displacement of
 /// every trial again (from the round before and from a fresh grid), and a
 /// trial stuck at the wrong flip of friction gets out once the nominal
 /// has improved. From the third round on the held-out RMS wanders by a
@@ -830,6 +830,45 @@ struct Backfitting<'c> {
     refit_params: bool,
     rounds_done: usize,
     settled: bool,
+    /// Tissue motion alone, under way in the tissue's frame: its rounds
+    /// are the costliest of any effect (each fits every trial's
+    /// displacement), and a contender that does not win needs only one.
+    frame: Option<InFrame<'c>>,
+}
+
+/// Tissue motion's rounds in the tissue's frame so far, the motion as
+/// columns (which stand where the rounds leave the withheld trials
+/// worse) and the effects beside it, added as columns in the frame.
+struct InFrame<'c> {
+    rounds: KeptRounds<FrameRound>,
+    columns: Backfitted<'c>,
+    forces: Vec<(&'c Candidate, f64)>,
+}
+
+impl<'c> InFrame<'c> {
+    /// The rounds up to the `most`-th.
+    fn upto(self, most: usize, refit_params: bool) -> Self {
+        let rounds = tissue_frame_rounds(&self.columns.1, refit_params, self.rounds, most);
+        Self { rounds, ..self }
+    }
+
+    /// The better of the last round kept (the effects beside the motion
+    /// scored in its frame) and the columns, and whether it is the round.
+    fn state(&self) -> (Backfitted<'c>, bool) {
+        let Some((_, (scored, moved, _))) = &self.rounds.last else {
+            return (self.columns.clone(), false);
+        };
+        let in_frame = if self.forces.is_empty() {
+            scored.clone()
+        } else {
+            score(moved, &self.forces, None)
+        };
+        if worse(in_frame.rms(), self.columns.0.rms()) {
+            (self.columns.clone(), false)
+        } else {
+            ((in_frame, moved.clone(), self.forces.clone()), true)
+        }
+    }
 }
 
 impl<'c> Backfitting<'c> {
@@ -839,11 +878,25 @@ impl<'c> Backfitting<'c> {
             refit_params: false,
             rounds_done: 0,
             settled: true,
+            frame: None,
         }
     }
 
-    /// Rounds of [`backfit`] up to the `upto`-th in all.
+    /// Rounds of [`backfit`] up to the `upto`-th in all. With tissue
+    /// motion, its rounds in the tissue's frame come first, as many
+    /// ([`tissue_frame_rounds`]): the effects beside it are backfitted
+    /// once they are all made.
     fn more(mut self, upto: usize) -> Self {
+        if let Some(frame) = self.frame.take() {
+            let frame = frame.upto(upto.min(TISSUE_FRAME_ROUNDS), self.refit_params);
+            let in_frame;
+            (self.state, in_frame) = frame.state();
+            if frame.rounds.open(TISSUE_FRAME_ROUNDS) {
+                self.frame = Some(frame);
+                return self;
+            }
+            self.settled = !in_frame || frame.forces.is_empty();
+        }
         if !self.settled && self.rounds_done < upto {
             let rounds = self.rounds_done..upto;
             self.rounds_done = upto;
@@ -866,39 +919,22 @@ fn backfitting<'c>(
     let (moving, forces): (Vec<_>, Vec<_>) = set
         .iter()
         .partition(|(c, _)| c.backfit == Backfit::TissueFrame);
-    let as_columns = || (score(data, set, None), data.to_vec(), set.to_vec());
-    let moved = (!moving.is_empty())
-        .then(|| backfit_tissue_frame(data, refit_params))
-        .flatten();
-    let (scored, current) = match moved {
-        // Moving the trials into a displacement fitted wrong (to another
-        // effect's residual) can leave them worse than the motion as
-        // columns: the better of the two on the withheld trials stands.
-        Some((scored, moved)) if forces.is_empty() => {
-            let columns = as_columns();
-            return Backfitting::settled(if scored.rms() <= columns.0.rms() {
-                (scored, moved, forces)
-            } else {
-                columns
-            });
-        }
-        Some((_, moved)) => {
-            let columns = as_columns();
-            let in_frame = score(&moved, &forces, None);
-            if worse(in_frame.rms(), columns.0.rms()) {
-                return Backfitting::settled(columns);
-            }
-            (in_frame, moved)
-        }
-        // A moved trial no longer fits: the motion stays as columns.
-        None if !moving.is_empty() => return Backfitting::settled(as_columns()),
-        None => (score(data, set, None), data.to_vec()),
-    };
+    // Moving the trials into a displacement fitted wrong (to another
+    // effect's residual) can leave them worse than the motion as
+    // columns: the better of the two on the withheld trials stands, and
+    // a moved trial that no longer fits leaves the motion as columns.
+    let columns = (score(data, set, None), data.to_vec(), set.to_vec());
+    let frame = (!moving.is_empty()).then(|| InFrame {
+        rounds: KeptRounds::new(),
+        columns: columns.clone(),
+        forces: forces.into_iter().copied().collect(),
+    });
     Backfitting {
-        state: (scored, current, forces),
+        state: columns,
         refit_params,
         rounds_done: 0,
         settled: false,
+        frame,
     }
 }
 
@@ -943,12 +979,24 @@ fn backfit_rounds<'c>(
     ((scored, current, forces), false)
 }
 
+/// A round of [`tissue_frame_rounds`]: the nominal found again in the
+/// tissue's frame, the data moved into it and the displacements.
+type FrameRound = (Scored, Vec<Prepared>, Vec<TissueShift>);
+
 /// The nominal found again in the tissue's frame: the tissue's
 /// displacement fitted per trial under the current nominal (cross-fitted,
 /// [`motion::fit_shifts`]), the positions moved into its frame, `needle
-/// fit`'s code run on them, in rounds kept as [`kept_rounds`] keeps them.
-/// `None` when no round fits.
-fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored, Vec<Prepared>)> {
+/// fit`'s code run on them, in rounds kept as [`KeptRounds`] keeps them,
+/// from `rounds` up to the `most`-th.
+fn tissue_frame_rounds(
+    data: &[Prepared],
+    refit_params: bool,
+    rounds: KeptRounds<FrameRound>,
+    most: usize,
+) -> KeptRounds<FrameRound> {
+    if !rounds.open(most) {
+        return rounds;
+    }
     let k = folds(data.len());
     // The displacement is fitted at the search rate, applied at the full
     // one. (Finding the nominal at the search rate too, and only the last
@@ -971,7 +1019,7 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
     } else {
         data[0].params
     };
-    let round = |last: Option<&(Scored, Vec<Prepared>, Vec<TissueShift>)>| {
+    let round = |last: Option<&FrameRound>| {
         // Each round from the nominal and displacements the last one kept.
         let (params, start) = match last {
             Some((_, prepared, shifts)) => (prepared[0].params, Some(&shifts[..])),
@@ -982,39 +1030,66 @@ fn backfit_tissue_frame(data: &[Prepared], refit_params: bool) -> Option<(Scored
         let scored = score(&prepared, &[], None);
         Some((scored.rms(), (scored, prepared, found)))
     };
-    kept_rounds(TISSUE_FRAME_ROUNDS, round).map(|(scored, prepared, _)| (scored, prepared))
+    rounds.upto(most, round)
 }
 
-/// At most `most` rounds of an iteration judged on withheld trials, as
-/// [`backfit_rounds`] judges its own: `round` makes the next from the
-/// last one kept (`None` before the first) and gives its held-out RMS, or
-/// `None` when it cannot be made. A round that cannot be made, or leaves
-/// the RMS worse or not a number, is not kept and ends the rounds; one
-/// that changes it by less than [`BACKFIT_TOL`] of it is kept and ends
-/// them. The choice among rounds is made on the withheld trials that then
+/// Rounds of an iteration judged on withheld trials, as
+/// [`backfit_rounds`] judges its own ([`Self::upto`]), which may stop and
+/// go on later from where they stopped: the leading contenders for an
+/// effect get a round each, the winner the rest ([`best_backfitted`]).
+/// The choice among rounds is made on the withheld trials that then
 /// score it: the figure is the best of several, mildly optimistic.
-fn kept_rounds<T>(most: usize, mut round: impl FnMut(Option<&T>) -> Option<(f64, T)>) -> Option<T> {
-    let mut last: Option<(f64, T)> = None;
-    for _ in 0..most {
-        let Some((rms, next)) = round(last.as_ref().map(|l| &l.1)) else {
-            break;
-        };
-        let before = last.as_ref().map(|l| l.0);
-        // Before the first round, anything but a number is worse.
-        if worse(rms, before.unwrap_or(f64::INFINITY)) {
-            break;
-        }
-        let settled = before.is_some_and(|b| b - rms < BACKFIT_TOL * b);
-        last = Some((rms, next));
-        if settled {
-            break;
+struct KeptRounds<T> {
+    /// The last round kept, with its held-out RMS.
+    last: Option<(f64, T)>,
+    /// Rounds asked for so far.
+    asked: usize,
+    /// No round after them is to be made.
+    ended: bool,
+}
+
+impl<T> KeptRounds<T> {
+    fn new() -> Self {
+        Self {
+            last: None,
+            asked: 0,
+            ended: false,
         }
     }
-    last.map(|l| l.1)
+
+    /// Rounds up to the `most`-th in all: `round` makes the next from
+    /// the last one kept (`None` before the first) and gives its held-out
+    /// RMS, or `None` when it cannot be made. A round that cannot be
+    /// made, or leaves the RMS worse or not a number, is not kept and
+    /// ends the rounds; one that changes it by less than [`BACKFIT_TOL`]
+    /// of it is kept and ends them.
+    fn upto(mut self, most: usize, mut round: impl FnMut(Option<&T>) -> Option<(f64, T)>) -> Self {
+        while !self.ended && self.asked < most {
+            self.asked += 1;
+            let Some((rms, next)) = round(self.last.as_ref().map(|l| &l.1)) else {
+                self.ended = true;
+                break;
+            };
+            let before = self.last.as_ref().map(|l| l.0);
+            // Before the first round, anything but a number is worse.
+            if worse(rms, before.unwrap_or(f64::INFINITY)) {
+                self.ended = true;
+                break;
+            }
+            self.ended = before.is_some_and(|b| b - rms < BACKFIT_TOL * b);
+            self.last = Some((rms, next));
+        }
+        self
+    }
+
+    /// Whether more rounds up to `most` would be made.
+    fn open(&self, most: usize) -> bool {
+        !self.ended && self.asked < most
+    }
 }
 
 /// Whether a round's held-out RMS `next` is worse than `before`, the
-/// rule of [`backfit_rounds`] and [`kept_rounds`]: higher, or not a
+/// rule of [`backfit_rounds`] and [`KeptRounds`]: higher, or not a
 /// number where `before` is one (a number is never worse than NaN).
 fn worse(next: f64, before: f64) -> bool {
     next > before || (next.is_nan() && !before.is_nan())
@@ -1693,21 +1768,48 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
 mod tests {
     use super::*;
 
-    /// The rounds `kept_rounds` asks for and the one it keeps, for rounds
-    /// whose held-out RMS are `rms` in turn (`None`: cannot be made).
-    fn run(rms: &[Option<f64>]) -> (usize, Option<usize>) {
+    /// The rounds [`KeptRounds`] asks for and the one it keeps, for rounds
+    /// whose held-out RMS are `rms` in turn (`None`: cannot be made),
+    /// asked for up to each of `stops` in turn and then to the last.
+    fn run_in_stages(rms: &[Option<f64>], stops: &[usize]) -> (usize, Option<usize>) {
         let mut asked = 0usize;
-        let kept = kept_rounds(TISSUE_FRAME_ROUNDS, |last: Option<&usize>| {
-            // Made from the round before: in these tests every round
-            // before the last asked is kept.
-            assert_eq!(last.copied(), asked.checked_sub(1));
-            asked += 1;
-            rms.get(asked - 1)
-                .copied()
-                .flatten()
-                .map(|r| (r, asked - 1))
-        });
-        (asked, kept)
+        let mut rounds = KeptRounds::new();
+        for &most in stops.iter().chain([&TISSUE_FRAME_ROUNDS]) {
+            rounds = rounds.upto(most, |last: Option<&usize>| {
+                // Made from the round before: in these tests every round
+                // before the last asked is kept.
+                assert_eq!(last.copied(), asked.checked_sub(1));
+                asked += 1;
+                rms.get(asked - 1)
+                    .copied()
+                    .flatten()
+                    .map(|r| (r, asked - 1))
+            });
+        }
+        assert_eq!(asked, rounds.asked);
+        (asked, rounds.last.map(|l| l.1))
+    }
+
+    fn run(rms: &[Option<f64>]) -> (usize, Option<usize>) {
+        run_in_stages(rms, &[])
+    }
+
+    /// A contender's one round, then the winner's rest, make the rounds
+    /// all at once would, each once.
+    #[test]
+    fn rounds_stopped_and_gone_on_with_are_the_rounds_made_at_once() {
+        let by_half: Vec<_> = (0..10).map(|k| Some(0.5f64.powi(k))).collect();
+        let cases: [&[Option<f64>]; 4] = [
+            &by_half,
+            &[Some(10.0), Some(5.0), Some(6.0), Some(1.0)],
+            &[Some(10.0), None, Some(1.0)],
+            &[None, Some(1.0)],
+        ];
+        for rms in cases {
+            for stops in [&[1][..], &[1, 1, 2], &[0, 3]] {
+                assert_eq!(run_in_stages(rms, stops), run(rms), "{rms:?} {stops:?}");
+            }
+        }
     }
 
     #[test]
