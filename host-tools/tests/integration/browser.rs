@@ -333,7 +333,7 @@ fn the_fit_and_the_diagnosis_draw_their_pages_in_the_live_views_look() {
             labels,
             [
                 "measured",
-                "nominal",
+                "nominal, the trial's own levels",
                 "+ depth_dependent_cutting",
                 "measured − nominal",
                 "measured − + depth_dependent_cutting"

@@ -741,7 +741,7 @@ fn a_report_is_written_with_its_figure() {
     let svg = std::fs::read_to_string(out.path().join("gap.svg")).unwrap();
     for label in [
         "measured",
-        "nominal",
+        "nominal, the trial&apos;s own levels",
         "+ depth_dependent_cutting",
         "insertion",
         "reversal",

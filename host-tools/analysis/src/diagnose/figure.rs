@@ -20,8 +20,26 @@ const BANDS: [RGBColor; 7] = [
     RGBColor(245, 245, 245),
 ];
 
-/// Draw `p` with its nominal model and `augmented` (same samples) to `path`.
-pub fn draw(path: &Path, p: &Prepared, augmented: &[f64], label: &str) -> Result<()> {
+/// A withheld trial's models as the diagnosis scored it, sample by
+/// sample: every shared term fitted on the other trials, the trial's own
+/// levels (cutting force, friction scale, stiffness, the force held at
+/// rest, where its withdrawal lets go) on itself.
+pub struct Withheld {
+    /// The nominal with its corrections: the baseline the gap is
+    /// measured from.
+    pub baseline_n: Vec<f64>,
+    /// The same with the verdict's effect(s).
+    pub augmented_n: Vec<f64>,
+    /// What `augmented_n` adds, as its legend reads.
+    pub label: String,
+}
+
+/// The legend of [`Withheld::baseline_n`].
+pub const BASELINE_LABEL: &str = "nominal, the trial's own levels";
+
+/// Draw `p` with its models (same samples) to `path`.
+pub fn draw(path: &Path, p: &Prepared, withheld: &Withheld) -> Result<()> {
+    let (augmented, label) = (&withheld.augmented_n[..], withheld.label.as_str());
     let err = |e| crate::plot::drawing_error(path, e);
     let root = SVGBackend::new(path, (1000, 720)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
@@ -47,13 +65,16 @@ pub fn draw(path: &Path, p: &Prepared, augmented: &[f64], label: &str) -> Result
     };
     let mut chart = ChartBuilder::on(&top)
         .caption(
-            format!("{} (withheld): measured, nominal, {label}", p.file),
+            format!("{} (withheld): measured, {BASELINE_LABEL}, {label}", p.file),
             ("sans-serif", 18),
         )
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(56)
-        .build_cartesian_2d(t0..t1, range(&[&p.trial.f_n, &p.nominal_n, augmented]))
+        .build_cartesian_2d(
+            t0..t1,
+            range(&[&p.trial.f_n, &withheld.baseline_n, augmented]),
+        )
         .map_err(err)?;
     chart
         .configure_mesh()
@@ -62,7 +83,7 @@ pub fn draw(path: &Path, p: &Prepared, augmented: &[f64], label: &str) -> Result
         .map_err(err)?;
     let series: [(&str, &[f64], RGBColor); 3] = [
         ("measured", &p.trial.f_n, RGBColor(40, 40, 40)),
-        ("nominal", &p.nominal_n, RGBColor(200, 30, 30)),
+        (BASELINE_LABEL, &withheld.baseline_n, RGBColor(200, 30, 30)),
         (label, augmented, RGBColor(20, 110, 200)),
     ];
     for (name, ys, color) in series {
@@ -79,10 +100,10 @@ pub fn draw(path: &Path, p: &Prepared, augmented: &[f64], label: &str) -> Result
         .draw()
         .map_err(err)?;
 
-    let nominal_residual = &p.residual_n;
-    let augmented_residual: Vec<f64> = (0..t.len())
-        .map(|i| p.trial.f_n[i] - augmented[i])
-        .collect();
+    let residual_of =
+        |model: &[f64]| -> Vec<f64> { p.trial.f_n.iter().zip(model).map(|(f, m)| f - m).collect() };
+    let nominal_residual = &residual_of(&withheld.baseline_n);
+    let augmented_residual = residual_of(augmented);
     let y = range(&[nominal_residual, &augmented_residual]);
     let mut chart = ChartBuilder::on(&bottom)
         .caption(

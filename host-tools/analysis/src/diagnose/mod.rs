@@ -40,6 +40,7 @@ use needle_io::trial::{Skipped, Unreadable};
 
 use self::candidates::{Backfit, Candidate, CANDIDATES};
 use self::crossval::{folds, paired_t, Gram, PerTrial};
+use self::figure::Withheld;
 use self::prepare::{prepare, Prepared, DWELL, LOADING, PHASES, WITHDRAWAL};
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
 use crate::fit::{fit_tared, fit_trial, fit_trial_at, Falls, TrialFit};
@@ -1509,9 +1510,11 @@ fn backfitted_first<'c>(
         .max_by(|a, b| b.1 .0.rms().total_cmp(&a.1 .0.rms()))
 }
 
-/// The first trial withheld: the nominal plus the verdict's effect(s),
-/// fitted (with the nominal corrections) on all the other trials.
-fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> (Vec<f64>, String) {
+/// The first trial withheld, as the diagnosis scored it: the nominal
+/// with its corrections, every shared term fitted on the other trials and
+/// the trial's own levels ([`SPREAD`]) on itself, without and with the
+/// verdict's effect(s).
+fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> Withheld {
     let v = &out.verdict;
     let along_depth = v.effects.first().and_then(|e| e.half_window_m);
     let named: Vec<&str> = [v.effect, v.second]
@@ -1530,34 +1533,51 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> (Vec<f64>, String) {
             Some((c, grid))
         })
         .collect();
-    let all_cols: Vec<_> = data.iter().map(|p| columns(p, &set)).collect();
-    let gs = grams(data, &all_cols, &Supports::all(data, &all_cols));
-    let mut train = Gram::new(gs[0][0].n);
-    for g in &gs[1..] {
-        train.merge(&total(g));
-    }
-    let theta = train.solve();
-    let mut augmented = data[0].nominal_n.clone();
-    add_terms(&mut augmented, &columns(&data[0], &set), &theta);
+    let per = PerTrial {
+        own: &SPREAD,
+        ridged: NOMINAL_CORRECTIONS.len(),
+    };
+    let model = |set: &[(&Candidate, f64)]| {
+        let all_cols: Vec<_> = data.iter().map(|p| columns(p, set)).collect();
+        let totals: Vec<Gram> = grams(data, &all_cols, &Supports::all(data, &all_cols))
+            .iter()
+            .map(total)
+            .collect();
+        let others: Vec<&Gram> = totals.iter().skip(1).collect();
+        let theta = per.for_trial(&totals[0], &per.solve_shared(&others));
+        let mut model_n = data[0].nominal_n.clone();
+        add_terms(&mut model_n, &all_cols[0], &theta);
+        model_n
+    };
+    let baseline_n = model(&[]);
+    let mut augmented_n = model(&set);
     if let (Some(half_m), Some(step)) = (along_depth, v.effects.first()) {
         let p = &data[0];
         let left: Vec<f64> = (0..p.trial.len())
-            .map(|i| p.trial.f_n[i] - augmented[i])
+            .map(|i| p.trial.f_n[i] - augmented_n[i])
             .collect();
-        for (a, d) in augmented
+        for (a, d) in augmented_n
             .iter_mut()
             .zip(along_depth::profile(p, left, half_m))
         {
             *a += d;
         }
-        return (augmented, format!("+ {}", step.label()));
+        return Withheld {
+            baseline_n,
+            augmented_n,
+            label: format!("+ {}", step.label()),
+        };
     }
     let label = if named.is_empty() {
         "nominal refitted".to_owned()
     } else {
         format!("+ {}", named.join(" + "))
     };
-    (augmented, label)
+    Withheld {
+        baseline_n,
+        augmented_n,
+        label,
+    }
 }
 
 fn by_phase(s: &Scored) -> ByPhase {
@@ -1750,10 +1770,10 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         write_residuals(path, &data)?;
     }
     if let Some(path) = &args.report {
-        let (augmented, label) = withheld_overlay(&data, &out);
+        let withheld = withheld_overlay(&data, &out);
         let svg = report_figure(path);
-        figure::draw(&svg, &data[0], &augmented, &label)?;
-        report::write(path, &svg, &out, &data[0], &augmented, &label)?;
+        figure::draw(&svg, &data[0], &withheld)?;
+        report::write(path, &svg, &out, &data[0], &withheld)?;
     }
     let text = serde_json::to_string_pretty(&out)? + "\n";
     match &args.json {

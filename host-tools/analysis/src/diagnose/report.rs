@@ -6,6 +6,7 @@
 
 use std::path::Path;
 
+use super::figure::{Withheld, BASELINE_LABEL};
 use super::prepare::{Prepared, PHASES};
 use super::Diagnosis;
 use crate::page::{self, colour, Band, Chart, Line};
@@ -56,15 +57,13 @@ pub fn headline(out: &Diagnosis) -> String {
 }
 
 /// Write the page to `path`: `p`, a withheld trial, drawn with its
-/// nominal and `augmented` (the model with `label`, same samples); `svg`
-/// names the print figure beside it.
+/// models; `svg` names the print figure beside it.
 pub fn write(
     path: &Path,
     svg: &Path,
     out: &Diagnosis,
     p: &Prepared,
-    augmented: &[f64],
-    label: &str,
+    withheld: &Withheld,
 ) -> Result<()> {
     let mut rows = String::new();
     for c in &out.candidates {
@@ -77,7 +76,7 @@ pub fn write(
             if c.significant { "yes" } else { "no" },
         );
     }
-    let charts = withheld_charts(p, augmented, label);
+    let charts = withheld_charts(p, withheld);
     let svg_name = svg
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -98,9 +97,11 @@ pub fn write(
     std::fs::write(path, html).with_context(|| format!("{}: cannot write", path.display()))
 }
 
-/// The withheld trial against time — measured, nominal, with the effect —
-/// and the residual of each beneath, phases shaded.
-fn withheld_charts(p: &Prepared, augmented: &[f64], label: &str) -> [Chart; 2] {
+/// The withheld trial against time — measured, the nominal with the
+/// trial's own levels, with the effect — and the residual of each
+/// beneath, phases shaded.
+fn withheld_charts(p: &Prepared, withheld: &Withheld) -> [Chart; 2] {
+    let (augmented, label) = (&withheld.augmented_n[..], withheld.label.as_str());
     let t = &p.trial.t_s;
     let line = |name: &str, colour, dashed, ys: &[f64]| {
         Line::new(
@@ -110,21 +111,18 @@ fn withheld_charts(p: &Prepared, augmented: &[f64], label: &str) -> [Chart; 2] {
             t.iter().copied().zip(ys.iter().copied()),
         )
     };
-    let augmented_residual: Vec<f64> = p
-        .trial
-        .f_n
-        .iter()
-        .zip(augmented)
-        .map(|(f, a)| f - a)
-        .collect();
+    let residual_of =
+        |model: &[f64]| -> Vec<f64> { p.trial.f_n.iter().zip(model).map(|(f, m)| f - m).collect() };
+    let (baseline_residual, augmented_residual) =
+        (residual_of(&withheld.baseline_n), residual_of(augmented));
     let bands = phase_bands(p);
     let force = Chart {
-        caption: format!("{} (withheld): measured, nominal, {label}", p.file),
+        caption: format!("{} (withheld): measured, {BASELINE_LABEL}, {label}", p.file),
         x_label: "time (s)".into(),
         y_label: "force (N)".into(),
         lines: vec![
             line("measured", colour::MEASURED, false, &p.trial.f_n),
-            line("nominal", colour::MODEL, true, &p.nominal_n),
+            line(BASELINE_LABEL, colour::MODEL, true, &withheld.baseline_n),
             line(label, colour::AUGMENTED, false, augmented),
         ],
         markers: Vec::new(),
@@ -136,7 +134,12 @@ fn withheld_charts(p: &Prepared, augmented: &[f64], label: &str) -> [Chart; 2] {
         x_label: "time (s)".into(),
         y_label: "residual (N)".into(),
         lines: vec![
-            line("measured − nominal", colour::MODEL, false, &p.residual_n),
+            line(
+                "measured − nominal",
+                colour::MODEL,
+                false,
+                &baseline_residual,
+            ),
             line(
                 &format!("measured − {label}"),
                 colour::AUGMENTED,
@@ -190,7 +193,7 @@ fn waterfall_svg(out: &Diagnosis) -> String {
     // Wide enough that the noise floor's label, at the right, clears the
     // bars.
     let w = 140.0 * bars.len() as f64 + 300.0;
-    let (h, left, bottom, bar_w) = (300.0, 70.0, 250.0, 90.0);
+    let (h, left, bottom, bar_w) = (316.0, 70.0, 250.0, 90.0);
     let y = |v: f64| bottom - (v / top) * (bottom - 20.0);
     let mut svg = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\
@@ -208,7 +211,9 @@ fn waterfall_svg(out: &Diagnosis) -> String {
             bottom - y(*v),
             if k == 0 { "#888" } else { "#4a7" },
             y(*v) - 4.0,
-            bottom + 16.0,
+            // Every other name a line lower: an effect's name is wider
+            // than its bar's spacing.
+            bottom + 16.0 + 16.0 * (k % 2) as f64,
         );
     }
     // The two labels at either end: the lines can lie a few pixels apart.
