@@ -116,7 +116,7 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
 /// force, the held terms the force it holds in its first dwell
 /// (`held_in_first_dwell`) and at the static band in the rests after it
 /// (`held_at_the_band`), which [`SPREAD`] frees per trial.
-pub const NOMINAL_CORRECTIONS: [&str; 14] = [
+pub const NOMINAL_CORRECTIONS: [&str; 15] = [
     "a1_n_per_m",
     "a2_n_per_m2",
     "cp_n_per_m",
@@ -131,6 +131,7 @@ pub const NOMINAL_CORRECTIONS: [&str; 14] = [
     "stick_held_n",
     "stick_n_per_m",
     "held_at_band",
+    "friction_scale_let_go",
 ];
 
 /// The corrections each trial has its own value of, fitted on the trial
@@ -148,8 +149,11 @@ pub const NOMINAL_CORRECTIONS: [&str; 14] = [
 /// per-trial numbers cannot. Indices into [`NOMINAL_CORRECTIONS`]:
 /// `cutting_force_n`, `let_go_shift_m`, `friction_scale`, `stiffness_scale`,
 /// `held_first_dwell`, the withdrawal's stick (`stick_held_n`,
-/// `stick_n_per_m`) and `held_at_band`.
-pub const SPREAD: [usize; 8] = [6, 7, 8, 9, 10, 11, 12, 13];
+/// `stick_n_per_m`), `held_at_band` and `friction_scale_let_go`: the
+/// friction of a withdrawal once the tissue it dragged out has let go,
+/// its own scale: the shaft then slides through tissue that was
+/// stretched and let go, whose friction the insertion need not set.
+pub const SPREAD: [usize; 9] = [6, 7, 8, 9, 10, 11, 12, 13, 14];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
@@ -179,7 +183,21 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
             })
             .collect(),
     );
-    cols.push(p.friction_n.clone());
+    // A withdrawal's sliding after a tent let go; all of the friction
+    // where no tissue was dragged.
+    let after_let_go =
+        |i: usize| !p.stick.is_empty() && i >= p.stick.end && p.phase[i] == WITHDRAWAL;
+    let (before_n, after_n): (Vec<f64>, Vec<f64>) = (0..n)
+        .map(|i| {
+            let f = p.friction_n[i];
+            if after_let_go(i) {
+                (0.0, f)
+            } else {
+                (f, 0.0)
+            }
+        })
+        .unzip();
+    cols.push(before_n);
     cols.push(
         (0..n)
             .map(|i| {
@@ -194,6 +212,7 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
     cols.push(held_in_first_dwell(p));
     cols.extend(dragged_tent(p));
     cols.push(held_at_the_band(p));
+    cols.push(after_n);
     cols.extend(set.iter().flat_map(|(c, g)| (c.columns)(p, *g)));
     cols
 }
