@@ -34,6 +34,15 @@ pub struct Withheld {
     pub label: String,
 }
 
+impl Withheld {
+    /// The measured force `f_n` less the baseline and less the model with
+    /// the effect(s).
+    pub fn residuals(&self, f_n: &[f64]) -> [Vec<f64>; 2] {
+        [&self.baseline_n, &self.augmented_n]
+            .map(|model| f_n.iter().zip(model).map(|(f, m)| f - m).collect())
+    }
+}
+
 /// The legend of [`Withheld::baseline_n`].
 pub const BASELINE_LABEL: &str = "nominal, the trial's own levels";
 
@@ -100,11 +109,8 @@ pub fn draw(path: &Path, p: &Prepared, withheld: &Withheld) -> Result<()> {
         .draw()
         .map_err(err)?;
 
-    let residual_of =
-        |model: &[f64]| -> Vec<f64> { p.trial.f_n.iter().zip(model).map(|(f, m)| f - m).collect() };
-    let nominal_residual = &residual_of(&withheld.baseline_n);
-    let augmented_residual = residual_of(augmented);
-    let y = range(&[nominal_residual, &augmented_residual]);
+    let [nominal_residual, augmented_residual] = &withheld.residuals(&p.trial.f_n);
+    let y = range(&[nominal_residual, augmented_residual]);
     let mut chart = ChartBuilder::on(&bottom)
         .caption(
             "residual (measured − model), phases shaded",
@@ -148,7 +154,7 @@ pub fn draw(path: &Path, p: &Prepared, withheld: &Withheld) -> Result<()> {
         .map_err(err)?;
     chart
         .draw_series(LineSeries::new(
-            line(&augmented_residual),
+            line(augmented_residual),
             RGBColor(20, 110, 200),
         ))
         .map_err(err)?;

@@ -111,10 +111,7 @@ fn withheld_charts(p: &Prepared, withheld: &Withheld) -> [Chart; 2] {
             t.iter().copied().zip(ys.iter().copied()),
         )
     };
-    let residual_of =
-        |model: &[f64]| -> Vec<f64> { p.trial.f_n.iter().zip(model).map(|(f, m)| f - m).collect() };
-    let (baseline_residual, augmented_residual) =
-        (residual_of(&withheld.baseline_n), residual_of(augmented));
+    let [baseline_residual, augmented_residual] = withheld.residuals(&p.trial.f_n);
     let bands = phase_bands(p);
     let force = Chart {
         caption: format!("{} (withheld): measured, {BASELINE_LABEL}, {label}", p.file),
