@@ -54,15 +54,26 @@ fn simulate_with(
 /// insert–dwell–withdraw at 100 Hz with a 12 mN load cell, clock jitter,
 /// each trial's tissue 15 % its own.
 fn simulate_as_rigs_record(dir: &Path, case: (&str, Form, u64)) {
+    simulate_jittered(dir, case, ProtocolKind::InsertDwellWithdraw, (100.0, 0.012));
+}
+
+/// [`simulate_with`] on `protocol` with a load cell of `(rate_hz,
+/// noise_n)`, clock jitter, each trial's tissue 15 % its own.
+fn simulate_jittered(
+    dir: &Path,
+    case: (&str, Form, u64),
+    protocol: ProtocolKind,
+    (rate_hz, noise_n): (f64, f64),
+) {
     let rig = Rig {
-        protocol: ProtocolKind::InsertDwellWithdraw,
+        protocol,
         spread: 0.15,
         jitter: true,
         ..Default::default()
     };
     let sensor = Sensor {
-        rate_hz: 100.0,
-        noise_n: 0.012,
+        rate_hz,
+        noise_n,
         ..SENSOR
     };
     simulate_with(dir, case, rig, sensor);
@@ -392,22 +403,8 @@ fn breathing_that_outruns_the_needle_is_named() {
 #[test]
 fn breathing_whose_period_wanders_is_ranked_with_a_phase_per_window() {
     let dir = tempfile::tempdir().unwrap();
-    let rig = Rig {
-        spread: 0.15,
-        jitter: true,
-        ..Default::default()
-    };
-    let sensor = Sensor {
-        rate_hz: 250.0,
-        noise_n: 0.003,
-        ..SENSOR
-    };
-    simulate_with(
-        dir.path(),
-        ("tissue_motion", Form::Literature, 2),
-        rig,
-        sensor,
-    );
+    let case = ("tissue_motion", Form::Literature, 2);
+    simulate_jittered(dir.path(), case, ProtocolKind::Paper, (250.0, 0.003));
     let out = diagnosis_of(dir.path());
     let v = &out["verdict"];
     assert_eq!(v["effect"], "tissue_motion", "{v}");
