@@ -531,11 +531,17 @@ fn rate_friction(p: &Prepared, q: f64) -> Vec<Vec<f64>> {
 /// exponential approach over x_c) and the elasto-plastic bristle's (a
 /// spring of stiffness F/x_c until it slips: a straight ramp that ends
 /// at the Karnopp value). They differ most where the friction reverses,
-/// which is where presliding shows.
+/// which is where presliding shows. The bristle's F is the friction it
+/// heads to, or where that is small (a viscous friction near a turn) the
+/// trial's typical sliding friction on the side the needle moves to: a
+/// bristle's stiffness belongs to the contact, not to the friction it
+/// leaves (which would load a withdrawal after a fast insertion at the
+/// insertion's stiffness).
 fn friction_lag(p: &Prepared, x_c: f64) -> Vec<Vec<f64>> {
     let n = p.trial.len();
     let (mut dahl, mut bristle) = (vec![0.0; n], vec![0.0; n]);
     let (mut lag_dahl, mut lag_bristle) = (0.0_f64, 0.0_f64);
+    let sliding = (sliding_friction_n(p, 1.0), sliding_friction_n(p, -1.0));
     for i in 0..n {
         let target = p.friction_n[i];
         if p.length_m[i] <= 0.0 {
@@ -548,12 +554,37 @@ fn friction_lag(p: &Prepared, x_c: f64) -> Vec<Vec<f64>> {
             0.0
         };
         lag_dahl += (target - lag_dahl) * (dx / x_c).min(1.0);
-        let most = target.abs().max(lag_bristle.abs()) * dx / x_c;
+        let step = p.trial.x_m[i]
+            - if i > 0 {
+                p.trial.x_m[i - 1]
+            } else {
+                p.trial.x_m[i]
+            };
+        let side_n = if step >= 0.0 { sliding.0 } else { sliding.1 };
+        let most = target.abs().max(side_n) * dx / x_c;
         lag_bristle += (target - lag_bristle).clamp(-most, most);
         dahl[i] = lag_dahl - target;
         bristle[i] = lag_bristle - target;
     }
     vec![dahl, bristle]
+}
+
+/// The friction a trial slides against in the direction `sign`,
+/// typically: the median of its size over the samples where the needle
+/// slides that way in the tissue.
+fn sliding_friction_n(p: &Prepared, sign: f64) -> f64 {
+    let mut sizes: Vec<f64> = (0..p.trial.len())
+        .filter(|&i| {
+            let v = p.velocity.v_mps[i] * sign;
+            p.length_m[i] > 0.0 && v >= p.params.half_band_mps
+        })
+        .map(|i| p.friction_n[i].abs())
+        .collect();
+    if sizes.is_empty() {
+        return 0.0;
+    }
+    let mid = sizes.len() / 2;
+    *sizes.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Walls and membranes where the detector found them, each a local
