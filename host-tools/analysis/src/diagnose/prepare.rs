@@ -107,6 +107,10 @@ pub struct Prepared {
     /// first step out (up to 10 ms before the withdrawal phase) to where
     /// the dragged tissue slipped; empty if it never stuck.
     pub stick: std::ops::Range<usize>,
+    /// The first sample of the needle out of the tissue for good as the
+    /// measured force has it (see `came_free` in this module); the trial's length if it
+    /// does not say.
+    pub came_free: usize,
     pub noise_n: f64,
     /// [`Self::for_search`]'s trial, made on first use: the searches ask
     /// for it once per grid value. Copied with the struct (a backfit's
@@ -186,12 +190,15 @@ impl Prepared {
     }
 
     /// The needle touches tissue at sample `i`: loading, or after the
-    /// puncture with some of its length in the tissue (a withdrawing
-    /// needle the tissue has let go of touches nothing, though the stage
-    /// is still withdrawing).
+    /// puncture with some of its length in the tissue and before the
+    /// measured force says it came free (a withdrawing needle the tissue
+    /// has let go of touches nothing, though the stage is still
+    /// withdrawing).
     pub fn in_tissue(&self, i: usize) -> bool {
         self.phase[i] == LOADING
-            || (!matches!(self.phase[i], APPROACH | AFTER) && self.length_m[i] > 0.0)
+            || (!matches!(self.phase[i], APPROACH | AFTER)
+                && self.length_m[i] > 0.0
+                && i < self.came_free)
     }
 
     /// How likely `jump` shows on the sample before its own, its own, or
@@ -276,10 +283,12 @@ pub fn prepare(
         cutting[i] = 0.0;
     }
     let residual_n: Vec<f64> = (0..n).map(|i| trial.f_n[i] - nominal_n[i]).collect();
+    let came_free = came_free(&trial, &geometry);
     let a_mps2 = acceleration(&trial);
     let structures = structures(&trial, params, &residual_n);
     Prepared {
         stick,
+        came_free,
         fitted_n: nominal_n.clone(),
         file,
         noise_n: geometry.noise_n,
@@ -494,6 +503,36 @@ pub fn stick(
     );
     crate::fit::trial::slipped(&trial.f_n[..end], &trial.x_m, start, geometry.noise_n, deep)
         .map_or(0..0, |s| start..s)
+}
+
+/// Where the measured force says a withdrawing needle came out of the
+/// tissue for good: after the trial's last sample pulling by ten noise sd
+/// or more, the needle moving back, the next five all within three noise
+/// sd of what the load cell reads with the needle free
+/// ([`crate::fit::trial::free_level_n`]). A pull that only friction makes
+/// fades with the length in the tissue and has no such snap; one that a
+/// relaxing branch carries ends where the needle leaves, which need not
+/// be where the nominal's relaxed surface puts it (the paper's protocol
+/// places that surface only by the friction fading to nothing). The
+/// trial's length where there is no snap.
+fn came_free(trial: &Trial, geometry: &TrialFit) -> usize {
+    let n = trial.len();
+    let free_n = crate::fit::trial::free_level_n(trial, geometry.contact_x_m);
+    let noise_n = geometry.noise_n.max(1e-4);
+    let Some(last_pull) = trial.f_n.iter().rposition(|&f| f < free_n - 10.0 * noise_n) else {
+        return n;
+    };
+    let after = last_pull + 1..last_pull + 6;
+    let quiet = after.end <= n
+        && trial.f_n[after.clone()]
+            .iter()
+            .all(|&f| (f - free_n).abs() <= 3.0 * noise_n);
+    let withdrawing = last_pull > 0 && trial.x_m[last_pull] < trial.x_m[last_pull - 1];
+    if quiet && withdrawing {
+        after.start
+    } else {
+        n
+    }
 }
 
 /// Second difference of position, m/s².
