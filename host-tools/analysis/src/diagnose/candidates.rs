@@ -92,12 +92,12 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
     Candidate {
         effect: "rate_dependent_friction",
-        grid_name: "exponent_minus_1",
-        grid: &[-0.75, -0.5, -0.25, 0.5],
-        linear: &["b_extra_ns_per_m2", "b_correction_ns_per_m2"],
+        grid_name: "law",
+        grid: &[-0.75, -0.5, -0.25, 0.5, 1.0, 2.0, 3.0, 4.0],
+        linear: &["rate_gain", "b_correction_ns_per_m2"],
         columns: rate_friction,
         on_grid: None,
-        grid_params: grid_as_named,
+        grid_params: rate_law_params,
         backfit: Backfit::Force,
     },
     Candidate {
@@ -499,24 +499,46 @@ fn maxwell_steps_of(p: &Prepared) -> Vec<Option<(f64, f64)>> {
         .collect()
 }
 
+/// Grid values of [`rate_friction`] from here on are Stribeck's law.
+const STRIBECK_FROM: f64 = 1.0;
+
+/// Stribeck's speed at grid value `g`: 0.25 mm/s doubling with each step;
+/// `None` below [`STRIBECK_FROM`] (a power law's exponent minus 1).
+fn stribeck_speed_mps(g: f64) -> Option<f64> {
+    (g >= STRIBECK_FROM).then(|| 0.00025 * 2f64.powf(g - STRIBECK_FROM))
+}
+
+fn rate_law_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
+    match stribeck_speed_mps(g) {
+        Some(v_s) => vec![("stribeck_speed_mps", v_s)],
+        None => vec![("exponent_minus_1", g)],
+    }
+}
+
 /// Sliding damping l·v·(|v|/v_ref)^q beside l·v itself. At rest the
 /// nominal's Karnopp friction holds the sliding force it had when the
 /// needle stopped, and so do these (a dwell after a fast insertion holds
 /// that speed's damping).
-fn rate_friction(p: &Prepared, q: f64) -> Vec<Vec<f64>> {
+///
+/// Or Stribeck's law (grid values from [`STRIBECK_FROM`] on): friction
+/// per length raised at low speed, l·sgn(v)·e^{−(|v|/v_s)²}, the raise
+/// gone by a few v_s (boundary lubrication giving way to a fluid film;
+/// v_s of 0.25–2 mm/s on the grid), beside l·v.
+fn rate_friction(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let n = p.trial.len();
     let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
     let mut held = (0.0, 0.0);
+    let law = |v: f64| match stribeck_speed_mps(g) {
+        Some(v_s) => v.signum() * (-(v / v_s).powi(2)).exp(),
+        None if v.abs() > 0.0005 => v * (v.abs() / 0.003).powf(g),
+        None => 0.0,
+    };
     for i in 0..n {
         let (v, l) = (p.velocity.v_mps[i], p.length_m[i]);
         if l <= 0.0 {
             held = (0.0, 0.0);
         } else if v.abs() >= p.params.half_band_mps {
-            held = if v.abs() > 0.0005 {
-                (l * v * (v.abs() / 0.003).powf(q), l * v)
-            } else {
-                (0.0, 0.0)
-            };
+            held = (l * law(v), l * v);
             (a[i], b[i]) = held;
         } else if p.friction_basis[i] != [0.0; 4] {
             (a[i], b[i]) = held;
