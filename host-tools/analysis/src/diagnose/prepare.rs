@@ -190,15 +190,18 @@ impl Prepared {
     }
 
     /// The needle touches tissue at sample `i`: loading, or after the
-    /// puncture with some of its length in the tissue and before the
-    /// measured force says it came free (a withdrawing needle the tissue
-    /// has let go of touches nothing, though the stage is still
-    /// withdrawing).
+    /// puncture until the measured force says it came free, or where it
+    /// does not say, with some of its length in the tissue as the nominal
+    /// has it (a withdrawing needle the tissue has let go of touches
+    /// nothing, though the stage is still withdrawing).
     pub fn in_tissue(&self, i: usize) -> bool {
-        self.phase[i] == LOADING
-            || (!matches!(self.phase[i], APPROACH | AFTER)
-                && self.length_m[i] > 0.0
-                && i < self.came_free)
+        let punctured = !matches!(self.phase[i], APPROACH | LOADING);
+        let out = if self.came_free < self.trial.len() {
+            i >= self.came_free
+        } else {
+            self.phase[i] == AFTER || self.length_m[i] <= 0.0
+        };
+        self.phase[i] == LOADING || (punctured && !out)
     }
 
     /// How likely `jump` shows on the sample before its own, its own, or
