@@ -136,12 +136,14 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
     Candidate {
         effect: "holder_inertia",
-        grid_name: "lag_s",
-        grid: &[0.0, 0.003, 0.01, 0.03],
+        grid_name: "mount",
+        grid: &[
+            0.0, 0.003, 0.01, 0.03, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0,
+        ],
         linear: &["mass_kg", "mass_smooth_kg"],
         columns: inertia,
         on_grid: None,
-        grid_params: grid_as_named,
+        grid_params: mount_params,
         backfit: Backfit::Force,
     },
     Candidate {
@@ -734,12 +736,13 @@ const RELOADED_FROM_M: f64 = 0.003;
 const FALL_ADVANCE_M: f64 = 0.000_2;
 
 /// Acceleration two ways, each as the holder feels it through a mount
-/// or drive that spreads it over τ (first-order; τ = 0 is rigid): the
+/// or drive that spreads it over τ (first-order; τ = 0 is rigid) or
+/// rings ([`resonance_at`]): the
 /// jumps of the needle's velocity (a start or stop is an impulse m·Δv,
 /// which a sampled load cell shows on the first sample after it), and the
 /// smooth rest, the second difference of position over ±10 ms with the
 /// jumps' kinks taken out (else every jump is also a 20 ms triangle).
-fn inertia(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
+fn inertia(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let (t, x) = (&p.trial.t_s, &p.trial.x_m);
     let n = x.len();
     let rate = p.trial.rate_hz();
@@ -768,7 +771,47 @@ fn inertia(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
             }
         })
         .collect();
-    vec![lag(step, tau_s, rate), lag(smooth, tau_s, rate)]
+    match resonance_at(g) {
+        Some(mode) => vec![ring(step, mode, rate), ring(smooth, mode, rate)],
+        None => vec![lag(step, g, rate), lag(smooth, g, rate)],
+    }
+}
+
+/// A compliant mount's mode at grid value `g` of [`inertia`] (from 1 on):
+/// 5–40 Hz, a benchtop stage's and holder's first modes, lightly damped
+/// (a bolted joint) or well damped (an elastomer): (Hz, damping ratio).
+/// `None` below 1: `g` is a first-order lag in s.
+fn resonance_at(g: f64) -> Option<(f64, f64)> {
+    const HZ: [f64; 4] = [5.0, 10.0, 20.0, 40.0];
+    const ZETA: [f64; 2] = [0.1, 0.3];
+    let k = (g >= 1.0).then(|| (g as usize - 1).min(HZ.len() * ZETA.len() - 1))?;
+    Some((HZ[k % HZ.len()], ZETA[k / HZ.len()]))
+}
+
+fn mount_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
+    match resonance_at(g) {
+        Some((hz, zeta)) => vec![("mount_hz", hz), ("mount_damping_ratio", zeta)],
+        None => vec![("lag_s", g)],
+    }
+}
+
+/// `signal` (an acceleration) as the load cell feels it through a mount
+/// ringing at `hz` with damping ratio `zeta`: the mount's deflection
+/// y'' + 2ζω·y' + ω²·y = ω²·a, integrated semi-implicitly in sub-steps
+/// of a tenth of a radian (stable at any rate).
+fn ring(mut signal: Vec<f64>, (hz, zeta): (f64, f64), rate_hz: f64) -> Vec<f64> {
+    let w = std::f64::consts::TAU * hz;
+    let steps = ((w / rate_hz / 0.1).ceil() as usize).max(1);
+    let h = 1.0 / (rate_hz * steps as f64);
+    let (mut y, mut dy) = (0.0, 0.0);
+    for s in &mut signal {
+        for _ in 0..steps {
+            dy += (w * w * (*s - y) - 2.0 * zeta * w * dy) * h;
+            y += dy * h;
+        }
+        *s = y;
+    }
+    signal
 }
 
 /// First-order lag of time constant `tau_s` (none at 0).
