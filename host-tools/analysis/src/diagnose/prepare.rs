@@ -286,7 +286,7 @@ pub fn prepare(
         cutting[i] = 0.0;
     }
     let residual_n: Vec<f64> = (0..n).map(|i| trial.f_n[i] - nominal_n[i]).collect();
-    let came_free = came_free(&trial, &geometry);
+    let came_free = came_free(&trial, &geometry, &stick);
     let a_mps2 = acceleration(&trial);
     let structures = structures(&trial, params, &residual_n);
     Prepared {
@@ -510,7 +510,9 @@ pub fn stick(
 
 /// Where the measured force says a withdrawing needle came out of the
 /// tissue for good: after the trial's last sample pulling by ten noise sd
-/// or more, the needle moving back, the next five all within three noise
+/// or more, the needle moving back and not the end of the withdrawal's
+/// stick (a dragged tissue's slip onto a kinetic friction of a noise sd
+/// or two looks the same), the next five all within three noise
 /// sd of what the load cell reads with the needle free
 /// ([`crate::fit::trial::free_level_n`]). A pull that only friction makes
 /// fades with the length in the tissue and has no such snap; one that a
@@ -518,7 +520,7 @@ pub fn stick(
 /// be where the nominal's relaxed surface puts it (the paper's protocol
 /// places that surface only by the friction fading to nothing). The
 /// trial's length where there is no snap.
-fn came_free(trial: &Trial, geometry: &TrialFit) -> usize {
+fn came_free(trial: &Trial, geometry: &TrialFit, stick: &std::ops::Range<usize>) -> usize {
     let n = trial.len();
     let free_n = crate::fit::trial::free_level_n(trial, geometry.contact_x_m);
     let noise_n = geometry.noise_n.max(1e-4);
@@ -531,7 +533,8 @@ fn came_free(trial: &Trial, geometry: &TrialFit) -> usize {
             .iter()
             .all(|&f| (f - free_n).abs() <= 3.0 * noise_n);
     let withdrawing = last_pull > 0 && trial.x_m[last_pull] < trial.x_m[last_pull - 1];
-    if quiet && withdrawing {
+    let slip = !stick.is_empty() && (stick.start..=stick.end).contains(&last_pull);
+    if quiet && withdrawing && !slip {
         after.start
     } else {
         n

@@ -1038,9 +1038,9 @@ impl Beyond {
 /// surface, which lies short of where the capsule gave way (liver's
 /// kinetic friction at 1 mm/s is a noise sd or so, and a slip 20 mm deep
 /// read as a let-go put the tent's pull into the friction line) — if it
-/// is the first snap and lands above `free_n`, what the load cell reads
-/// with the needle free ([`free_level_n`]; a drifting bridge moves it off
-/// zero), by no more than the noise or a fifth of the snap: a
+/// is the first snap and lands no higher above `free_n`, what the load
+/// cell reads with the needle free ([`free_level_n`]; a drifting bridge
+/// moves it off zero), than the noise or a fifth of the snap: a
 /// tissue relaxing slowly still holds some of the insertion's push, but a
 /// landing that pushes harder is a tissue moving out faster than the
 /// needle, flipping the friction's sign. The largest such
@@ -1077,11 +1077,12 @@ pub fn slipped(
         if snap && first_snap.is_none() {
             first_snap = Some(i..i + 3);
         }
-        // Deep in the tissue, the first snap landing within the noise of
-        // the free needle's level is a slip too; one that pushes past it
-        // is no slip at all (the tissue moving out faster than the
-        // needle), nor are later snaps of a friction whose sign a moving
-        // tissue flips.
+        // Deep in the tissue, the first snap landing near the free
+        // needle's level is a slip too (within the noise, or above it by
+        // what a slow relaxation still holds); one that pushes harder is
+        // no slip at all (the tissue moving out faster than the needle),
+        // nor are later snaps of a friction whose sign a moving tissue
+        // flips.
         let first = first_snap.as_ref().is_some_and(|r| r.contains(&i));
         let settled_n = within_n.max(RELAXED_SHARE * rise);
         let deep = first && x[i] > puncture_x_m && after - free_n <= settled_n;
