@@ -99,6 +99,32 @@ fn num(v: &Value) -> f64 {
     v.as_f64().unwrap()
 }
 
+/// [`simulate_jittered`]'s dataset on the paper's protocol with a 3 mN
+/// load cell at 250 Hz, diagnosed.
+fn diagnosis_on_the_papers_rig(case: (&str, Form, u64)) -> Value {
+    let dir = tempfile::tempdir().unwrap();
+    simulate_jittered(dir.path(), case, ProtocolKind::Paper, (250.0, 0.003));
+    diagnosis_of(dir.path())
+}
+
+/// The diagnosis's own scores of `effect`'s candidate.
+fn candidate<'a>(out: &'a Value, effect: &str) -> &'a Value {
+    out["candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["effect"] == effect)
+        .unwrap()
+}
+
+/// Held-out RMS of the baseline and after the verdict's effects, N.
+fn heldout_before_after(out: &Value) -> (f64, f64) {
+    (
+        num(&out["baseline"]["heldout_rms_n"]),
+        num(&out["verdict"]["heldout_rms_after_n"]),
+    )
+}
+
 /// The verdict names `effect` (or `none`) first in its waterfall, and a
 /// named effect's held-out shrink is real: the RMS after it is well below
 /// the RMS before; it is also among the three candidates of most shrink
@@ -419,16 +445,10 @@ fn breathing_that_outruns_the_needle_is_named() {
 /// the wander fitted after it takes most of the gap.
 #[test]
 fn breathing_whose_period_wanders_is_ranked_with_a_phase_per_window() {
-    let dir = tempfile::tempdir().unwrap();
-    let case = ("tissue_motion", Form::Literature, 2);
-    simulate_jittered(dir.path(), case, ProtocolKind::Paper, (250.0, 0.003));
-    let out = diagnosis_of(dir.path());
+    let out = diagnosis_on_the_papers_rig(("tissue_motion", Form::Literature, 2));
     let v = &out["verdict"];
     assert_eq!(v["effect"], "tissue_motion", "{v}");
-    let (before, after) = (
-        num(&out["baseline"]["heldout_rms_n"]),
-        num(&v["heldout_rms_after_n"]),
-    );
+    let (before, after) = heldout_before_after(&out);
     assert!(after <= 0.3 * before, "{before} → {after} N");
 }
 
@@ -442,10 +462,7 @@ fn breathing_whose_period_wanders_is_ranked_with_a_phase_per_window() {
 #[test]
 fn a_relaxing_branch_ends_where_the_needle_came_free() {
     for form in [Form::Standard, Form::Alternate, Form::Literature] {
-        let dir = tempfile::tempdir().unwrap();
-        let case = ("viscoelasticity", form, 2);
-        simulate_jittered(dir.path(), case, ProtocolKind::Paper, (250.0, 0.003));
-        let out = diagnosis_of(dir.path());
+        let out = diagnosis_on_the_papers_rig(("viscoelasticity", form, 2));
         let v = &out["verdict"];
         assert_eq!(v["effect"], "viscoelasticity", "{form:?}: {v}");
         let left = num(&v["heldout_rms_after_n"]);
@@ -460,23 +477,12 @@ fn a_relaxing_branch_ends_where_the_needle_came_free() {
 #[test]
 fn stribecks_raise_at_low_speed_is_taken_by_its_own_law() {
     for seed in [1, 2] {
-        let dir = tempfile::tempdir().unwrap();
-        let case = ("rate_dependent_friction", Form::Literature, seed);
-        simulate_jittered(dir.path(), case, ProtocolKind::Paper, (250.0, 0.003));
-        let out = diagnosis_of(dir.path());
+        let out = diagnosis_on_the_papers_rig(("rate_dependent_friction", Form::Literature, seed));
         let v = &out["verdict"];
         assert_eq!(v["effect"], "rate_dependent_friction", "seed {seed}: {v}");
-        let rate = out["candidates"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|c| c["effect"] == "rate_dependent_friction")
-            .unwrap();
+        let rate = candidate(&out, "rate_dependent_friction");
         assert!(rate["params"]["stribeck_speed_mps"].is_number(), "{rate}");
-        let (before, after) = (
-            num(&out["baseline"]["heldout_rms_n"]),
-            num(&v["heldout_rms_after_n"]),
-        );
+        let (before, after) = heldout_before_after(&out);
         assert!(after <= 0.45 * before, "seed {seed}: {before} → {after} N");
     }
 }
@@ -488,18 +494,10 @@ fn stribecks_raise_at_low_speed_is_taken_by_its_own_law() {
 /// follow. Named, with the mode found near its frequency.
 #[test]
 fn a_holder_on_a_ringing_mount_is_named() {
-    let dir = tempfile::tempdir().unwrap();
-    let case = ("holder_inertia", Form::Literature, 2);
-    simulate_jittered(dir.path(), case, ProtocolKind::Paper, (250.0, 0.003));
-    let out = diagnosis_of(dir.path());
+    let out = diagnosis_on_the_papers_rig(("holder_inertia", Form::Literature, 2));
     let v = &out["verdict"];
     assert_eq!(v["effect"], "holder_inertia", "{v}");
-    let mount = out["candidates"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["effect"] == "holder_inertia")
-        .unwrap();
+    let mount = candidate(&out, "holder_inertia");
     let hz = num(&mount["params"]["mount_hz"]);
     assert!((5.0..=10.0).contains(&hz), "{mount}");
 }
@@ -513,16 +511,10 @@ fn a_holder_on_a_ringing_mount_is_named() {
 #[test]
 fn a_bristles_ramp_is_set_by_the_friction_ahead() {
     for seed in [1, 2] {
-        let dir = tempfile::tempdir().unwrap();
-        let case = ("presliding_hysteresis", Form::Alternate, seed);
-        simulate_jittered(dir.path(), case, ProtocolKind::Paper, (250.0, 0.003));
-        let out = diagnosis_of(dir.path());
+        let out = diagnosis_on_the_papers_rig(("presliding_hysteresis", Form::Alternate, seed));
         let v = &out["verdict"];
         assert_eq!(v["effect"], "presliding_hysteresis", "seed {seed}: {v}");
-        let (before, after) = (
-            num(&out["baseline"]["heldout_rms_n"]),
-            num(&v["heldout_rms_after_n"]),
-        );
+        let (before, after) = heldout_before_after(&out);
         assert!(after <= 0.65 * before, "seed {seed}: {before} → {after} N");
     }
 }
@@ -656,12 +648,7 @@ fn cutting_loaded_again_after_the_puncture_is_named() {
         let v = &out["verdict"];
         assert_eq!(v["effect"], "depth_dependent_cutting", "{v}");
         assert!(num(&v["shrink"]) >= 0.5, "{v}");
-        let chosen = out["candidates"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|c| c["effect"] == "depth_dependent_cutting")
-            .unwrap();
+        let chosen = candidate(&out, "depth_dependent_cutting");
         assert!(num(&chosen["params"]["reload_length_m"]) > 0.0, "{chosen}");
         let gain = num(&chosen["params"]["reload_gain"]);
         assert!((0.5..1.5).contains(&gain), "{chosen}");

@@ -572,18 +572,13 @@ fn friction_lag(p: &Prepared, x_c: f64) -> Vec<Vec<f64>> {
             (lag_dahl, lag_bristle) = (0.0, 0.0);
             continue;
         }
-        let dx = if i > 0 {
-            (p.trial.x_m[i] - p.trial.x_m[i - 1]).abs()
+        let step = if i > 0 {
+            p.trial.x_m[i] - p.trial.x_m[i - 1]
         } else {
             0.0
         };
+        let dx = step.abs();
         lag_dahl += (target - lag_dahl) * (dx / x_c).min(1.0);
-        let step = p.trial.x_m[i]
-            - if i > 0 {
-                p.trial.x_m[i - 1]
-            } else {
-                p.trial.x_m[i]
-            };
         let side_n = if step >= 0.0 { sliding.0 } else { sliding.1 };
         let most = target.abs().max(side_n) * dx / x_c;
         lag_bristle += (target - lag_bristle).clamp(-most, most);
@@ -597,18 +592,15 @@ fn friction_lag(p: &Prepared, x_c: f64) -> Vec<Vec<f64>> {
 /// typically: the median of its size over the samples where the needle
 /// slides that way in the tissue.
 fn sliding_friction_n(p: &Prepared, sign: f64) -> f64 {
-    let mut sizes: Vec<f64> = (0..p.trial.len())
-        .filter(|&i| {
-            let v = p.velocity.v_mps[i] * sign;
-            p.length_m[i] > 0.0 && v >= p.params.half_band_mps
-        })
-        .map(|i| p.friction_n[i].abs())
-        .collect();
-    if sizes.is_empty() {
-        return 0.0;
-    }
-    let mid = sizes.len() / 2;
-    *sizes.select_nth_unstable_by(mid, f64::total_cmp).1
+    crate::fit::trial::median(
+        (0..p.trial.len())
+            .filter(|&i| {
+                let v = p.velocity.v_mps[i] * sign;
+                p.length_m[i] > 0.0 && v >= p.params.half_band_mps
+            })
+            .map(|i| p.friction_n[i].abs())
+            .collect(),
+    )
 }
 
 /// Walls and membranes where the detector found them, each a local

@@ -170,7 +170,7 @@ pub fn velocity_between(trial: &Trial, back_s: f64, ahead_s: f64) -> Vec<f64> {
 }
 
 /// The median of `values` (0 for none), reordering them.
-fn median(mut values: Vec<f64>) -> f64 {
+pub(crate) fn median(mut values: Vec<f64>) -> f64 {
     if values.is_empty() {
         return 0.0;
     }
