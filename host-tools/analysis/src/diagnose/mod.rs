@@ -839,7 +839,7 @@ fn scored_with_backfit<'c>(
     nominal: Nominal,
     rounds: usize,
 ) -> Backfitted<'c> {
-    backfitting(data, set, nominal).more(rounds).state
+    backfitting(data, set, nominal, true).more(rounds).state
 }
 
 /// A backfit under way: what its rounds so far left, and whether more
@@ -926,11 +926,13 @@ impl<'c> Backfitting<'c> {
     }
 }
 
-/// [`scored_with_backfit`] before its rounds.
+/// [`scored_with_backfit`] before its rounds; tissue motion in `set` is
+/// moved into the tissue's frame when `may_move`, else kept as columns.
 fn backfitting<'c>(
     data: &[Prepared],
     set: &[(&'c Candidate, f64)],
     nominal: Nominal,
+    may_move: bool,
 ) -> Backfitting<'c> {
     if nominal == Nominal::Device {
         return Backfitting::settled((score(data, set, None), data.to_vec(), set.to_vec()));
@@ -944,7 +946,7 @@ fn backfitting<'c>(
     // columns: the better of the two on the withheld trials stands, and
     // a moved trial that no longer fits leaves the motion as columns.
     let columns = (score(data, set, None), data.to_vec(), set.to_vec());
-    let frame = (!moving.is_empty()).then(|| InFrame {
+    let frame = (may_move && !moving.is_empty()).then(|| InFrame {
         rounds: KeptRounds::new(),
         columns: columns.clone(),
         forces: forces.into_iter().copied().collect(),
@@ -1235,23 +1237,24 @@ pub fn diagnose_with_progress(
     // Only the significant: a larger shrink that does not hold across the
     // withheld trials (another effect's residual beside it) does not hide
     // a smaller one that does.
-    let contenders: Vec<(usize, f64)> = ranked
+    let contenders: Vec<Contender> = ranked
         .iter()
         .filter(|r| significant(r.2, r.3))
-        .map(|(ci, s, ..)| (*ci, s.grid_value))
+        .map(|(ci, s, ..)| Contender::of(*ci, s))
         .collect();
-    let first = best_backfitted(data, &[], &contenders, nominal, progress).or_else(|| {
-        // Before calling a gap unexplained, the leading candidates get
-        // their backfit: an effect the nominal's fit took up (a drift
-        // along an insertion at constant speed is a friction slope)
-        // shows only once the nominal is found again without it.
-        (baseline.rms() > EXPLAINED_FACTOR * noise)
-            .then(|| {
-                progress("no candidate significant: backfitting the leading ones");
-                backfitted_first(data, &baseline, &ranked, nominal)
-            })
-            .flatten()
-    });
+    let first = best_backfitted(data, (&[], baseline.rms()), &contenders, nominal, progress)
+        .or_else(|| {
+            // Before calling a gap unexplained, the leading candidates get
+            // their backfit: an effect the nominal's fit took up (a drift
+            // along an insertion at constant speed is a friction slope)
+            // shows only once the nominal is found again without it.
+            (baseline.rms() > EXPLAINED_FACTOR * noise)
+                .then(|| {
+                    progress("no candidate significant: backfitting the leading ones");
+                    backfitted_first(data, &baseline, &ranked, nominal)
+                })
+                .flatten()
+        });
     let mut steps = match first {
         Some(first) => waterfall(first, bar, nominal, progress),
         None => Vec::new(),
@@ -1428,12 +1431,12 @@ fn waterfall(
             .filter(|(_, with)| bar.worthy(left.rms(), with.rms(), improvement(left, with).1))
             .collect();
         next.sort_by(|a, b| a.1.rms().total_cmp(&b.1.rms()));
-        let contenders: Vec<(usize, f64)> = next
+        let contenders: Vec<Contender> = next
             .iter()
-            .map(|(cj, with)| (*cj, with.grid_value))
+            .map(|(cj, with)| Contender::of(*cj, with))
             .collect();
         let Some((cj, (scored, cleaned, kept))) =
-            best_backfitted(&cur, &fixed, &contenders, nominal, progress)
+            best_backfitted(&cur, (&fixed, left.rms()), &contenders, nominal, progress)
         else {
             break;
         };
@@ -1447,45 +1450,80 @@ fn waterfall(
     steps
 }
 
-/// Of `contenders` (candidate, grid value; best first), the one that
-/// leaves least beside `fixed` once the nominal is found again under it:
-/// alone, an effect is judged against a nominal that took up part of it,
-/// and a rival can look better beside that nominal than the effect
-/// itself. The [`BACKFIT_TRIED`] leading ones get one round each, the
-/// winner the rest of its backfit from there (the nominal's own rules for
-/// what is backfitted, a device's model never, hold for it as for one).
+/// A candidate significant for a step: which, its grid value, and the
+/// held-out RMS it leaves as columns.
+#[derive(Clone, Copy)]
+struct Contender {
+    ci: usize,
+    grid_value: f64,
+    rms: f64,
+}
+
+impl Contender {
+    fn of(ci: usize, scored: &Scored) -> Self {
+        Self {
+            ci,
+            grid_value: scored.grid_value,
+            rms: scored.rms(),
+        }
+    }
+}
+
+/// Least share of what the leading contender takes as columns (in mean
+/// square) that tissue motion, a contender beside it, must take as
+/// columns to get its round in the tissue's frame; under it, its round
+/// is one as columns. A frame round fits every trial's displacement
+/// (about a second of a 10-trial diagnosis of 15 000 samples a trial,
+/// where a round as columns refits the nominal only); a motion the
+/// columns rank that far behind is the linear part of another effect's
+/// residual, and its frame round, where one was made, left the withheld
+/// trials worse than its columns, which then stood. Alone or leading,
+/// the motion always gets its frame.
+const FRAME_SHARE: f64 = 0.5;
+
+/// Of `contenders` (best first), the one that leaves least beside
+/// `fixed` (which left `before_rms`) once the nominal is found again
+/// under it: alone, an effect is judged against a nominal that took up
+/// part of it, and a rival can look better beside that nominal than the
+/// effect itself. The [`BACKFIT_TRIED`] leading ones get one round each,
+/// the winner the rest of its backfit from there (the nominal's own rules
+/// for what is backfitted, a device's model never, hold for it as for
+/// one).
 fn best_backfitted<'c>(
     data: &[Prepared],
-    fixed: &[(&'c Candidate, f64)],
-    contenders: &[(usize, f64)],
+    (fixed, before_rms): (&[(&'c Candidate, f64)], f64),
+    contenders: &[Contender],
     nominal: Nominal,
     progress: &mut dyn FnMut(&str),
 ) -> Option<(usize, Backfitted<'c>)> {
-    let with = |ci: usize, g: f64| {
+    let with = |c: &Contender| {
         let mut set = fixed.to_vec();
-        set.push((&CANDIDATES[ci], g));
+        set.push((&CANDIDATES[c.ci], c.grid_value));
         set
     };
-    if let [(ci, g)] = contenders {
+    if let [c] = contenders {
         return Some((
-            *ci,
-            scored_with_backfit(data, &with(*ci, *g), nominal, BACKFIT_ROUNDS),
+            c.ci,
+            scored_with_backfit(data, &with(c), nominal, BACKFIT_ROUNDS),
         ));
     }
+    let taken = |c: &Contender| before_rms.powi(2) - c.rms.powi(2);
+    let lead_taken = contenders.first().map_or(0.0, taken);
     // Only the best so far is kept: each holds a copy of the data.
     let mut best: Option<(usize, Backfitting)> = None;
-    for &(ci, g) in contenders.iter().take(BACKFIT_TRIED) {
+    for c in contenders.iter().take(BACKFIT_TRIED) {
         progress(&format!(
             "backfitting the nominal under {}",
-            CANDIDATES[ci].effect
+            CANDIDATES[c.ci].effect
         ));
-        let tried = backfitting(data, &with(ci, g), nominal).more(1);
+        let may_move = taken(c) >= FRAME_SHARE * lead_taken;
+        let tried = backfitting(data, &with(c), nominal, may_move).more(1);
         let rms = |b: &Backfitting| b.state.0.rms();
         if best
             .as_ref()
             .is_none_or(|(_, b)| rms(&tried).total_cmp(&rms(b)).is_lt())
         {
-            best = Some((ci, tried));
+            best = Some((c.ci, tried));
         }
     }
     let (ci, winner) = best?;
