@@ -15,7 +15,9 @@ cd "$(dirname "$0")/.."
 cargo build --release -q -p host-tools
 needle=${CARGO_TARGET_DIR:-target}/release/needle
 pin=()
-command -v taskset > /dev/null && pin=(taskset -c 0)
+if command -v taskset > /dev/null; then pin=(taskset -c 0); fi
+# `time` prints seconds with a point for awk to read.
+export LC_ALL=C
 TIMEFORMAT='%U %S'
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
@@ -28,7 +30,8 @@ for effect in none presliding_hysteresis viscoelasticity tissue_motion; do
   best=""
   for _ in $(seq "$runs"); do
     # Bash's own `time`: user and system seconds of the run.
-    { time "${pin[@]}" "$needle" diagnose "$d" > "$work/json" 2> /dev/null; } 2> "$work/time"
+    { time ${pin[@]+"${pin[@]}"} "$needle" diagnose "$d" > "$work/json" 2> "$work/err"; } 2> "$work/time" ||
+      { cat "$work/err" >&2; exit 1; }
     t=$(awk '{ print $1 + $2 }' "$work/time")
     if [ -z "$best" ] || awk -v a="$t" -v b="$best" 'BEGIN { exit !(a < b) }'; then
       best=$t

@@ -1496,13 +1496,13 @@ impl Contender {
 /// Least share of what the leading contender takes as columns (in mean
 /// square) that tissue motion, a contender beside it, must take as
 /// columns to get its round in the tissue's frame; under it, its round
-/// is one as columns. A frame round fits every trial's displacement
-/// (about a second of a 10-trial diagnosis of 15 000 samples a trial,
-/// where a round as columns refits the nominal only); a motion the
-/// columns rank that far behind is the linear part of another effect's
-/// residual, and its frame round, where one was made, left the withheld
-/// trials worse than its columns, which then stood. Alone or leading,
-/// the motion always gets its frame.
+/// is one as columns, and only if it wins that way is it fitted in its
+/// frame. A frame round fits every trial's displacement (about a second
+/// of a 10-trial diagnosis of 15 000 samples a trial, where a round as
+/// columns refits the nominal only), and columns that take so much less
+/// than the leader's are the linear part of another effect's residual
+/// more than a motion of the tissue. Alone or leading, the motion always
+/// gets its frame.
 const FRAME_SHARE: f64 = 0.5;
 
 /// Of `contenders` (best first), the one that leaves least beside
@@ -1533,25 +1533,33 @@ fn best_backfitted<'c>(
     }
     let taken = |c: &Contender| before_rms.powi(2) - c.rms.powi(2);
     let lead_taken = contenders.first().map_or(0.0, taken);
+    let may_move = |c: &Contender| {
+        CANDIDATES[c.ci].backfit != Backfit::TissueFrame || taken(c) >= FRAME_SHARE * lead_taken
+    };
     // Only the best so far is kept: each holds a copy of the data.
-    let mut best: Option<(usize, Backfitting)> = None;
+    let mut best: Option<(&Contender, Backfitting)> = None;
     for c in contenders.iter().take(BACKFIT_TRIED) {
         progress(&format!(
             "backfitting the nominal under {}",
             CANDIDATES[c.ci].effect
         ));
-        let may_move = taken(c) >= FRAME_SHARE * lead_taken;
-        let tried = backfitting(data, &with(c), nominal, may_move).more(1);
+        let tried = backfitting(data, &with(c), nominal, may_move(c)).more(1);
         let rms = |b: &Backfitting| b.state.0.rms();
         if best
             .as_ref()
             .is_none_or(|(_, b)| rms(&tried).total_cmp(&rms(b)).is_lt())
         {
-            best = Some((c.ci, tried));
+            best = Some((c, tried));
         }
     }
-    let (ci, winner) = best?;
-    Some((ci, winner.more(BACKFIT_ROUNDS).state))
+    let (c, winner) = best?;
+    // A motion that won as columns is fitted in its frame after all.
+    let state = if may_move(c) {
+        winner.more(BACKFIT_ROUNDS).state
+    } else {
+        scored_with_backfit(data, &with(c), nominal, BACKFIT_ROUNDS)
+    };
+    Some((c.ci, state))
 }
 
 /// Most effects the waterfall names.
