@@ -555,6 +555,23 @@ fn a_drift_that_accelerates_is_named() {
     assert!(left <= 1.2 * num(&out["noise_floor_n"]), "{v}");
 }
 
+/// A bridge settling after power-up (the alternate form: 3 mN/s at
+/// first, settling over 30 s) on insert–dwell–withdraw: the trial's
+/// force was tared on the first half of its approach, where the drift
+/// had already begun, so the drift the trial shows is the drift since
+/// then, and the candidate's column is tared the same way. Counted from
+/// the first sample instead, the column missed each trial by a constant,
+/// and the drift, under half a noise floor in RMS over the trial, was
+/// taken as `none`.
+#[test]
+fn a_drift_is_tared_where_the_trial_was() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate_as_rigs_record(dir.path(), ("sensor_drift", Form::Alternate, 1));
+    let out = diagnosis_of(dir.path());
+    let v = &out["verdict"];
+    assert_eq!(v["effect"], "sensor_drift", "{v}");
+}
+
 /// Insert–dwell–withdraw into liver whose every trial is 20 % its own
 /// (stiffness, cutting, friction): the sample on which the stage stops
 /// lies on either side of the stop to the encoder, and the force settles

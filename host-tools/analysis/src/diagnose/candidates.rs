@@ -10,7 +10,7 @@
 use std::f64::consts::TAU;
 
 use super::motion::{harmonics_along, moved_model, PhaseWander, TissueShift};
-use super::prepare::{Prepared, LOADING};
+use super::prepare::{Prepared, APPROACH, LOADING};
 use crate::fit::lsq::Lsq;
 
 /// A candidate's columns for one trial, one vector per linear parameter.
@@ -830,11 +830,14 @@ fn lag(mut signal: Vec<f64>, tau_s: f64, rate_hz: f64) -> Vec<f64> {
 /// or, `tau_s` < 0, lagging a steady warming by |τ|, t − |τ|·(1 −
 /// e^{−t/|τ|}): the gauge warms through the body it is bonded to, so its
 /// drift starts flat and accelerates (as t²/2|τ| at first) towards the
-/// rate, the coefficient.
+/// rate, the coefficient. Each is taken less its value where the trial
+/// was tared (`fit::trial::tare`: the median of the first half of the
+/// approach, which for a drift moving one way is its value halfway
+/// through that half): the force holds the drift since then.
 fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let t0 = p.trial.t_s.first().copied().unwrap_or(0.0);
     let lag_s = -tau_s;
-    vec![p
+    let mut column: Vec<f64> = p
         .trial
         .t_s
         .iter()
@@ -848,7 +851,11 @@ fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
                 t
             }
         })
-        .collect()]
+        .collect();
+    let approach = p.phase.iter().take_while(|&&k| k == APPROACH).count();
+    let zero = column.get(approach / 4).copied().unwrap_or(0.0);
+    column.iter_mut().for_each(|c| *c -= zero);
+    vec![column]
 }
 
 /// Tissue motion grid: frequency (breathing, 0.15–0.4 Hz) × amplitude.
