@@ -559,10 +559,9 @@ fn a_drift_that_accelerates_is_named() {
 /// first, settling over 30 s) on insert–dwell–withdraw: the trial's
 /// force was tared on the first half of its approach, where the drift
 /// had already begun, so the drift the trial shows is the drift since
-/// then, and the candidate's column is tared the same way. Counted from
-/// the first sample instead, the column missed each trial by a constant,
-/// and the drift, under half a noise floor in RMS over the trial, was
-/// taken as `none`.
+/// then, and the candidate's column is tared the same way: a column zero
+/// at the first sample misses each trial by a constant no correction
+/// takes, and this drift is under half a noise floor over the trial.
 #[test]
 fn a_drift_is_tared_where_the_trial_was() {
     let dir = tempfile::tempdir().unwrap();

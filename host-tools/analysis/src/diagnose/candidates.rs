@@ -832,8 +832,9 @@ fn lag(mut signal: Vec<f64>, tau_s: f64, rate_hz: f64) -> Vec<f64> {
 /// drift starts flat and accelerates (as t²/2|τ| at first) towards the
 /// rate, the coefficient. Each is taken less its value where the trial
 /// was tared (`fit::trial::tare`: the median of the first half of the
-/// approach, which for a drift moving one way is its value halfway
-/// through that half): the force holds the drift since then.
+/// samples before the loading rise, which the approach nearly spans; for
+/// a drift moving one way, its value halfway through that half): the
+/// force holds the drift since then.
 fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let t0 = p.trial.t_s.first().copied().unwrap_or(0.0);
     let lag_s = -tau_s;

@@ -1553,13 +1553,21 @@ fn best_backfitted<'c>(
         }
     }
     let (c, winner) = best?;
-    // A motion that won as columns is fitted in its frame after all.
-    let state = if may_move(c) {
-        winner.more(BACKFIT_ROUNDS).state
-    } else {
-        scored_with_backfit(data, &with(c), nominal, BACKFIT_ROUNDS)
-    };
-    Some((c.ci, state))
+    let state = winner.more(BACKFIT_ROUNDS).state;
+    if may_move(c) {
+        return Some((c.ci, state));
+    }
+    // A motion that won as columns is fitted in its frame after all, and
+    // stands where that leaves the withheld trials no worse.
+    let framed = scored_with_backfit(data, &with(c), nominal, BACKFIT_ROUNDS);
+    Some((
+        c.ci,
+        if worse(framed.0.rms(), state.0.rms()) {
+            state
+        } else {
+            framed
+        },
+    ))
 }
 
 /// Most effects the waterfall names.
