@@ -57,6 +57,13 @@ fn simulate_as_rigs_record(dir: &Path, case: (&str, Form, u64)) {
     simulate_jittered(dir, case, ProtocolKind::InsertDwellWithdraw, (100.0, 0.012));
 }
 
+/// [`simulate_as_rigs_record`]'s dataset, diagnosed.
+fn diagnosis_as_rigs_record(case: (&str, Form, u64)) -> Value {
+    let dir = tempfile::tempdir().unwrap();
+    simulate_as_rigs_record(dir.path(), case);
+    diagnosis_of(dir.path())
+}
+
 /// [`simulate_with`] on `protocol` with a load cell of `(rate_hz,
 /// noise_n)`, clock jitter, each trial's tissue 15 % its own.
 fn simulate_jittered(
@@ -391,9 +398,7 @@ fn a_snap_deep_in_the_tissue_is_a_slip_not_a_let_go() {
 /// and hides the relaxation.
 #[test]
 fn a_slip_onto_a_slow_relaxations_hold_is_a_slip() {
-    let dir = tempfile::tempdir().unwrap();
-    simulate_as_rigs_record(dir.path(), ("viscoelasticity", Form::Literature, 1));
-    let out = diagnosis_of(dir.path());
+    let out = diagnosis_as_rigs_record(("viscoelasticity", Form::Literature, 1));
     let v = &out["verdict"];
     assert_eq!(v["effect"], "viscoelasticity", "{v}");
     let left = num(&v["heldout_rms_after_n"]);
@@ -419,9 +424,7 @@ fn breathing_that_outruns_the_needle_is_named() {
         (Form::Alternate, 2.0),
         (Form::Literature, 4.0),
     ] {
-        let dir = tempfile::tempdir().unwrap();
-        simulate_as_rigs_record(dir.path(), ("tissue_motion", form, 1));
-        let out = diagnosis_of(dir.path());
+        let out = diagnosis_as_rigs_record(("tissue_motion", form, 1));
         let v = &out["verdict"];
         assert_eq!(v["effect"], "tissue_motion", "{form:?}: {v}");
         let (left, floor) = (
@@ -546,9 +549,7 @@ fn the_misfit_of_the_first_effects_form_is_not_a_second_effect() {
 /// warming takes it all.
 #[test]
 fn a_drift_that_accelerates_is_named() {
-    let dir = tempfile::tempdir().unwrap();
-    simulate_as_rigs_record(dir.path(), ("sensor_drift", Form::Literature, 1));
-    let out = diagnosis_of(dir.path());
+    let out = diagnosis_as_rigs_record(("sensor_drift", Form::Literature, 1));
     let v = &out["verdict"];
     assert_eq!(v["effect"], "sensor_drift", "{v}");
     let left = num(&v["heldout_rms_after_n"]);
@@ -564,9 +565,7 @@ fn a_drift_that_accelerates_is_named() {
 /// takes, and this drift is under half a noise floor over the trial.
 #[test]
 fn a_drift_is_tared_where_the_trial_was() {
-    let dir = tempfile::tempdir().unwrap();
-    simulate_as_rigs_record(dir.path(), ("sensor_drift", Form::Alternate, 1));
-    let out = diagnosis_of(dir.path());
+    let out = diagnosis_as_rigs_record(("sensor_drift", Form::Alternate, 1));
     let v = &out["verdict"];
     assert_eq!(v["effect"], "sensor_drift", "{v}");
 }

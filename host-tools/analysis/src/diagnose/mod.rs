@@ -1294,14 +1294,12 @@ pub fn diagnose_with_progress(
         Some((cj, _)) if credible => CANDIDATES[*cj].effect,
         _ => "none",
     };
-    // Each step's share of the gap, in mean squares above the noise.
-    let gap_ms = (baseline.rms().powi(2) - noise * noise).max(1e-24);
     let mut before_rms = baseline.rms();
     let waterfall: Vec<Step> = steps
         .iter()
         .filter(|_| credible)
         .map(|(ci, s)| {
-            let share = (before_rms.powi(2) - s.rms().powi(2)) / gap_ms;
+            let share = bar.share_of_gap(before_rms, s.rms());
             before_rms = s.rms();
             Step {
                 effect: CANDIDATES[*ci].effect,
@@ -1408,11 +1406,16 @@ impl Bar {
         shrink >= MIN_SHRINK && t >= MIN_T && taken >= MIN_EFFECT_FLOORS * self.noise_n
     }
 
-    /// Whether a step of the waterfall from `before` to `after` (held-out
-    /// RMS) takes [`MIN_STEP_SHARE`] of the gap.
+    /// The share of the gap (the baseline's mean square above the noise)
+    /// a step from `before` to `after` (held-out RMS) takes.
+    fn share_of_gap(self, before: f64, after: f64) -> f64 {
+        let gap_ms = (self.baseline_n.powi(2) - self.noise_n.powi(2)).max(1e-24);
+        (before.powi(2) - after.powi(2)) / gap_ms
+    }
+
+    /// Whether a step of the waterfall takes [`MIN_STEP_SHARE`] of the gap.
     fn a_cause(self, before: f64, after: f64) -> bool {
-        let gap_ms = self.baseline_n.powi(2) - self.noise_n.powi(2);
-        before.powi(2) - after.powi(2) >= MIN_STEP_SHARE * gap_ms
+        self.share_of_gap(before, after) >= MIN_STEP_SHARE
     }
 }
 
