@@ -11,11 +11,14 @@
 
 /// Velocity differences over `k` samples either side of the gap between
 /// samples i − 1 and i: ahead from x[i], back up to x[i − 1], each over
-/// its own time span (a rig's clock jitters, and loses samples).
-fn contrast(t: &[f64], x: &[f64], i: usize, k: usize) -> f64 {
+/// its own time span (a rig's clock jitters, and loses samples); with the
+/// time between the two windows' middles, over which a smooth
+/// acceleration builds the difference.
+fn contrast(t: &[f64], x: &[f64], i: usize, k: usize) -> (f64, f64) {
     let ahead = (x[i + k] - x[i]) / (t[i + k] - t[i]).max(1e-12);
     let back = (x[i - 1] - x[i - 1 - k]) / (t[i - 1] - t[i - 1 - k]).max(1e-12);
-    ahead - back
+    let apart_s = 0.5 * (t[i + k] + t[i]) - 0.5 * (t[i - 1] + t[i - 1 - k]);
+    (ahead - back, apart_s)
 }
 
 /// Least-squares line through samples `from..to` (exclusive): (slope,
@@ -80,11 +83,15 @@ pub(crate) fn normal_cdf(z: f64) -> f64 {
 /// The velocity jumps of the trace, over windows of `k` samples, of at
 /// least `least_mps`, read by an encoder of resolution `step_m`.
 ///
-/// A smooth acceleration a gives contrasts a·(k + 1)·dt over k and
-/// a·(2k + 1)·dt over 2k, a jump Δv gives Δv over both; so
-/// ((2k + 1)·c_k − (k + 1)·c_2k)/k is the jump alone. A jump between
-/// samples i − 1 and i lands on i (the first sample after it), found where
-/// the lines fitted to the motion either side cross.
+/// A smooth acceleration a gives contrasts a·d_k over k and a·d_2k over
+/// 2k, d the time between the windows' middles ((k + 1)·dt and
+/// (2k + 1)·dt on a steady clock), a jump Δv gives Δv over both; so
+/// (d_2k·c_k − d_k·c_2k)/(d_2k − d_k) is the jump alone, on the clock's
+/// own times: read with a steady clock's weights, samples lost as the
+/// needle speeds up are a jump of the acceleration times the gap. A jump
+/// between samples i − 1 and i lands on i (the first sample after it),
+/// found where the lines fitted to the motion either side cross
+/// (`crossing`), which must see the same jump.
 pub fn velocity_steps(t: &[f64], x: &[f64], k: usize, least_mps: f64, step_m: f64) -> Vec<Jump> {
     let n = x.len();
     let mut steps = Vec::new();
@@ -95,58 +102,97 @@ pub fn velocity_steps(t: &[f64], x: &[f64], k: usize, least_mps: f64, step_m: f6
     // the short one does not, which the combination turns into a phantom
     // jump the other way; the short window's own contrast rules it out.
     let jump = |i: usize| {
-        let (ck, c2k) = (contrast(t, x, i, k), contrast(t, x, i, 2 * k));
-        let j = ((2 * k + 1) as f64 * ck - (k + 1) as f64 * c2k) / k as f64;
+        let ((ck, dk), (c2k, d2k)) = (contrast(t, x, i, k), contrast(t, x, i, 2 * k));
+        let j = (d2k * ck - dk * c2k) / (d2k - dk).max(1e-12);
         if ck.abs() >= least_mps && j * ck > 0.0 {
-            j.abs()
+            j
         } else {
             0.0
         }
     };
     let mut i = 2 * k + 1;
     while i + 2 * k < n {
-        if jump(i) < least_mps {
+        if jump(i).abs() < least_mps {
             i += 1;
             continue;
         }
         // The strongest sample of this run of large jumps.
         let mut best = i;
         let mut j = i;
-        while j + 2 * k < n && jump(j) >= least_mps {
-            if jump(j) > jump(best) {
+        while j + 2 * k < n && jump(j).abs() >= least_mps {
+            if jump(j).abs() > jump(best).abs() {
                 best = j;
             }
             j += 1;
         }
-        steps.extend(crossing(t, x, best, k, step_m));
+        steps.extend(crossing(t, x, best, k, jump(best), (least_mps, step_m)));
         i = j.max(best + k);
     }
     steps
 }
 
+/// How far the lines' jump may stray from the combination's, as a share
+/// of it (beyond the jump the windows can read at all). The lines'
+/// slopes differ by the acceleration over the time between them as well
+/// as by the jump; the combination has no part of a constant
+/// acceleration. Where the two part by more, the lines see the motion
+/// bend, not a jump: a stroke of the paper's oscillation read at 100 Hz
+/// (its jerk leaves 0.2–0.3 mm/s of the combination, above five encoder
+/// steps a window, while the lines part by 5–10 mm/s of its
+/// acceleration), a start eased in, or, at 50 Hz, the far side of a
+/// stop the long window reaches (half of it apart). A stroke set off or
+/// stopped at speed, bent as it is, parts them by an eighth at 50 Hz.
+const LINES_AGREE: f64 = 0.25;
+
 /// Where the straight motions before and after sample `i` meet (the
-/// sample that time falls on or before) and the jump of their slopes. The
-/// samples next to the gap are left out of both lines: one of them mixes
-/// both motions.
-fn crossing(t: &[f64], x: &[f64], i: usize, k: usize, step_m: f64) -> Option<Jump> {
-    let (v_back, x0_back) = line(t, x, i - 1 - k, i - 1);
-    let (v_ahead, x0_ahead) = line(t, x, i + 1, i + 1 + k);
+/// sample that time falls on or before) and the jump of their slopes, if
+/// that is the jump `j_mps` the windows' combination reads there (to
+/// [`LINES_AGREE`] of it and `least_mps`). The samples next to the gap
+/// are left out of both lines: one of them mixes both motions.
+fn crossing(
+    t: &[f64],
+    x: &[f64],
+    i: usize,
+    k: usize,
+    j_mps: f64,
+    (least_mps, step_m): (f64, f64),
+) -> Option<Jump> {
+    let (t_jump, dv) = meet(t, x, i, k)?;
+    if dv * j_mps <= 0.0 || (dv - j_mps).abs() > LINES_AGREE * j_mps.abs() + least_mps {
+        return None;
+    }
+    let dt = t[i] - t[i - 1];
+    // First sample at or after the jump, within a sample of i.
+    let index = (i - 1..=i + 1).find(|&j| t[j] >= t_jump - 1e-9 * dt)?;
+    // Straight motions meet to within about an encoder step of position:
+    // a jump of Δv is placed to within step/Δv of time. A curved one (a
+    // stroke of an oscillation setting off at speed) bends away from its
+    // line, and the lines through twice the samples meet elsewhere by
+    // about what the bend moves them: as much again of uncertainty, for
+    // the force to settle.
+    let wide = (i > 2 * k && i + 1 + 2 * k <= t.len())
+        .then(|| meet(t, x, i, 2 * k))
+        .flatten();
+    let bend_s = wide.map_or(0.0, |(t_wide, _)| (t_wide - t_jump).abs());
+    Some(Jump {
+        t_s: t_jump,
+        sd_s: (step_m / dv.abs()).max(bend_s),
+        index,
+        dv_mps: dv,
+    })
+}
+
+/// When the lines through `span` samples before and after sample `i`
+/// (the samples next to the gap left out) meet, and the jump of their
+/// slopes; `span` samples must lie either side.
+fn meet(t: &[f64], x: &[f64], i: usize, span: usize) -> Option<(f64, f64)> {
+    let (v_back, x0_back) = line(t, x, i - 1 - span, i - 1);
+    let (v_ahead, x0_ahead) = line(t, x, i + 1, i + 1 + span);
     let dv = v_ahead - v_back;
     if dv.abs() < 1e-9 {
         return None;
     }
-    let t_jump = (x0_back - x0_ahead) / dv;
-    let dt = t[i] - t[i - 1];
-    // First sample at or after the jump, within a sample of i.
-    let index = (i - 1..=i + 1).find(|&j| t[j] >= t_jump - 1e-9 * dt)?;
-    // The lines meet to within about an encoder step of position: a jump
-    // of Δv is placed to within step/Δv of time.
-    Some(Jump {
-        t_s: t_jump,
-        sd_s: step_m / dv.abs(),
-        index,
-        dv_mps: dv,
-    })
+    Some(((x0_back - x0_ahead) / dv, dv))
 }
 
 #[cfg(test)]
@@ -156,18 +202,43 @@ mod tests {
     /// Positions of a motion with velocity `v(t)`, sampled at 500 Hz and
     /// quantised to 1 µm.
     fn sampled(n: usize, v: impl Fn(f64) -> f64) -> (Vec<f64>, Vec<f64>) {
-        let dt = 0.002;
-        let (mut t, mut x, mut pos) = (Vec::new(), Vec::new(), 0.0);
-        for i in 0..n {
-            let ti = i as f64 * dt;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.002).collect();
+        let x = read_at(&t, v);
+        (t, x)
+    }
+
+    /// Positions of a motion with velocity `v(t)` read at times `t` to
+    /// 1 µm, from 0 at t = 0.
+    fn read_at(t: &[f64], v: impl Fn(f64) -> f64) -> Vec<f64> {
+        let (mut x, mut pos, mut from) = (Vec::new(), 0.0, 0.0);
+        for &ti in t {
             // Integrate finely so a jump between samples is exact.
+            let h = (ti - from) / 100.0;
             for s in 0..100 {
-                pos += v(ti - dt + (s as f64 + 0.5) * dt / 100.0) * dt / 100.0;
+                pos += v(from + (s as f64 + 0.5) * h) * h;
             }
-            t.push(ti);
+            from = ti;
             x.push((pos / 1e-6).round() * 1e-6);
         }
-        (t, x)
+        x
+    }
+
+    /// A clock at 100 Hz, each period off by up to a tenth.
+    fn jittered_100_hz(n: usize) -> Vec<f64> {
+        let mut t = vec![0.0];
+        for i in 1..n {
+            // A fixed sequence, spread over ±10 %.
+            let off = ((i * 7919) % 201) as f64 / 1000.0 - 0.1;
+            t.push(t[i - 1] + 0.01 * (1.0 + off));
+        }
+        t
+    }
+
+    /// The paper's oscillation as this project's simulator makes it
+    /// (±4 mm at 1.1 Hz): velocity at `t`.
+    fn stroke_mps(t: f64) -> f64 {
+        let w = std::f64::consts::TAU * 1.1;
+        0.004 * w * (w * t).cos()
     }
 
     #[test]
@@ -196,5 +267,53 @@ mod tests {
         assert_eq!(s.len(), 1);
         assert_eq!(s[0].index, 151);
         assert!((s[0].dv_mps + 0.0188).abs() < 5e-4, "{:?}", s[0]);
+    }
+
+    /// Read at 100 Hz (windows of 3 samples, five encoder steps a window
+    /// 0.17 mm/s), a 1.1 Hz stroke's jerk leaves 0.2–0.3 mm/s of the
+    /// combination all along it: no jump for all that.
+    #[test]
+    fn a_fast_stroke_read_at_100_hz_is_no_jump() {
+        let t: Vec<f64> = (0..400).map(|i| i as f64 * 0.01).collect();
+        let x = read_at(&t, stroke_mps);
+        assert_eq!(velocity_steps(&t, &x, 3, 5e-6 / 0.03, 1e-6), vec![]);
+    }
+
+    /// The same stroke on a clock jittered by a tenth of its period.
+    #[test]
+    fn a_jittered_clock_makes_no_jump_of_a_stroke() {
+        let t = jittered_100_hz(400);
+        let x = read_at(&t, stroke_mps);
+        assert_eq!(velocity_steps(&t, &x, 3, 5e-6 / 0.03, 1e-6), vec![]);
+    }
+
+    /// A needle creeping back at 2.8 mm/s sets off on a stroke at speed
+    /// a tenth of a sample after one: the stroke bends away from the line
+    /// through the samples after it, which meets the creep's line about
+    /// a third of a millisecond early, ten times what an encoder step
+    /// over the jump says. The jump's uncertainty covers that.
+    #[test]
+    fn a_stroke_set_off_at_speed_is_placed_within_its_uncertainty() {
+        let t0 = 1.001;
+        let t: Vec<f64> = (0..300).map(|i| i as f64 * 0.01).collect();
+        let x = read_at(&t, |t| if t < t0 { -0.0028 } else { stroke_mps(t - t0) });
+        let s = velocity_steps(&t, &x, 3, 5e-6 / 0.03, 1e-6);
+        let jump = s
+            .iter()
+            .find(|j| (j.t_s - t0).abs() < 0.01)
+            .expect("the set-off");
+        assert!((jump.t_s - t0).abs() <= 2.0 * jump.sd_s, "{jump:?}");
+    }
+
+    /// Samples lost for 68 ms (a rig's clock drops up to 70 ms) while the
+    /// needle speeds up at 0.2 m/s² (a stroke of the paper's oscillation
+    /// near its turn): the windows either side of the gap part by the
+    /// acceleration over the gap, which is no jump.
+    #[test]
+    fn samples_lost_while_speeding_up_are_no_jump() {
+        let mut t: Vec<f64> = (0..100).map(|i| i as f64 * 0.002).collect();
+        t.extend((100..200).map(|i| i as f64 * 0.002 + 0.066));
+        let x = read_at(&t, |t| 0.2 * t);
+        assert_eq!(velocity_steps(&t, &x, 5, 5e-6 / 0.01, 1e-6), vec![]);
     }
 }
