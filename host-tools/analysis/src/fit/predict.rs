@@ -688,7 +688,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     }
 }
 
-/// The velocity at sample `i` from samples `a` before it and `b` after:
+/// The velocity at sample `i` from samples `a..=b` about it (indices):
 /// the central difference, the velocity of the middle of `a..b`. Where
 /// samples were lost beside `i` (one side's span longer than the other's
 /// by more than a sample's period), that middle is tens of ms off `i`,
@@ -696,9 +696,9 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
 /// m/s² over 15 ms, a force-law step of 70 mN): each side's mean
 /// velocity, at the middle of its span, is interpolated to `t[i]`
 /// instead, exact for a constant acceleration. A window lopsided by less
-/// (a clock that only jitters) keeps the central difference, whose exact
-/// zero where the encoder reads the same position either side marks a
-/// turn that reads still.
+/// (a clock that jitters, nearly always) keeps the central difference,
+/// whose exact zero where the encoder reads the same position either
+/// side marks a turn that reads still.
 fn centred_mps(t: &[f64], x: &[f64], (a, i, b): (usize, usize, usize)) -> f64 {
     let (back_s, ahead_s) = (t[i] - t[a], t[b] - t[i]);
     let period_s = (back_s + ahead_s) / (b - a) as f64;
