@@ -345,6 +345,27 @@ fn spread_alone_read_at_100_hz_on_a_jittered_clock_is_none_too() {
     }
 }
 
+/// With the journal's friction on insert–dwell–withdraw at a real rig's
+/// 100 Hz and 12 mN, the tissue dragged out lets go onto a kinetic
+/// friction nearly as deep as its pull (0.3 N): a snap of 8–9 noise sd
+/// on single samples, which the withdrawal's stick must still find, or
+/// the tent's ramp is left to the friction line.
+#[test]
+fn spread_alone_with_friction_at_rest_withdrawn_at_a_rigs_rate_is_none() {
+    let sensor = Sensor {
+        rate_hz: 100.0,
+        noise_n: 0.012,
+        encoder_m: 1e-6,
+    };
+    let rig = Rig {
+        protocol: ProtocolKind::InsertDwellWithdraw,
+        spread: 0.2,
+        jitter: true,
+        ..Default::default()
+    };
+    spread_alone_is_none_on("liver1_journal", 1, sensor, rig);
+}
+
 /// Each trial's load cell zeroed mN off (10 mN sd on 5 mN of
 /// noise), as real rigs leave it: an offset through the whole trial is
 /// the trial's own, like its tissue, not an effect; each trial is tared
