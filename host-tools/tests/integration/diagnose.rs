@@ -366,6 +366,48 @@ fn spread_alone_with_friction_at_rest_withdrawn_at_a_rigs_rate_is_none() {
     spread_alone_is_none_on("liver1_journal", 1, sensor, rig);
 }
 
+/// Liver 2 on insert–dwell–withdraw (cutting nearly as hard as its
+/// capsule, so one trial in ten reads a puncture and the rest do not):
+/// a fold without that trial has no cutting and no friction ahead to fit,
+/// and the held-out figures must still be the force's, not a rounding
+/// error's (1.3e15 N were reported).
+#[test]
+fn a_correction_only_one_trial_has_is_not_fitted_to_rounding() {
+    let dir = tempfile::tempdir().unwrap();
+    let sensor = Sensor {
+        rate_hz: 250.0,
+        noise_n: 0.012,
+        encoder_m: 1e-6,
+    };
+    let rig = Rig {
+        protocol: ProtocolKind::InsertDwellWithdraw,
+        spread: 0.2,
+        jitter: true,
+        tare_sd_n: 0.003,
+        ..Default::default()
+    };
+    Dataset {
+        tissue_name: "liver2",
+        tissue: &tissue("liver2").unwrap(),
+        effects: &[],
+        trials: 10,
+        seed: 3,
+        sensor,
+        through: false,
+        form: Form::Standard,
+        rig,
+    }
+    .write(dir.path())
+    .unwrap();
+    let (_, data) = load(dir.path(), None).unwrap();
+    let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
+    let baseline_n = num(&out["baseline"]["heldout_rms_n"]);
+    assert!(baseline_n < 1.0, "{}", out["baseline"]);
+    for c in out["candidates"].as_array().unwrap() {
+        assert!(num(&c["heldout_rms_n"]) < 1.0, "{c}");
+    }
+}
+
 /// Each trial's load cell zeroed mN off (10 mN sd on 5 mN of
 /// noise), as real rigs leave it: an offset through the whole trial is
 /// the trial's own, like its tissue, not an effect; each trial is tared

@@ -78,11 +78,24 @@ impl Gram {
     }
 
     /// Least-squares θ, with a ridge of 1e-9 of the diagonal's scale so an
-    /// all-zero column (an effect with nothing to act on) gives θ = 0.
+    /// all-zero column (an effect with nothing to act on) gives θ = 0. A
+    /// column absent from these samples but for rounding (its sum of
+    /// squares under [`ABSENT_SS`]) gets θ = 0 too: its θ would be a
+    /// ratio of rounding errors, and the trials it is present in would
+    /// be scored with that.
     pub fn solve(&self) -> Vec<f64> {
         let n = self.n;
         let mut m = self.ata.clone();
         let mut b = self.aty.clone();
+        for i in 0..n {
+            if m[i * n + i] <= ABSENT_SS {
+                for k in 0..n {
+                    m[i * n + k] = 0.0;
+                    m[k * n + i] = 0.0;
+                }
+                b[i] = 0.0;
+            }
+        }
         for i in 0..n {
             m[i * n + i] += 1e-9 * m[i * n + i].abs() + 1e-300;
         }
@@ -120,6 +133,16 @@ impl Gram {
             .collect()
     }
 }
+
+/// A column's sum of squares at or under which it is absent from the
+/// samples summed (in its own units squared: the smallest column that
+/// means something, a friction basis v·l at 0.1 mm/s and 1 mm in, sums
+/// to 1e-14 a sample; a cutting odds of e^-100 a sample, rounding, to
+/// 1e-47). A trial with no puncture has no cutting and no friction
+/// ahead: a fold without the one trial that has them would otherwise
+/// fit their corrections to rounding (θ of 1e22–1e26) and score that
+/// trial with them.
+pub const ABSENT_SS: f64 = 1e-30;
 
 /// Relative ridge on the shared columns once the trials' own are taken out.
 const RIDGE: f64 = 1e-3;
@@ -284,6 +307,21 @@ mod tests {
         assert!((th[0] - 2.0).abs() < 1e-6 && (th[1] + 3.0).abs() < 1e-6 && th[2] == 0.0);
         assert!(g.sse(&th) < 1e-8);
         assert!((g.sse(&[0.0; 3]) - g.yy).abs() < 1e-9);
+    }
+
+    /// A column that is rounding on these samples (a cutting odds of
+    /// e^-100) has no θ to find: 0, not the ratio of two rounding errors,
+    /// which would score a trial where the column is present.
+    #[test]
+    fn a_column_of_rounding_gets_no_coefficient() {
+        let mut g = Gram::new(2);
+        for i in 0..100 {
+            let sign = if i % 3 == 0 { 1.0 } else { -1.0 };
+            g.add(&[1.0, 1e-25 * sign], 2.0 + 0.01 * sign);
+        }
+        let th = g.solve();
+        assert_eq!(th[1], 0.0, "{th:?}");
+        assert!((th[0] - 2.0).abs() < 0.01, "{th:?}");
     }
 
     /// Three trials of y = 2x + c_j (c_j their own offsets 1, −4, 7): the
