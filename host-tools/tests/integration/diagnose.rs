@@ -333,7 +333,7 @@ fn spread_alone_read_at_100_hz_on_a_jittered_clock_is_none_too() {
     let sensor = Sensor {
         rate_hz: 100.0,
         noise_n: 0.002,
-        encoder_m: 1e-6,
+        ..SENSOR
     };
     let rig = Rig {
         spread: 0.2,
@@ -355,7 +355,7 @@ fn spread_alone_with_friction_at_rest_withdrawn_at_a_rigs_rate_is_none() {
     let sensor = Sensor {
         rate_hz: 100.0,
         noise_n: 0.012,
-        encoder_m: 1e-6,
+        ..SENSOR
     };
     let rig = Rig {
         protocol: ProtocolKind::InsertDwellWithdraw,
@@ -373,11 +373,10 @@ fn spread_alone_with_friction_at_rest_withdrawn_at_a_rigs_rate_is_none() {
 /// error's (1.3e15 N were reported).
 #[test]
 fn a_correction_only_one_trial_has_is_not_fitted_to_rounding() {
-    let dir = tempfile::tempdir().unwrap();
     let sensor = Sensor {
         rate_hz: 250.0,
         noise_n: 0.012,
-        encoder_m: 1e-6,
+        ..SENSOR
     };
     let rig = Rig {
         protocol: ProtocolKind::InsertDwellWithdraw,
@@ -386,21 +385,7 @@ fn a_correction_only_one_trial_has_is_not_fitted_to_rounding() {
         tare_sd_n: 0.003,
         ..Default::default()
     };
-    Dataset {
-        tissue_name: "liver2",
-        tissue: &tissue("liver2").unwrap(),
-        effects: &[],
-        trials: 10,
-        seed: 3,
-        sensor,
-        through: false,
-        form: Form::Standard,
-        rig,
-    }
-    .write(dir.path())
-    .unwrap();
-    let (_, data) = load(dir.path(), None).unwrap();
-    let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
+    let out = no_effect_diagnosis("liver2", 3, sensor, rig);
     let baseline_n = num(&out["baseline"]["heldout_rms_n"]);
     assert!(baseline_n < 1.0, "{}", out["baseline"]);
     for c in out["candidates"].as_array().unwrap() {
@@ -704,6 +689,25 @@ fn spread_alone_is_none_on(
     sensor: Sensor,
     rig: Rig,
 ) -> serde_json::Value {
+    let out = no_effect_diagnosis(tissue_name, seed, sensor, rig);
+    let v = &out["verdict"];
+    assert_eq!(v["effect"], "none", "{tissue_name} seed {seed}: {v}");
+    assert_eq!(
+        v["effects"],
+        serde_json::json!([]),
+        "{tissue_name} seed {seed}: {v}"
+    );
+    let (left, noise) = (num(&v["heldout_rms_after_n"]), num(&out["noise_floor_n"]));
+    assert!(
+        left <= 1.5 * noise,
+        "{tissue_name} seed {seed}: {left} vs {noise}"
+    );
+    out
+}
+
+/// Ten trials of `tissue_name`'s nominal physics on `sensor` and `rig`,
+/// diagnosed against the fitted nominal.
+fn no_effect_diagnosis(tissue_name: &'static str, seed: u64, sensor: Sensor, rig: Rig) -> Value {
     let dir = tempfile::tempdir().unwrap();
     Dataset {
         tissue_name,
@@ -719,20 +723,7 @@ fn spread_alone_is_none_on(
     .write(dir.path())
     .unwrap();
     let (_, data) = load(dir.path(), None).unwrap();
-    let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
-    let v = &out["verdict"];
-    assert_eq!(v["effect"], "none", "{tissue_name} seed {seed}: {v}");
-    assert_eq!(
-        v["effects"],
-        serde_json::json!([]),
-        "{tissue_name} seed {seed}: {v}"
-    );
-    let (left, noise) = (num(&v["heldout_rms_after_n"]), num(&out["noise_floor_n"]));
-    assert!(
-        left <= 1.5 * noise,
-        "{tissue_name} seed {seed}: {left} vs {noise}"
-    );
-    out
+    serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap()
 }
 
 /// A heterogeneous tissue: each trial's cutting force wanders along its

@@ -1062,6 +1062,7 @@ pub fn slipped(
     // needle moving back): the tent stretched through the dwell slips
     // there, and only there may a landing on zero be its slip.
     let mut first_snap: Option<std::ops::Range<usize>> = None;
+    let mean = |r: std::ops::Range<usize>| f[r.clone()].iter().sum::<f64>() / r.len() as f64;
     for i in start + 3..end.saturating_sub(8) {
         let (low_at, low) = (i - 3..i)
             .map(|j| (j, f[j]))
@@ -1069,13 +1070,12 @@ pub fn slipped(
         let rise = f[i] - low;
         // Past the snap's own samples: one spread over several still
         // rises through the first few.
-        let landing = &f[i + 3..(i + 3 + LANDING_SAMPLES).min(end)];
-        let after = landing.iter().sum::<f64>() / landing.len() as f64;
+        let landing = i + 3..(i + 3 + LANDING_SAMPLES).min(end);
+        let after = mean(landing.clone());
         let standard_error_n = noise_n / (landing.len() as f64).sqrt();
         let within_n = (3.0 * standard_error_n).max(0.5 * noise_n);
         let lands_pulling = after <= -within_n;
         let moving = x[low_at.saturating_sub(3)] > x[low_at] && x[low_at] > x[i];
-        let mean = |r: std::ops::Range<usize>| f[r.clone()].iter().sum::<f64>() / r.len() as f64;
         let step = mean(i..i + 3) - mean(i - 3..i);
         let snap =
             (rise >= least_n || step >= STEP_NOISE_SD * noise_n) && low <= -least_n && moving;
