@@ -718,7 +718,7 @@ fn refine(
             normal.add(row, w * r[i]);
         }
         let loss = huber(&r, corner_n);
-        let step = damped_step(&normal, unknowns, &mut lambda, loss, |delta| {
+        let step = normal.damped_step(unknowns, &mut lambda, loss, |delta| {
             let mut next = shift;
             for (k, d) in delta.iter().enumerate().take(unknowns) {
                 next = with(&next, k, *d);
@@ -808,7 +808,7 @@ fn refine_wander(
         for (row, y) in prior.rows(&shift.wander) {
             normal.add(row, y);
         }
-        let step = damped_step(&normal, unknowns, &mut lambda, loss, |delta| {
+        let step = normal.damped_step(unknowns, &mut lambda, loss, |delta| {
             let mut next = shift;
             for (k, d) in delta.iter().enumerate().take(unknowns) {
                 if k < 4 {
@@ -885,32 +885,6 @@ impl WanderPrior {
 /// literature on breathing variability; the larger, so that the prior
 /// holds only what the data leave open.
 const BREATH_PERIOD_CV: f64 = 0.3;
-
-/// One Levenberg–Marquardt step on `normal`'s first `unknowns`: the
-/// damping raised tenfold until `try_delta`'s step (its new state and
-/// loss) lowers `loss`, then lowered tenfold; `None` when no step does
-/// by a damping of 10⁶.
-fn damped_step<const N: usize, T>(
-    normal: &Lsq<N>,
-    unknowns: usize,
-    lambda: &mut f64,
-    loss: f64,
-    mut try_delta: impl FnMut(&[f64; N]) -> (T, f64),
-) -> Option<(T, f64)> {
-    while *lambda < 1e6 {
-        let Some(delta) = normal.solve_damped(*lambda, unknowns) else {
-            *lambda *= 10.0;
-            continue;
-        };
-        let (next, loss_next) = try_delta(&delta);
-        if loss_next < loss {
-            *lambda = (*lambda / 10.0).max(1e-9);
-            return Some((next, loss_next));
-        }
-        *lambda *= 10.0;
-    }
-    None
-}
 
 /// Most Levenberg–Marquardt iterations of a fit, and of a scouting one
 /// from each of several starts (the best of which is then fitted fully).

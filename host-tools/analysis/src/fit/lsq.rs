@@ -105,6 +105,32 @@ impl<const N: usize> Lsq<N> {
         damped.solve()
     }
 
+    /// One Levenberg–Marquardt step on the first `unknowns`: the damping
+    /// raised tenfold until `try_delta`'s step (its new state and loss)
+    /// lowers `loss`, then lowered tenfold; `None` when no step does by a
+    /// damping of 10⁶.
+    pub fn damped_step<T>(
+        &self,
+        unknowns: usize,
+        lambda: &mut f64,
+        loss: f64,
+        mut try_delta: impl FnMut(&[f64; N]) -> (T, f64),
+    ) -> Option<(T, f64)> {
+        while *lambda < 1e6 {
+            let Some(delta) = self.solve_damped(*lambda, unknowns) else {
+                *lambda *= 10.0;
+                continue;
+            };
+            let (next, loss_next) = try_delta(&delta);
+            if loss_next < loss {
+                *lambda = (*lambda / 10.0).max(1e-9);
+                return Some((next, loss_next));
+            }
+            *lambda *= 10.0;
+        }
+        None
+    }
+
     /// Sum of squared residuals at `c` (from the accumulated sums).
     pub fn sse(&self, c: &[f64; N]) -> f64 {
         let ata = self.gram();
