@@ -1424,10 +1424,11 @@ impl Bar {
 /// form of the tissue's own, never quite it; the misfit it leaves is
 /// structured, and any flexible candidate takes a part of it that holds
 /// on every withheld trial. On this project's simulator such steps took
-/// 0.04–0.08 of the gap (presliding's literature form, seed 2, followed by
+/// 0.04–0.10 of the gap (presliding's literature form, seed 2, followed by
 /// relaxation and cutting along depth), where a second effect really
-/// there took 0.32–0.36 (`both_effects_of_a_pair_are_named`).
-pub const MIN_STEP_SHARE: f64 = 0.1;
+/// there took 0.32–0.36 (`both_effects_of_a_pair_are_named`): the bar
+/// half as far again as the first, under half the second.
+pub const MIN_STEP_SHARE: f64 = 0.15;
 
 /// The waterfall from the first effect: each further effect is the
 /// candidate of most shrink that is significant against what the effects

@@ -578,8 +578,9 @@ pub fn last_loaded_sample(geometry: &TrialFit, trial: &Trial) -> usize {
 /// half-moving, over a newton of residual each. So the jumps are found
 /// first ([`jumps::velocity_steps`], placed to the sample by where the
 /// motions either side meet), and each sample's velocity is a central
-/// difference over up to 10 ms that stays between them, one-sided on the
-/// sample next to a jump.
+/// difference over up to 10 ms that stays between them (read at the
+/// sample's own time where the clock is uneven and the window bends:
+/// `centred_mps`), one-sided on the sample next to a jump.
 pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let n = trial.len();
     if n < 2 {
@@ -631,7 +632,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
         for (i, vi) in v.iter_mut().enumerate().take(end).skip(start) {
             let m = (i - start).min(end - 1 - i).min(k);
             if m > 0 {
-                *vi = centred_mps(t, x, (i - m, i, i + m));
+                *vi = centred_mps(t, x, (i - m, i, i + m), step_m);
                 continue;
             }
             let (a, b) = if end - 1 > i {
@@ -689,24 +690,42 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
 }
 
 /// The velocity at sample `i` from samples `a..=b` about it (indices):
-/// the central difference, the velocity of the middle of `a..b`. Where
-/// samples were lost beside `i` (one side's span longer than the other's
-/// by more than a sample's period), that middle is tens of ms off `i`,
-/// and on a stroke turning round the velocity there is mm/s off (0.2
-/// m/s² over 15 ms, a force-law step of 70 mN): each side's mean
-/// velocity, at the middle of its span, is interpolated to `t[i]`
-/// instead, exact for a constant acceleration. A window lopsided by less
-/// (a clock that jitters, nearly always) keeps the central difference,
-/// whose exact zero where the encoder reads the same position either
-/// side marks a turn that reads still.
-fn centred_mps(t: &[f64], x: &[f64], (a, i, b): (usize, usize, usize)) -> f64 {
+/// the central difference, the velocity of the middle of `a..b`, or
+/// each side's mean velocity, at the middle of its span, interpolated to
+/// `t[i]` (exact for a constant acceleration), where the middle is far
+/// enough off `i` to matter:
+/// - samples lost beside `i` (one side's span longer than the other's by
+///   more than a sample's period): the middle is tens of ms off `i`, and
+///   on a stroke turning round the velocity there is mm/s off (0.2 m/s²
+///   over 15 ms, a force-law step of 70 mN);
+/// - a clock that jitters, where the window bends by two encoder steps or
+///   more (its middle's sagitta, ½·a·back·ahead): a stroke turning at
+///   100 Hz (0.2 m/s², a sagitta of 90 µm) is read at the window's middle
+///   up to a millisecond off `i`, 0.2 mm/s, on the wrong side of its turn
+///   one sample in ten — a friction stepping by a newton there. Where the
+///   window bends less, the central difference, which does not read
+///   `x[i]`: the interpolation reads its encoder step once more, 0.1
+///   mm/s over a 1 ms window, times a damping of 5000 N·s/m² a 15 mN
+///   force.
+///
+/// A window even within rounding keeps the central difference, whose
+/// exact zero where the encoder reads the same position either side
+/// marks a turn that reads still.
+fn centred_mps(t: &[f64], x: &[f64], (a, i, b): (usize, usize, usize), step_m: f64) -> f64 {
     let (back_s, ahead_s) = (t[i] - t[a], t[b] - t[i]);
-    let period_s = (back_s + ahead_s) / (b - a) as f64;
-    if back_s <= 0.0 || ahead_s <= 0.0 || (back_s - ahead_s).abs() <= period_s {
-        return (x[b] - x[a]) / (t[b] - t[a]).max(1e-12);
+    let span_s = back_s + ahead_s;
+    let central = (x[b] - x[a]) / span_s.max(1e-12);
+    if back_s <= 0.0 || ahead_s <= 0.0 || (back_s - ahead_s).abs() <= 1e-9 * span_s {
+        return central;
     }
     let (back, ahead) = ((x[i] - x[a]) / back_s, (x[b] - x[i]) / ahead_s);
-    back + (ahead - back) * back_s / (back_s + ahead_s)
+    let lopsided = (back_s - ahead_s).abs() > span_s / (b - a) as f64;
+    let sagitta_m = (ahead - back).abs() * back_s * ahead_s / span_s;
+    if lopsided || sagitta_m >= 2.0 * step_m {
+        back + (ahead - back) * back_s / span_s
+    } else {
+        central
+    }
 }
 
 /// The samples where a smooth turn (a stroke reversing, no jump and no
@@ -955,6 +974,40 @@ mod tests {
         };
         let none = level_shifts(&met, &v, &total_n, 0, (&v.uncertain, &[8, 9]));
         assert!(none.iter().all(Option::is_none), "{none:?}");
+    }
+
+    /// The paper's strokes (±4 mm at 1.1 Hz) read at 100 Hz on a clock
+    /// jittered by a tenth of its period, encoder 1 µm: at each turn the
+    /// window's middle is up to a millisecond off the sample, 0.2 mm/s of
+    /// the stroke's, yet every sample's velocity is on its own side of the
+    /// turn (or is marked uncertain), as the friction's side needs.
+    #[test]
+    fn a_stroke_turning_on_a_jittered_clock_is_read_on_its_side() {
+        use rand::SeedableRng;
+        let w = 2.0 * std::f64::consts::PI * 1.1;
+        let mut wrong = Vec::new();
+        for seed in 0..20 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let t_s = crate::sim::jittered_times(100.0, 6.0, &mut rng);
+            let trial = Trial {
+                f_n: vec![0.0; t_s.len()],
+                x_m: t_s
+                    .iter()
+                    .map(|&t| (0.02 + 0.004 * (w * t).sin()) * 1e6)
+                    .map(|um: f64| um.round() * 1e-6)
+                    .collect(),
+                t_s,
+            };
+            let v = needle_velocity(&trial);
+            for (i, &t) in trial.t_s.iter().enumerate() {
+                let exact_mps = 0.004 * w * (w * t).cos();
+                let marked = v.uncertain.iter().any(|u| u.0 == i);
+                if v.v_mps[i] * exact_mps < 0.0 && !marked {
+                    wrong.push((seed, i, v.v_mps[i], exact_mps));
+                }
+            }
+        }
+        assert!(wrong.is_empty(), "{wrong:?}");
     }
 
     #[test]
