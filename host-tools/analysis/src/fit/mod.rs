@@ -463,7 +463,8 @@ fn split_by_speed(
 /// the law whose mean is a law of the mean. Measured against the laws,
 /// not the puncture forces: a tissue punctured near its pole spreads its
 /// puncture force far more than its stiffness (the paper's liver, 2.3 ±
-/// 0.8 N), and the laws' mean is then no law's force at the mean depth.
+/// 0.8 N), and the puncture forces' mean is then no law's force at the
+/// mean depth.
 fn rational_mean_holds(all: &[&TrialFit]) -> bool {
     let mean =
         |get: fn(&TrialFit) -> f64| mean_sd(&all.iter().map(|t| get(t)).collect::<Vec<_>>()).0;

@@ -578,7 +578,8 @@ pub fn last_loaded_sample(geometry: &TrialFit, trial: &Trial) -> usize {
 /// half-moving, over a newton of residual each. So the jumps are found
 /// first ([`jumps::velocity_steps`], placed to the sample by where the
 /// motions either side meet), and each sample's velocity is a central
-/// difference over up to 10 ms that stays between them (read at the
+/// difference over up to 10 ms either side (three samples at least:
+/// [`window_samples`]) that stays between them (read at the
 /// sample's own time where the clock is uneven and the window bends:
 /// `centred_mps`), one-sided on the sample next to a jump.
 pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
@@ -703,10 +704,11 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
 ///   100 Hz (0.2 m/s², a sagitta of 90 µm) is read at the window's middle
 ///   up to a millisecond off `i`, 0.2 mm/s, on the wrong side of its turn
 ///   one sample in ten — a friction stepping by a newton there. Where the
-///   window bends less, the central difference, which does not read
-///   `x[i]`: the interpolation reads its encoder step once more, 0.1
-///   mm/s over a 1 ms window, times a damping of 5000 N·s/m² a 15 mN
-///   force.
+///   window bends less than quantisation can make it bend, the central
+///   difference, which does not read `x[i]`: the interpolation reads
+///   its encoder step once more, by (ahead − back)/(back·ahead) — beside
+///   a rest or a jump, where a window shrinks to a sample or two either
+///   side, 0.3 mm/s a step at 1 kHz, tens of mN of a skin's damping.
 ///
 /// A window even within rounding keeps the central difference, whose
 /// exact zero where the encoder reads the same position either side
@@ -974,6 +976,15 @@ mod tests {
         };
         let none = level_shifts(&met, &v, &total_n, 0, (&v.uncertain, &[8, 9]));
         assert!(none.iter().all(Option::is_none), "{none:?}");
+    }
+
+    /// A needle dithering by one encoder step between samples 1.1 and
+    /// 0.8 ms apart reads still: a bend no more than quantisation can make
+    /// is no turn, and the window's central difference holds.
+    #[test]
+    fn a_dither_of_one_step_on_a_jittered_clock_reads_still() {
+        let (t, x) = ([0.0, 0.0011, 0.0019], [0.02, 0.020001, 0.02]);
+        assert_eq!(centred_mps(&t, &x, (0, 1, 2), 1e-6), 0.0);
     }
 
     /// The paper's strokes (±4 mm at 1.1 Hz) read at 100 Hz on a clock

@@ -120,8 +120,13 @@ pub type Held = (f64, bool);
 /// A stiffness law fitted to the loading curve.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StiffnessFit {
+    /// The law's coefficients: the polynomial's with depth measured from
+    /// the contact point the trial keeps ([`TrialFit::contact_x_m`]), where
+    /// the model measures it; the rational law's from its own.
     pub p1: f64,
     pub p2: f64,
+    /// The law's misfit from its own contact point: what the laws are
+    /// compared by.
     pub rms_n: f64,
     pub r2: f64,
 }
