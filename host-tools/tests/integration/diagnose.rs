@@ -330,16 +330,7 @@ fn spread_alone_with_friction_at_rest_is_none_too() {
 /// that is an effect: spread alone is still `none`.
 #[test]
 fn spread_alone_read_at_100_hz_on_a_jittered_clock_is_none_too() {
-    let sensor = Sensor {
-        rate_hz: 100.0,
-        noise_n: 0.002,
-        ..SENSOR
-    };
-    let rig = Rig {
-        spread: 0.2,
-        jitter: true,
-        ..Default::default()
-    };
+    let (sensor, rig) = a_rigs_spread(ProtocolKind::Paper, (100.0, 0.002), 0.0);
     for seed in [2, 6] {
         spread_alone_is_none_on("liver1", seed, sensor, rig);
     }
@@ -352,17 +343,7 @@ fn spread_alone_read_at_100_hz_on_a_jittered_clock_is_none_too() {
 /// the tent's ramp is left to the friction line.
 #[test]
 fn spread_alone_with_friction_at_rest_withdrawn_at_a_rigs_rate_is_none() {
-    let sensor = Sensor {
-        rate_hz: 100.0,
-        noise_n: 0.012,
-        ..SENSOR
-    };
-    let rig = Rig {
-        protocol: ProtocolKind::InsertDwellWithdraw,
-        spread: 0.2,
-        jitter: true,
-        ..Default::default()
-    };
+    let (sensor, rig) = a_rigs_spread(ProtocolKind::InsertDwellWithdraw, (100.0, 0.012), 0.0);
     spread_alone_is_none_on("liver1_journal", 1, sensor, rig);
 }
 
@@ -372,17 +353,7 @@ fn spread_alone_with_friction_at_rest_withdrawn_at_a_rigs_rate_is_none() {
 /// mean depth, though the puncture forces' mean is not.
 #[test]
 fn spread_alone_on_a_law_punctured_near_its_pole_is_none() {
-    let sensor = Sensor {
-        rate_hz: 250.0,
-        noise_n: 0.012,
-        ..SENSOR
-    };
-    let rig = Rig {
-        spread: 0.2,
-        jitter: true,
-        tare_sd_n: 0.003,
-        ..Default::default()
-    };
+    let (sensor, rig) = a_rigs_spread(ProtocolKind::Paper, (250.0, 0.012), 0.003);
     spread_alone_is_none_on("liver1_rational", 3, sensor, rig);
 }
 
@@ -394,18 +365,7 @@ fn spread_alone_on_a_law_punctured_near_its_pole_is_none() {
 /// error's (1.3e15 N were reported).
 #[test]
 fn a_correction_only_one_trial_has_is_not_fitted_to_rounding() {
-    let sensor = Sensor {
-        rate_hz: 250.0,
-        noise_n: 0.012,
-        ..SENSOR
-    };
-    let rig = Rig {
-        protocol: ProtocolKind::InsertDwellWithdraw,
-        spread: 0.2,
-        jitter: true,
-        tare_sd_n: 0.003,
-        ..Default::default()
-    };
+    let (sensor, rig) = a_rigs_spread(ProtocolKind::InsertDwellWithdraw, (250.0, 0.012), 0.003);
     let liver2 = TissueParams {
         cutting_force_n: 0.94,
         ..tissue("liver2").unwrap()
@@ -698,6 +658,29 @@ fn a_stop_is_placed_by_the_trials_own_levels_either_side() {
         );
         assert!(left <= 1.1 * noise, "{rate_hz} Hz: {left} on {noise}");
     }
+}
+
+/// A load cell of `(rate_hz, noise_n)` on a jittered clock, each trial's
+/// tissue 20 % its own and its zero `tare_sd_n` off, on `protocol`: the
+/// rigs of the book's no-effect grid.
+fn a_rigs_spread(
+    protocol: ProtocolKind,
+    (rate_hz, noise_n): (f64, f64),
+    tare_sd_n: f64,
+) -> (Sensor, Rig) {
+    let sensor = Sensor {
+        rate_hz,
+        noise_n,
+        ..SENSOR
+    };
+    let rig = Rig {
+        protocol,
+        spread: 0.2,
+        jitter: true,
+        tare_sd_n,
+        ..Default::default()
+    };
+    (sensor, rig)
 }
 
 fn spread_alone_is_none(tissue_name: &'static str, seed: u64, tare_sd_n: f64) -> serde_json::Value {

@@ -205,7 +205,7 @@ fn meet(t: &[f64], x: &[f64], i: usize, span: usize) -> Option<(f64, f64)> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     /// Positions of a motion with velocity `v(t)`, sampled at 500 Hz and
@@ -218,7 +218,7 @@ mod tests {
 
     /// Positions of a motion with velocity `v(t)` read at times `t` to
     /// 1 µm, from 0 at t = 0.
-    fn read_at(t: &[f64], v: impl Fn(f64) -> f64) -> Vec<f64> {
+    pub(in crate::fit) fn read_at(t: &[f64], v: impl Fn(f64) -> f64) -> Vec<f64> {
         let (mut x, mut pos, mut from) = (Vec::new(), 0.0, 0.0);
         for &ti in t {
             // Integrate finely so a jump between samples is exact.
@@ -234,7 +234,7 @@ mod tests {
 
     /// The paper's oscillation as this project's simulator makes it
     /// (±4 mm at 1.1 Hz): velocity at `t`.
-    fn stroke_mps(t: f64) -> f64 {
+    pub(in crate::fit) fn stroke_mps(t: f64) -> f64 {
         let w = std::f64::consts::TAU * 1.1;
         0.004 * w * (w * t).cos()
     }

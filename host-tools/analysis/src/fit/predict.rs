@@ -994,24 +994,20 @@ mod tests {
     /// turn (or is marked uncertain), as the friction's side needs.
     #[test]
     fn a_stroke_turning_on_a_jittered_clock_is_read_on_its_side() {
+        use crate::fit::jumps::tests::{read_at, stroke_mps};
         use rand::SeedableRng;
-        let w = 2.0 * std::f64::consts::PI * 1.1;
         let mut wrong = Vec::new();
         for seed in 0..20 {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
             let t_s = crate::sim::jittered_times(100.0, 6.0, &mut rng);
             let trial = Trial {
                 f_n: vec![0.0; t_s.len()],
-                x_m: t_s
-                    .iter()
-                    .map(|&t| (0.02 + 0.004 * (w * t).sin()) * 1e6)
-                    .map(|um: f64| um.round() * 1e-6)
-                    .collect(),
+                x_m: read_at(&t_s, stroke_mps),
                 t_s,
             };
             let v = needle_velocity(&trial);
             for (i, &t) in trial.t_s.iter().enumerate() {
-                let exact_mps = 0.004 * w * (w * t).cos();
+                let exact_mps = stroke_mps(t);
                 let marked = v.uncertain.iter().any(|u| u.0 == i);
                 if v.v_mps[i] * exact_mps < 0.0 && !marked {
                     wrong.push((seed, i, v.v_mps[i], exact_mps));

@@ -671,21 +671,18 @@ fn fit_loading(x: &[f64], f: &[f64], (j0, ip): (usize, usize), thr: f64) -> Resu
     } else {
         -c0 / c1
     };
-    let contact_x_m = if contact.is_finite() { contact } else { x[j0] };
+    let root_x_m = if contact.is_finite() { contact } else { x[j0] };
     let loading: Vec<(f64, f64)> = (j0..=ip).map(|j| (x[j], f[j])).collect();
     let mut rational = Lsq::<2>::default();
     for &(x, f) in &loading {
-        let d = x - contact_x_m;
+        let d = x - root_x_m;
         if d > 0.0 && f > thr {
             rational.add([d, 1.0], d / f);
         }
     }
-    let polynomial = polynomial_from(&loading, contact_x_m);
-    let [ra, rb, rational_contact] = refine_rational(
-        &loading,
-        contact_x_m,
-        rational.solve().unwrap_or([0.0, 0.0]),
-    );
+    let polynomial = polynomial_from(&loading, root_x_m);
+    let [ra, rb, rational_contact] =
+        refine_rational(&loading, root_x_m, rational.solve().unwrap_or([0.0, 0.0]));
     let rational_curve: Vec<(f64, f64)> = loading
         .iter()
         .map(|&(xj, fj)| (xj - rational_contact, fj))
@@ -713,7 +710,7 @@ fn fit_loading(x: &[f64], f: &[f64], (j0, ip): (usize, usize), thr: f64) -> Resu
     let fitted_contact_x_m = if rational.rms_n < polynomial.rms_n {
         rational_contact
     } else {
-        contact_x_m
+        root_x_m
     };
     let unloaded_x_m = (0..j0)
         .rev()
@@ -723,15 +720,16 @@ fn fit_loading(x: &[f64], f: &[f64], (j0, ip): (usize, usize), thr: f64) -> Resu
     // The polynomial's coefficients from the contact point kept, the
     // one the model will measure depth from; its misfit, that the laws
     // are compared by, from its own.
-    let [a1, a2] = {
-        let kept = polynomial_from(&loading, contact_x_m);
-        [kept.p1, kept.p2]
+    let kept = if contact_x_m == root_x_m {
+        polynomial
+    } else {
+        polynomial_from(&loading, contact_x_m)
     };
     Ok(Loading {
         contact_x_m,
         polynomial: StiffnessFit {
-            p1: a1,
-            p2: a2,
+            p1: kept.p1,
+            p2: kept.p2,
             ..polynomial
         },
         rational,
