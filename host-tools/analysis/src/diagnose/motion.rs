@@ -294,8 +294,7 @@ pub fn moved_model(
     shift: &dyn Fn(usize) -> (f64, f64),
 ) -> (Vec<f64>, Vec<f64>, f64) {
     let mut total = vec![0.0; p.trial.len()];
-    let (relative_x_m, contact_x_m) =
-        moved_parts(p, params, shift, &mut |i, s| total[i] = s.total_n());
+    let (relative_x_m, contact_x_m) = moved_parts(p, params, shift, |i, s| total[i] = s.total_n());
     (total, relative_x_m, contact_x_m)
 }
 
@@ -305,8 +304,8 @@ pub fn moved_model(
 fn moved_parts(
     p: &Prepared,
     params: &TissueParams,
-    shift: &dyn Fn(usize) -> (f64, f64),
-    each: &mut dyn FnMut(usize, &SampleParts),
+    shift: impl Fn(usize) -> (f64, f64),
+    each: impl FnMut(usize, &SampleParts),
 ) -> (Vec<f64>, f64) {
     let trial = &p.trial;
     let n = trial.len();
@@ -388,11 +387,20 @@ fn residuals(
     harmonics: &mut Harmonics,
 ) -> Vec<f64> {
     let h = harmonics.follow(shift, &p.trial.t_s);
-    let mut parts = vec![SampleParts::default(); p.trial.len()];
-    let (relative_x_m, contact_x_m) =
-        moved_parts(p, params, &|i| shift.at_harmonics(h[i]), &mut |i, s| {
-            parts[i] = *s
-        });
+    // Only what the rows below read: each sample's model force and the
+    // columns the trial's own levels scale (a fit evaluates this
+    // thousands of times a trial, and copying whole `SampleParts` showed
+    // in its time).
+    let mut parts = vec![[0.0; 6]; p.trial.len()];
+    let (relative_x_m, contact_x_m) = moved_parts(
+        p,
+        params,
+        |i| shift.at_harmonics(h[i]),
+        |i, s| {
+            let [b0, b1, b2, b3] = s.friction_basis;
+            parts[i] = [s.total_n(), s.cutting_n, b0, b1, b2, b3];
+        },
+    );
     // The trial's own cutting force and friction coefficients: the pooled
     // nominal misses a trial's by the tissue's spread (15–30 %), and one
     // fitted in the encoder's frame of a moving tissue by far more (the
@@ -408,21 +416,20 @@ fn residuals(
     let rows: Vec<[f64; LEVELS]> = samples
         .iter()
         .map(|&i| {
-            let s = &parts[i];
-            let [b0, b1, b2, b3] = s.friction_basis;
+            let [_, cutting_n, b0, b1, b2, b3] = parts[i];
             let d_mm = 1e3 * (relative_x_m[i] - contact_x_m);
             let [l0, l1, l2] = if p.phase[i] == LOADING && d_mm > 0.0 {
                 [1.0, d_mm, d_mm * d_mm]
             } else {
                 [0.0; 3]
             };
-            [s.cutting_n, b0, b1, b2, b3, l0, l1, l2]
+            [cutting_n, b0, b1, b2, b3, l0, l1, l2]
         })
         .collect();
     let corner_n = HUBER_CORNER_NOISE_SD * p.noise_n;
     let nominal_r: Vec<f64> = samples
         .iter()
-        .map(|&i| p.trial.f_n[i] - parts[i].total_n())
+        .map(|&i| p.trial.f_n[i] - parts[i][0])
         .collect();
     let mut weights = vec![1.0; samples.len()];
     let mut r = nominal_r.clone();
@@ -451,10 +458,16 @@ const LEVELS: usize = 8;
 /// sample weighed by `weights`.
 fn level_deltas(rows: &[[f64; LEVELS]], r: &[f64], weights: &[f64]) -> [f64; LEVELS] {
     let mut levels = Lsq::<LEVELS>::default();
-    for ((row, &e), &w) in rows.iter().zip(r).zip(weights) {
-        let w = w.sqrt();
-        levels.add(row.map(|c| w * c), w * e);
-    }
+    let weighed = rows.iter().zip(r).zip(weights).map(|((row, &e), &w)| {
+        // A whole weight (most samples) scales nothing.
+        if w == 1.0 {
+            (*row, e)
+        } else {
+            let w = w.sqrt();
+            (row.map(|c| w * c), w * e)
+        }
+    });
+    levels.add_all(weighed);
     levels
         .solve_damped(LEVEL_RIDGE, LEVELS)
         .unwrap_or([0.0; LEVELS])

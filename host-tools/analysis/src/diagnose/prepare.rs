@@ -349,7 +349,7 @@ pub fn fit_relaxation(
                 let cap = (10.0 * geometry.noise_n).powi(2).max(f64::MIN_POSITIVE);
                 let puncture = last_loaded_sample(&g, trial);
                 let mut sse = 0.0;
-                predict_each(params, &g, (trial, &trial.x_m), v, &mut |i, s| {
+                predict_each(params, &g, (trial, &trial.x_m), v, |i, s| {
                     if i > puncture && v.v_mps[i].abs() >= params.half_band_mps {
                         sse += (trial.f_n[i] - s.friction_n - s.cutting_n).powi(2).min(cap);
                     }

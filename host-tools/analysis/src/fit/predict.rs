@@ -90,7 +90,7 @@ pub fn predict_parts_at(
         friction_basis: vec![[0.0; 4]; n],
         ..Parts::default()
     };
-    let puncture = predict_each(params, geometry, (trial, &trial.x_m), &v, &mut |i, s| {
+    let puncture = predict_each(params, geometry, (trial, &trial.x_m), &v, |i, s| {
         p.stiffness_n[i] = s.stiffness_n;
         p.friction_n[i] = s.friction_n;
         p.cutting_n[i] = s.cutting_n;
@@ -115,7 +115,7 @@ pub fn predict_total_at(
     v: &NeedleVelocity,
 ) -> Vec<f64> {
     let mut total = vec![0.0; trial.len()];
-    predict_each(params, geometry, (trial, x_m), v, &mut |i, s| {
+    predict_each(params, geometry, (trial, x_m), v, |i, s| {
         total[i] = s.total_n()
     });
     total
@@ -130,7 +130,7 @@ pub fn predict_each(
     geometry: &TrialFit,
     (trial, x_m): (&Trial, &[f64]),
     v: &NeedleVelocity,
-    each: &mut dyn FnMut(usize, &SampleParts),
+    mut each: impl FnMut(usize, &SampleParts),
 ) -> usize {
     let puncture = last_loaded_sample(geometry, trial);
     debug_assert_eq!(x_m.len(), trial.len(), "a position for every sample");
@@ -142,7 +142,7 @@ pub fn predict_each(
     // Where the measured force fits neither side's level of a jump, the
     // levels are moved to the trial's own, which the first pass shows.
     let mut first = Vec::with_capacity(trial.len());
-    let seen = pass(inside(), (trial, x_m), puncture, &mut |_, s| first.push(*s));
+    let seen = pass(inside(), (trial, x_m), puncture, |_, s| first.push(*s));
     let shifts = if seen.contested.is_empty() {
         Vec::new()
     } else {
@@ -168,7 +168,7 @@ fn pass<'a>(
     mut model: Inside<'a>,
     (trial, x_m): (&Trial, &[f64]),
     puncture: usize,
-    each: &mut dyn FnMut(usize, &SampleParts),
+    mut each: impl FnMut(usize, &SampleParts),
 ) -> Inside<'a> {
     for (i, &x) in x_m.iter().enumerate().take(trial.len()) {
         let s = if i <= puncture {
