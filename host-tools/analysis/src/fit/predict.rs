@@ -673,11 +673,12 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     }));
     let quantum_mps = step_m / (2 * k) as f64 / dt;
     let known: Vec<usize> = uncertain.iter().map(|u| u.0).collect();
-    uncertain.extend(
-        turning(&v, quantum_mps, least_rest)
-            .into_iter()
-            .filter(|u| !known.contains(&u.0) && !near_jump(u.0) && !near_jump(u.0 + 1)),
-    );
+    for (j, other, odds, here) in turning(&v, quantum_mps, least_rest) {
+        if !known.contains(&j) && !near_jump(j) && !near_jump(j + 1) {
+            v[j] = here;
+            uncertain.push((j, other, odds));
+        }
+    }
     uncertain.sort_by_key(|u| u.0);
     NeedleVelocity {
         v_mps: v,
@@ -737,9 +738,15 @@ fn centred_mps(t: &[f64], x: &[f64], (a, i, b): (usize, usize, usize), step_m: f
 /// sample lies on the encoder cannot say, while the friction steps from
 /// one side's force to the other's there, hundreds of noise floors. Each
 /// such sample gets the velocity of the turn's other side and even odds,
-/// for the force to settle ([`other_side_odds`]). A run still as long as
+/// for the force to settle ([`other_side_odds`]), and the velocity of
+/// the side its reading lies on as its own (`here`, returned as the
+/// fourth of each): a stroke passes through zero in microseconds, so a
+/// sample of a turn slides one way or the other, and its reading, within
+/// a step of zero, may fall inside the friction's band (5 µm/s), where
+/// the model would hold it at rest on the force before — a newton off
+/// the skin phantom's force once it has flipped. A run still as long as
 /// a rest (`least_rest` samples) is a stop, which [`settling`] takes.
-fn turning(v: &[f64], quantum_mps: f64, least_rest: usize) -> Vec<(usize, f64, f64)> {
+fn turning(v: &[f64], quantum_mps: f64, least_rest: usize) -> Vec<(usize, f64, f64, f64)> {
     let mut out = Vec::new();
     let mut i = 1;
     while i < v.len() {
@@ -753,8 +760,12 @@ fn turning(v: &[f64], quantum_mps: f64, least_rest: usize) -> Vec<(usize, f64, f
         let (before, after) = (v[still.start - 1], v.get(still.end).copied().unwrap_or(0.0));
         if before * after < 0.0 && still.len() < least_rest {
             for j in still.clone() {
-                let other = if v[j] * after > 0.0 { before } else { after };
-                out.push((j, other, 0.5));
+                let (here, other) = if v[j] * after > 0.0 {
+                    (after, before)
+                } else {
+                    (before, after)
+                };
+                out.push((j, other, 0.5, here));
             }
         }
         i = still.end;
@@ -1011,6 +1022,41 @@ mod tests {
                 let marked = v.uncertain.iter().any(|u| u.0 == i);
                 if v.v_mps[i] * exact_mps < 0.0 && !marked {
                     wrong.push((seed, i, v.v_mps[i], exact_mps));
+                }
+            }
+        }
+        assert!(wrong.is_empty(), "{wrong:?}");
+    }
+
+    /// A sample of a turn slides one way or the other: its velocity and
+    /// its alternative lie either side of zero, each beyond the
+    /// friction's band (5 µm/s; a reading inside it held the sample at
+    /// rest on the force before the turn), and one of them is on the
+    /// side the stroke is. 100 and 250 Hz on jittered clocks.
+    #[test]
+    fn a_sample_of_a_turn_slides_on_one_side_or_the_other() {
+        use crate::fit::jumps::tests::{read_at, stroke_mps};
+        use rand::SeedableRng;
+        let band_mps = 5e-6;
+        let mut wrong = Vec::new();
+        for (seed, rate_hz) in (0..20).flat_map(|s| [(s, 100.0), (s, 250.0)]) {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let t_s = crate::sim::jittered_times(rate_hz, 6.0, &mut rng);
+            let trial = Trial {
+                f_n: vec![0.0; t_s.len()],
+                x_m: read_at(&t_s, stroke_mps),
+                t_s,
+            };
+            let v = needle_velocity(&trial);
+            for &(i, other, _) in &v.uncertain {
+                let (here, exact) = (v.v_mps[i], stroke_mps(trial.t_s[i]));
+                // Turning, not set off or stopped by a jump.
+                if exact == 0.0 || exact.abs() > 1e-3 {
+                    continue;
+                }
+                let sides = here * other < 0.0 && here.abs() > band_mps && other.abs() > band_mps;
+                if !sides || (here * exact < 0.0 && other * exact < 0.0) {
+                    wrong.push((seed, rate_hz, i, here, other, exact));
                 }
             }
         }
