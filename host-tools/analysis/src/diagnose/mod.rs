@@ -77,26 +77,34 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     pub device_model: bool,
     /// Write every sample's nominal model and residual as CSV here
-    /// (`file,t_s,x_m,f_n,model_n,residual_n,phase`; `f_n` less the
-    /// trial's tare, which `needle fit` reports as `per_trial[].tare_n`).
+    /// (`file,t_s,x_m,f_n,model_n,residual_n,phase,fitted_n,fitted_residual_n`;
+    /// `f_n` less the trial's tare, which `needle fit` reports as
+    /// `per_trial[].tare_n`; `fitted_n` the nominal at its best for the
+    /// trial, with the trial's own corrections as the baseline fits them,
+    /// and what it leaves).
     #[arg(long)]
     pub residuals: Option<PathBuf>,
 }
 
-/// Every sample's nominal model and residual, as CSV.
+/// Every sample's nominal model and residual, and the nominal at its
+/// best for its trial (`fitted_n`, [`fitted_and_baseline`]) and what that
+/// leaves, as CSV.
 fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
-    let mut out = String::from("file,t_s,x_m,f_n,model_n,residual_n,phase\n");
+    let mut out =
+        String::from("file,t_s,x_m,f_n,model_n,residual_n,phase,fitted_n,fitted_residual_n\n");
     for p in data {
         for i in 0..p.trial.len() {
             out += &format!(
-                "{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{}\n",
                 p.file,
                 p.trial.t_s[i],
                 p.trial.x_m[i],
                 p.trial.f_n[i],
                 p.nominal_n[i],
                 p.residual_n[i],
-                PHASES[p.phase[i]]
+                PHASES[p.phase[i]],
+                p.fitted_n[i],
+                p.trial.f_n[i] - p.fitted_n[i],
             );
         }
     }
@@ -1868,7 +1876,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     progress("done");
     needle_io::note!("{}", report::headline(&out));
     if let Some(path) = &args.residuals {
-        write_residuals(path, &data)?;
+        write_residuals(path, &fitted_and_baseline(data.clone()).0)?;
     }
     if let Some(path) = &args.report {
         let withheld = withheld_overlay(&data, &out);
