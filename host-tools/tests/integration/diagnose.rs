@@ -347,6 +347,19 @@ fn spread_alone_with_friction_at_rest_withdrawn_at_a_rigs_rate_is_none() {
     spread_alone_is_none_on("liver1_journal", 1, sensor, rig);
 }
 
+/// The skin phantom read at 1 kHz by a 3 mN load cell: its damping (15
+/// times liver's) turns the velocity's reading error, an encoder step
+/// over a 20 ms window, into 5 mN of the friction law's force, more than
+/// the load cell's noise. A trial whose strokes the right law fits to that
+/// still places its own ρ; judged against the load cell's noise alone it
+/// did not, kept the tissue's, 1.3 mm off its relaxed surface, and
+/// left 15–40 mN along its strokes.
+#[test]
+fn spread_alone_on_skin_read_at_1_khz_is_none() {
+    let (sensor, rig) = a_rigs_spread(ProtocolKind::Paper, (1000.0, 0.003), 0.003);
+    spread_alone_is_none_on("skin_phantom", 3, sensor, rig);
+}
+
 /// Liver by eq. 3's rational law, punctured from 1 to 6 N as its puncture
 /// spreads (its pole 9 mm past the mean puncture): the law is the tissue's
 /// and is fitted on every trial, and the laws' mean is the law at the

@@ -903,7 +903,7 @@ impl NeedleVelocity {
 
 /// The encoder's resolution as the data show it: the least gap between
 /// two positions it read.
-fn encoder_step_m(trial: &Trial) -> f64 {
+pub(crate) fn encoder_step_m(trial: &Trial) -> f64 {
     // The least gap between distinct positions anywhere in the trial, not
     // between neighbouring samples: at 100 Hz a needle moves ten counts a
     // sample, but the withdrawal's positions fall between the insertion's.

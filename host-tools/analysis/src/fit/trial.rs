@@ -144,6 +144,15 @@ pub fn velocity(trial: &Trial) -> Vec<f64> {
     velocity_over(trial, 0.01)
 }
 
+/// How far [`velocity`]'s reading may be off by the encoder alone: each
+/// end of its window rounded to a step (uniform, sd step/√12), the
+/// difference step/√6 over the window's span, m/s.
+fn velocity_read_sd_mps(trial: &Trial) -> f64 {
+    let rate_hz = trial.rate_hz();
+    let half = ((0.01 * rate_hz).round()).max(1.0);
+    super::predict::encoder_step_m(trial) / 6f64.sqrt() / (2.0 * half / rate_hz)
+}
+
 /// Velocity by central differences over ±`half_window_s` (at least one
 /// sample either side).
 pub fn velocity_over(trial: &Trial, half_window_s: f64) -> Vec<f64> {
@@ -524,7 +533,11 @@ pub fn fit_trial_at(trial: &Trial, falls: Falls) -> Result<TrialFit> {
         >= MIN_STROKE_SAMPLES;
     let dwell = dwell_relaxation(trial, &v, ip);
     let friction = if inward {
-        both_ways(&track, &advancing, contact_x_m, x_s2, noise_n)?
+        both_ways(
+            (&track, &advancing),
+            (contact_x_m, x_s2),
+            (noise_n, velocity_read_sd_mps(trial)),
+        )?
     } else {
         one_way(
             &track,
@@ -906,11 +919,9 @@ type Xvf = (f64, f64, f64);
 /// where the withdrawing needle leaves the tissue, cutting as what is left
 /// while advancing into new tissue.
 fn both_ways(
-    track: &[Xvf],
-    advancing: &[Xvf],
-    contact_x_m: f64,
-    x_s2: f64,
-    noise_n: f64,
+    (track, advancing): (&[Xvf], &[Xvf]),
+    (contact_x_m, x_s2): (f64, f64),
+    (noise_n, v_read_sd_mps): (f64, f64),
 ) -> Result<OneTrialFriction> {
     let inward = Beyond::new(track.iter().filter(|s| s.1 > 0.0));
     let outward = Beyond::new(track.iter().filter(|s| s.1 <= 0.0));
@@ -946,13 +957,27 @@ fn both_ways(
         .map(|&(x, v, f)| f - friction_n(x, v))
         .collect();
     // Only a friction law that fits this trial's strokes places its ρ: a
-    // residual whose bulk is beyond 1.5 noise floors (the diagnosis's bar
-    // for "explained", `diagnose::EXPLAINED_FACTOR`; fit does not depend
-    // on diagnose) is an effect the law lacks, which bends ρ to take it.
+    // residual whose bulk is beyond 1.5 floors (the diagnosis's bar for
+    // "explained", `diagnose::EXPLAINED_FACTOR`; fit does not depend on
+    // diagnose) is an effect the law lacks, which bends ρ to take it.
     // The bulk, by the median: the few samples where a stroke turns or
     // stops, whose velocity this fit reads roughly, are no such effect.
+    // The floor is what the right law leaves: the load cell's noise, and
+    // the velocity's reading error through the law's damping b·l — for
+    // liver a tenth of a mN, for the skin phantom's (15 times liver's)
+    // read at 1 kHz on a 1 µm encoder 5 mN, more than a quiet load
+    // cell's noise.
+    let damping_ms = track
+        .iter()
+        .map(|&(x, v, _)| {
+            let b = if v > 0.0 { bp } else { bn };
+            (b * (x - relaxed_x_m).max(0.0) * v_read_sd_mps).powi(2)
+        })
+        .sum::<f64>()
+        / track.len().max(1) as f64;
+    let floor_n = (noise_n * noise_n + damping_ms).sqrt();
     let bulk_sd_n = median(residual.iter().map(|r| r.abs()).collect()) / 0.6745;
-    let fits = bulk_sd_n <= 1.5 * noise_n;
+    let fits = bulk_sd_n <= 1.5 * floor_n;
     let rho_sd = fits
         .then(|| profile_sd(&profile, best, residual.len(), effective_samples(&residual)))
         .flatten();
