@@ -360,6 +360,17 @@ fn spread_alone_on_skin_read_at_1_khz_is_none() {
     spread_alone_is_none_on("skin_phantom", 3, sensor, rig);
 }
 
+/// The skin phantom at 250 Hz: a stroke stopping at 20 mm/s 44 µs after
+/// a sample (±48 µs) at which the encoder already reads the rest (within
+/// half a step: 24 µs of travel). The rest starts there by the encoder,
+/// and the stop's own odds for that sample offered the rest again as its
+/// alternative: a newton and a tenth off where it was still cutting.
+#[test]
+fn spread_alone_on_skin_stopping_at_speed_is_none() {
+    let (sensor, rig) = a_rigs_spread(ProtocolKind::Paper, (250.0, 0.003), 0.003);
+    spread_alone_is_none_on("skin_phantom", 3, sensor, rig);
+}
+
 /// Liver by eq. 3's rational law, punctured from 1 to 6 N as its puncture
 /// spreads (its pole 9 mm past the mean puncture): the law is the tissue's
 /// and is fitted on every trial, and the laws' mean is the law at the

@@ -655,7 +655,16 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     for j in &jumps {
         let [early, _, late] = j.landing(t);
         let (before, after) = (j.index - 1, j.index);
-        if early > 0.01 {
+        if v[before] == v[after] && before > 0 {
+            // A stop at speed the lines place just after a sample at which
+            // the encoder already reads the rest (within half a step of
+            // it: 24 µs at 20 mm/s): the rest starts at that sample, and
+            // it moved with the samples before it as likely as the stop
+            // came after it.
+            if 1.0 - early > 0.01 {
+                uncertain.push((before, v[before - 1], 1.0 - early));
+            }
+        } else if early > 0.01 {
             uncertain.push((before, v[after], early));
         }
         if late > 0.01 && after + 1 < n {
