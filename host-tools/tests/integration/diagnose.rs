@@ -371,6 +371,17 @@ fn spread_alone_on_skin_stopping_at_speed_is_none() {
     spread_alone_is_none_on("skin_phantom", 3, sensor, rig);
 }
 
+/// Liver by eq. 3 on insert–dwell–withdraw at 100 Hz with a 3 mN load
+/// cell: a stop the force puts on the sliding side (the encoder read the
+/// rest a sample before the stop the lines place) still carried the
+/// first dwell's held level in full, which the trial's own dwell — twice
+/// the nominal's — scaled into a newton on that sample.
+#[test]
+fn spread_alone_on_a_stop_the_force_puts_before_the_dwell_is_none() {
+    let (sensor, rig) = a_rigs_spread(ProtocolKind::InsertDwellWithdraw, (100.0, 0.003), 0.003);
+    spread_alone_is_none_on("liver1_rational", 3, sensor, rig);
+}
+
 /// Liver by eq. 3's rational law, punctured from 1 to 6 N as its puncture
 /// spreads (its pole 9 mm past the mean puncture): the law is the tissue's
 /// and is fitted on every trial, and the laws' mean is the law at the

@@ -239,8 +239,14 @@ fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
     };
     // Only where the nominal holds: a dwell's first samples can still be
     // sliding by the encoder (a stage easing to a stop), and there the
-    // trial's own friction and cutting answer.
+    // trial's own friction and cutting answer; a sample the force put on
+    // the sliding side of the stop holds as little as it is likely to be
+    // at rest.
     let at_rest = |i: usize| p.velocity.v_mps[i].abs() < p.params.half_band_mps;
+    let mut resting = vec![1.0; p.trial.len()];
+    for &(i, w) in &p.other_side {
+        resting[i] = 1.0 - w;
+    }
     for (i, h) in held
         .iter_mut()
         .enumerate()
@@ -248,7 +254,7 @@ fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
         .take(first.len())
     {
         if at_rest(i) {
-            *h = p.friction_n[i] + p.cutting[i] * p.params.cutting_force_n;
+            *h = resting[i] * (p.friction_n[i] + p.cutting[i] * p.params.cutting_force_n);
         }
     }
     held

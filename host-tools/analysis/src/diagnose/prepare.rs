@@ -209,9 +209,13 @@ impl Prepared {
     /// measured force settled which side those samples lie on.
     pub fn landing(&self, jump: &Jump) -> [f64; 3] {
         let [mut early, _, mut late] = jump.landing(&self.trial.t_s);
+        let v = &self.velocity.v_mps;
         for &(i, w) in &self.other_side {
             if i + 1 == jump.index {
-                early = w;
+                // The sample before is on the jump's far side as likely as
+                // its alternative is, unless the encoder already put it
+                // there (a rest it reads before the stop the lines place).
+                early = if v[i] == v[jump.index] { 1.0 - w } else { w };
             } else if i == jump.index {
                 late = w;
             }
