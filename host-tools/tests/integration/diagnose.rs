@@ -347,13 +347,12 @@ fn spread_alone_with_friction_at_rest_withdrawn_at_a_rigs_rate_is_none() {
     spread_alone_is_none_on("liver1_journal", 1, sensor, rig);
 }
 
-/// The skin phantom read at 1 kHz by a 3 mN load cell: its damping (15
+/// The skin phantom read at 1 kHz by a 3 mN load cell: its damping (4–17
 /// times liver's) turns the velocity's reading error, an encoder step
 /// over a 20 ms window, into 5 mN of the friction law's force, more than
-/// the load cell's noise. A trial whose strokes the right law fits to that
-/// still places its own ρ; judged against the load cell's noise alone it
-/// did not, kept the tissue's, 1.3 mm off its relaxed surface, and
-/// left 15–40 mN along its strokes.
+/// the load cell's noise. A trial whose strokes the right law fits to
+/// that places its own ρ (the tissue's lies 1.3 mm off one trial's
+/// relaxed surface, and leaves 15–40 mN along its strokes).
 #[test]
 fn spread_alone_on_skin_read_at_1_khz_is_none() {
     let (sensor, rig) = a_rigs_spread(ProtocolKind::Paper, (1000.0, 0.003), 0.003);
@@ -362,9 +361,9 @@ fn spread_alone_on_skin_read_at_1_khz_is_none() {
 
 /// The skin phantom at 250 Hz: a stroke stopping at 20 mm/s 44 µs after
 /// a sample (±48 µs) at which the encoder already reads the rest (within
-/// half a step: 24 µs of travel). The rest starts there by the encoder,
-/// and the stop's own odds for that sample offered the rest again as its
-/// alternative: a newton and a tenth off where it was still cutting.
+/// half a step: 24 µs of travel). The rest starts there by the encoder;
+/// the sample's alternative is the velocity before the stop, and the
+/// force (still cutting, a newton above the rest's) settles it.
 #[test]
 fn spread_alone_on_skin_stopping_at_speed_is_none() {
     let (sensor, rig) = a_rigs_spread(ProtocolKind::Paper, (250.0, 0.003), 0.003);
@@ -373,9 +372,9 @@ fn spread_alone_on_skin_stopping_at_speed_is_none() {
 
 /// Liver by eq. 3 on insert–dwell–withdraw at 100 Hz with a 3 mN load
 /// cell: a stop the force puts on the sliding side (the encoder read the
-/// rest a sample before the stop the lines place) still carried the
-/// first dwell's held level in full, which the trial's own dwell — twice
-/// the nominal's — scaled into a newton on that sample.
+/// rest a sample before the stop the lines place) holds the first
+/// dwell's level only as likely as it is at rest, so the trial's own
+/// dwell — twice the nominal's — does not scale it into a newton.
 #[test]
 fn spread_alone_on_a_stop_the_force_puts_before_the_dwell_is_none() {
     let (sensor, rig) = a_rigs_spread(ProtocolKind::InsertDwellWithdraw, (100.0, 0.003), 0.003);

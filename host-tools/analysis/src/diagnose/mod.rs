@@ -239,9 +239,13 @@ fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
     };
     // Only where the nominal holds: a dwell's first samples can still be
     // sliding by the encoder (a stage easing to a stop), and there the
-    // trial's own friction and cutting answer; a sample the force put on
-    // the sliding side of the stop holds as little as it is likely to be
-    // at rest.
+    // trial's own friction and cutting answer; a sample at rest by the
+    // encoder whose alternative is sliding (a stop the lines place after
+    // it) holds as much as it is likely to be at rest. (Its parts are
+    // already that mixture of both sides: the column is then the rest's
+    // share of it, not the rest's own level, which the parts do not keep.
+    // A sample sliding by the encoder is not at rest here whatever its
+    // alternative.)
     let at_rest = |i: usize| p.velocity.v_mps[i].abs() < p.params.half_band_mps;
     let mut resting = vec![1.0; p.trial.len()];
     for &(i, w) in &p.other_side {

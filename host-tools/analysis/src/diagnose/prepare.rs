@@ -210,12 +210,27 @@ impl Prepared {
     pub fn landing(&self, jump: &Jump) -> [f64; 3] {
         let [mut early, _, mut late] = jump.landing(&self.trial.t_s);
         let v = &self.velocity.v_mps;
+        // Whether the alternative velocity offered for sample `i` is the
+        // jump's far side (it differs from the sample's own by the jump),
+        // or its near side (by minus the jump: the encoder already read
+        // the rest at the sample before the stop the lines place). By the
+        // jump's size, not by equality: in the tissue's frame each
+        // sample's velocity is less the tissue's at its own time.
+        let offers_far_side = |i: usize| {
+            self.velocity
+                .uncertain
+                .iter()
+                .find(|u| u.0 == i)
+                .is_none_or(|u| {
+                    let d = u.1 - v[i];
+                    (d - jump.dv_mps).abs() <= (d + jump.dv_mps).abs()
+                })
+        };
         for &(i, w) in &self.other_side {
             if i + 1 == jump.index {
-                // The sample before is on the jump's far side as likely as
-                // its alternative is, unless the encoder already put it
-                // there (a rest it reads before the stop the lines place).
-                early = if v[i] == v[jump.index] { 1.0 - w } else { w };
+                // On the far side as likely as its alternative is, if that
+                // is the far side.
+                early = if offers_far_side(i) { w } else { 1.0 - w };
             } else if i == jump.index {
                 late = w;
             }

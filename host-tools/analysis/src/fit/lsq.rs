@@ -44,11 +44,11 @@ impl<const N: usize> Lsq<N> {
         self.yy += y * y;
     }
 
-    /// Rows all at once, every term of each summed, zeros too: the same
-    /// sums as [`Self::add`] (a zero term adds an exact zero to a sum
-    /// that starts at +0), on copies held through the loop, which the
-    /// compiler keeps out of memory where `add` stores them a row at a
-    /// time. For short rows with few zeros.
+    /// Rows all at once, every term of each summed, zeros too: for finite
+    /// rows the same sums as [`Self::add`] (a zero term adds an exact zero
+    /// to a sum that starts at +0), on copies held through the loop,
+    /// which the compiler keeps out of memory where `add` stores them a
+    /// row at a time. For short rows with few zeros.
     pub fn add_all(&mut self, rows: impl Iterator<Item = ([f64; N], f64)>) {
         let (mut ata, mut aty, mut yy) = (self.ata, self.aty, self.yy);
         for (phi, y) in rows {
@@ -204,7 +204,8 @@ mod tests {
     }
 
     /// `add_all` is a faster `add`, not another sum: bit for bit the same
-    /// normal equations on rows with zeros, negative terms and weights.
+    /// normal equations on rows with zeros (of either sign) and negative
+    /// terms.
     #[test]
     fn all_rows_at_once_sum_as_one_at_a_time() {
         let rows: Vec<([f64; 4], f64)> = (0..50)
@@ -216,7 +217,11 @@ mod tests {
                         zero_or(k % 3 != 0, x.sin()),
                         zero_or(k % 2 == 0, -x),
                         1.0 / 3.0,
-                        zero_or(k % 5 < 2, x * x * 1e-3),
+                        if k % 7 == 0 {
+                            -0.0
+                        } else {
+                            zero_or(k % 5 < 2, x * x * 1e-3)
+                        },
                     ],
                     (0.3 * x).cos() - 0.1,
                 )

@@ -199,7 +199,7 @@ fn noise(f: &[f64]) -> f64 {
 }
 
 /// The capsule puncture: the first of `falls` (below 60 % of the running
-/// peak, or by a tenth of it and [`FAST_FALL_NOISE_SD`] within three samples —
+/// peak, or by a tenth of it and [`FAST_FALL_NOISE_SD`] noise sd within three samples —
 /// only the latter for [`Falls::Sudden`]; the peak well above noise) with
 /// the needle further in than at the peak — a force that falls at rest (a tissue relaxing through a dwell,
 /// cutting stopping with the needle) is no puncture, and neither is a
@@ -213,7 +213,7 @@ fn find_puncture(f: &[f64], x: &[f64], noise_n: f64, falls: Falls) -> Option<(us
             peak = i;
         }
         // Fallen far, or fallen fast: a tenth of the peak, and
-        // FAST_FALL_NOISE_SD, within three samples. A membrane over stiff tissue
+        // FAST_FALL_NOISE_SD noise sd, within three samples. A membrane over stiff tissue
         // gives way to 60–80 % of its peak, and a capsule whose cutting
         // force lies near its puncture force (the paper's spread, 2.30 ±
         // 0.83 N and 0.94 ± 0.36 N, puts them within 10 % of each other
@@ -964,10 +964,10 @@ fn both_ways(
     // stops, whose velocity this fit reads roughly, are no such effect.
     // The floor is what the right law leaves: the load cell's noise, and
     // the velocity's reading error through the law's damping b·l — for
-    // liver a tenth of a mN, for the skin phantom's (15 times liver's)
+    // liver a tenth of a mN, for the skin phantom's (4–17 times liver's)
     // read at 1 kHz on a 1 µm encoder 5 mN, more than a quiet load
     // cell's noise.
-    let damping_ms = track
+    let damping_sq_n2 = track
         .iter()
         .map(|&(x, v, _)| {
             let b = if v > 0.0 { bp } else { bn };
@@ -975,7 +975,7 @@ fn both_ways(
         })
         .sum::<f64>()
         / track.len().max(1) as f64;
-    let floor_n = (noise_n * noise_n + damping_ms).sqrt();
+    let floor_n = (noise_n * noise_n + damping_sq_n2).sqrt();
     let bulk_sd_n = median(residual.iter().map(|r| r.abs()).collect()) / 0.6745;
     let fits = bulk_sd_n <= 1.5 * floor_n;
     let rho_sd = fits
@@ -1734,8 +1734,7 @@ mod tests {
     /// sample, 16 sd of a 12 mN load cell; the shaft's friction then
     /// takes the force past the capsule's peak, and 10 mm on the needle
     /// leaves the far side, the force falling to 0.2 N. The puncture is
-    /// the capsule's fall (with twenty sd asked of a fall it was the
-    /// exit, 0.93 N).
+    /// the capsule's fall, not the exit after the higher force.
     #[test]
     fn a_capsule_falling_by_sixteen_noise_sd_onto_its_cutting_is_a_puncture() {
         let (rate, v_mps, contact_m) = (250.0, 0.002, 0.005);
