@@ -139,9 +139,12 @@ const SLIDING_MPS: f64 = 0.0005;
 /// middle of the paper's x_s1 < x_s3 < x_s2, the library's own value.
 pub const RELAXATION_PRIOR: f64 = 0.5;
 
+/// Half-width of [`velocity`]'s window, s.
+const VELOCITY_HALF_WINDOW_S: f64 = 0.01;
+
 /// Velocity by central differences over ±10 ms.
 pub fn velocity(trial: &Trial) -> Vec<f64> {
-    velocity_over(trial, 0.01)
+    velocity_over(trial, VELOCITY_HALF_WINDOW_S)
 }
 
 /// How far [`velocity`]'s reading may be off by the encoder alone: each
@@ -149,8 +152,18 @@ pub fn velocity(trial: &Trial) -> Vec<f64> {
 /// difference step/√6 over the window's span, m/s.
 fn velocity_read_sd_mps(trial: &Trial) -> f64 {
     let rate_hz = trial.rate_hz();
-    let half = ((0.01 * rate_hz).round()).max(1.0);
-    super::predict::encoder_step_m(trial) / 6f64.sqrt() / (2.0 * half / rate_hz)
+    let span_s = 2.0 * samples_in(VELOCITY_HALF_WINDOW_S, rate_hz) as f64 / rate_hz;
+    super::predict::encoder_step_m(trial) / 6f64.sqrt() / span_s
+}
+
+/// The samples `s` seconds span at `rate_hz`: at least one unless `s` is
+/// zero.
+fn samples_in(s: f64, rate_hz: f64) -> usize {
+    if s > 0.0 {
+        ((s * rate_hz).round() as usize).max(1)
+    } else {
+        0
+    }
 }
 
 /// Velocity by central differences over ±`half_window_s` (at least one
@@ -163,14 +176,8 @@ pub fn velocity_over(trial: &Trial, half_window_s: f64) -> Vec<f64> {
 /// after it (each side at least one sample unless zero).
 pub fn velocity_between(trial: &Trial, back_s: f64, ahead_s: f64) -> Vec<f64> {
     let n = trial.len();
-    let samples = |s: f64| {
-        if s > 0.0 {
-            ((s * trial.rate_hz()).round() as usize).max(1)
-        } else {
-            0
-        }
-    };
-    let (back, ahead) = (samples(back_s), samples(ahead_s));
+    let rate_hz = trial.rate_hz();
+    let (back, ahead) = (samples_in(back_s, rate_hz), samples_in(ahead_s, rate_hz));
     (0..n)
         .map(|i| {
             let (a, b) = (i.saturating_sub(back), (i + ahead).min(n - 1));
@@ -1698,6 +1705,23 @@ mod tests {
         assert!((a - b).abs() < 0.05, "{a} vs {b} (the peak {top})");
     }
 
+    /// In air, then liver 1's capsule (eq. 4 from `contact_m`) up to
+    /// `peak_n`, the needle advancing at `v_mps` read at `rate` Hz: the
+    /// (position, force) samples and where the needle is next.
+    fn liver_capsule_to(
+        peak_n: f64,
+        (rate, v_mps, contact_m): (f64, f64, f64),
+    ) -> (Vec<(f64, f64)>, f64) {
+        let mut at: Vec<(f64, f64)> = Vec::new();
+        let mut x: f64 = 0.0;
+        while at.last().is_none_or(|s| s.1 < peak_n) {
+            let u = (x - contact_m).max(0.0);
+            at.push((x, 48.0 * u + 5200.0 * u * u));
+            x += v_mps / rate;
+        }
+        (at, x)
+    }
+
     /// A capsule giving way from 2.3 N to 2.0 N in one sample, then
     /// cutting that grows with depth past the capsule's peak before the
     /// needle stops: the puncture is the capsule's sudden fall, not the
@@ -1705,14 +1729,7 @@ mod tests {
     #[test]
     fn a_capsule_giving_way_to_near_its_cutting_force_is_a_puncture() {
         let (rate, v_mps, contact_m) = (500.0, 0.002, 0.005);
-        let mut at: Vec<(f64, f64)> = Vec::new();
-        let mut x: f64 = 0.0;
-        // In air, then the capsule (liver 1's curve) to 2.3 N.
-        while at.last().is_none_or(|s| s.1 < 2.3) {
-            let u = (x - contact_m).max(0.0);
-            at.push((x, 48.0 * u + 5200.0 * u * u));
-            x += v_mps / rate;
-        }
+        let (mut at, mut x) = liver_capsule_to(2.3, (rate, v_mps, contact_m));
         let capsule_x_m = at[at.len() - 1].0;
         // Cutting from 2.0 N, growing 60 N/m with depth, for 20 mm.
         while x < capsule_x_m + 0.02 {
@@ -1738,13 +1755,7 @@ mod tests {
     #[test]
     fn a_capsule_falling_by_sixteen_noise_sd_onto_its_cutting_is_a_puncture() {
         let (rate, v_mps, contact_m) = (250.0, 0.002, 0.005);
-        let mut at: Vec<(f64, f64)> = Vec::new();
-        let mut x: f64 = 0.0;
-        while at.last().is_none_or(|s| s.1 < 0.72) {
-            let u = (x - contact_m).max(0.0);
-            at.push((x, 48.0 * u + 5200.0 * u * u));
-            x += v_mps / rate;
-        }
+        let (mut at, mut x) = liver_capsule_to(0.72, (rate, v_mps, contact_m));
         let capsule_x_m = at[at.len() - 1].0;
         while x < capsule_x_m + 0.01 {
             at.push((x, 0.53 + 40.0 * (x - capsule_x_m)));
