@@ -142,7 +142,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         ],
         linear: &["mass_kg", "mass_smooth_kg"],
         columns: inertia,
-        on_grid: None,
+        on_grid: Some(inertia_on_grid),
         grid_params: mount_params,
         backfit: Backfit::Force,
     },
@@ -735,6 +735,31 @@ const FALL_ADVANCE_M: f64 = 0.000_2;
 /// smooth rest, the second difference of position over ±10 ms with the
 /// jumps' kinks taken out (else every jump is also a 20 ms triangle).
 fn inertia(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
+    let mut cols = Vec::new();
+    inertia_on_grid(p, &[g], &mut |_, c| cols = c);
+    cols
+}
+
+/// [`inertia`] at each of `grid`'s values, the two accelerations made
+/// once for all the mounts they are felt through.
+fn inertia_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize, Columns)) {
+    let rate = p.trial.rate_hz();
+    let (step, smooth) = accelerations(p);
+    for (gi, &g) in grid.iter().enumerate() {
+        each(
+            gi,
+            match resonance_at(g) {
+                Some(mode) => ring([step.clone(), smooth.clone()], mode, rate).into(),
+                None => vec![lag(step.clone(), g, rate), lag(smooth.clone(), g, rate)],
+            },
+        );
+    }
+}
+
+/// The needle's acceleration as [`inertia`] splits it: the jumps of its
+/// velocity, each on the samples it may have landed on, and the smooth
+/// rest.
+fn accelerations(p: &Prepared) -> (Vec<f64>, Vec<f64>) {
     let (t, x) = (&p.trial.t_s, &p.trial.x_m);
     let n = x.len();
     let rate = p.trial.rate_hz();
@@ -763,10 +788,7 @@ fn inertia(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
             }
         })
         .collect();
-    match resonance_at(g) {
-        Some(mode) => vec![ring(step, mode, rate), ring(smooth, mode, rate)],
-        None => vec![lag(step, g, rate), lag(smooth, g, rate)],
-    }
+    (step, smooth)
 }
 
 /// A compliant mount's mode at grid value `g` of [`inertia`] (from 1 on):
@@ -787,27 +809,39 @@ fn mount_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
     }
 }
 
-/// `signal` (an acceleration) as the load cell feels it through a mount
-/// ringing at `hz` with damping ratio `zeta`: the mount's deflection
+/// `signals` (accelerations) as the load cell feels them through a
+/// mount ringing at `hz` with damping ratio `zeta`: the mount's deflection
 /// y'' + 2ζω·y' + ω²·y = ω²·a, integrated semi-implicitly in sub-steps
 /// of a tenth of a radian (stable at any rate; a trial without one,
-/// too short to have a rate, is left as it is).
-fn ring(mut signal: Vec<f64>, (hz, zeta): (f64, f64), rate_hz: f64) -> Vec<f64> {
+/// too short to have a rate, is left as it is). The signals are stepped
+/// side by side: each step waits on the one before, and two such chains
+/// run in the time of one.
+fn ring<const K: usize>(
+    mut signals: [Vec<f64>; K],
+    (hz, zeta): (f64, f64),
+    rate_hz: f64,
+) -> [Vec<f64>; K] {
     if !(rate_hz.is_finite() && rate_hz > 0.0) {
-        return signal;
+        return signals;
     }
     let w = std::f64::consts::TAU * hz;
     let steps = ((w / rate_hz / 0.1).ceil() as usize).max(1);
     let h = 1.0 / (rate_hz * steps as f64);
-    let (mut y, mut dy) = (0.0, 0.0);
-    for s in &mut signal {
+    let (mut y, mut dy) = ([0.0; K], [0.0; K]);
+    let n = signals.iter().map(Vec::len).min().unwrap_or(0);
+    for i in 0..n {
+        let a = signals.each_ref().map(|s| s[i]);
         for _ in 0..steps {
-            dy += (w * w * (*s - y) - 2.0 * zeta * w * dy) * h;
-            y += dy * h;
+            for k in 0..K {
+                dy[k] += (w * w * (a[k] - y[k]) - 2.0 * zeta * w * dy[k]) * h;
+                y[k] += dy[k] * h;
+            }
         }
-        *s = y;
+        for k in 0..K {
+            signals[k][i] = y[k];
+        }
     }
-    signal
+    signals
 }
 
 /// First-order lag of time constant `tau_s` (none at 0).
@@ -1087,7 +1121,7 @@ mod tests {
     #[test]
     fn a_mount_rings_at_its_mode_and_settles_on_the_acceleration() {
         let rate_hz = 1000.0;
-        let rung = ring(vec![1.0; 4000], (10.0, 0.1), rate_hz);
+        let [rung] = ring([vec![1.0; 4000]], (10.0, 0.1), rate_hz);
         let peak = rung.iter().copied().fold(f64::MIN, f64::max);
         let peak_at = rung.iter().position(|&y| y == peak).unwrap();
         assert!((peak - 1.73).abs() < 0.02, "{peak}");
@@ -1097,6 +1131,6 @@ mod tests {
             "{peak_at}"
         );
         assert!((rung[3999] - 1.0).abs() < 1e-3, "{}", rung[3999]);
-        assert_eq!(ring(vec![1.0, 2.0], (10.0, 0.1), 0.0), vec![1.0, 2.0]);
+        assert_eq!(ring([vec![1.0, 2.0]], (10.0, 0.1), 0.0), [vec![1.0, 2.0]]);
     }
 }
