@@ -638,25 +638,34 @@ fn grid_starts(
             .map(|a| a * 1e-3)
             .into_iter()
             .filter_map(|amplitude_m| {
-                (0..GRID_PHASES)
-                    .map(|k| {
-                        let (s, c) = (TAU * k as f64 / GRID_PHASES as f64).sin_cos();
-                        let shift = TissueShift {
-                            omega_rad_s: omega,
-                            t_ref_s,
-                            coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
-                            wander: PhaseWander::NONE,
-                        };
-                        // Squared: far from the displacement every sample is off
-                        // by more than the noise, and Huber's loss would be an
-                        // absolute one, which favours moving the tissue least.
-                        let e: f64 = residuals(p, params, &shift, samples, &mut harmonics)
-                            .iter()
-                            .map(|e| e * e)
-                            .sum();
-                        (e, shift)
-                    })
-                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                let mut at_phase = |k: usize| {
+                    let (s, c) = (TAU * k as f64 / GRID_PHASES as f64).sin_cos();
+                    let shift = TissueShift {
+                        omega_rad_s: omega,
+                        t_ref_s,
+                        coeffs_m: [amplitude_m * c, amplitude_m * s, 0.0, 0.0],
+                        wander: PhaseWander::NONE,
+                    };
+                    // Squared: far from the displacement every sample is off
+                    // by more than the noise, and Huber's loss would be an
+                    // absolute one, which favours moving the tissue least.
+                    let e: f64 = residuals(p, params, &shift, samples, &mut harmonics)
+                        .iter()
+                        .map(|e| e * e)
+                        .sum();
+                    (e, shift)
+                };
+                // Every other phase, then the two beside the best of those.
+                let least = |a: &(f64, TissueShift), b: &(f64, TissueShift)| a.0.total_cmp(&b.0);
+                let (best_k, best) = (0..GRID_PHASES)
+                    .step_by(2)
+                    .map(|k| (k, at_phase(k)))
+                    .min_by(|a, b| least(&a.1, &b.1))?;
+                [best_k + 1, best_k + GRID_PHASES - 1]
+                    .map(|k| at_phase(k % GRID_PHASES))
+                    .into_iter()
+                    .chain([best])
+                    .min_by(least)
             })
             .collect();
     per_amplitude.sort_by(|a, b| a.0.total_cmp(&b.0));
