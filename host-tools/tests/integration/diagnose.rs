@@ -582,10 +582,14 @@ fn stribecks_raise_at_low_speed_is_taken_by_its_own_law() {
 }
 
 /// The holder on a compliant mount (the literature form: ringing at
-/// 8 Hz, damping ratio 0.3) on the paper's protocol (250 Hz, 3 mN, each
-/// trial 15 % its own, seed 2): every stop and reversal rings, which a
-/// mount that only spreads the acceleration over a time constant cannot
-/// follow. Named, with the mode found near its frequency.
+/// 25 Hz, damping ratio 0.2), between the load cell and the needle: the
+/// load cell reads the tissue's force through it, so each puncture's
+/// fall overshoots by half the fall and rings, as every stop and
+/// reversal does. Named on the paper's protocol (250 Hz, 3 mN, each trial
+/// 15 % its own, seed 2) with the mode found within a third of an octave
+/// and the tissue's force passed through it whole (its gain near 1), and
+/// on insert–dwell–withdraw as rigs record it (100 Hz, 12 mN, seed 1),
+/// where the fall's ring lies on a sample or two.
 #[test]
 fn a_holder_on_a_ringing_mount_is_named() {
     let out = diagnosis_on_the_papers_rig(("holder_inertia", Form::Literature, 2));
@@ -593,7 +597,17 @@ fn a_holder_on_a_ringing_mount_is_named() {
     assert_eq!(v["effect"], "holder_inertia", "{v}");
     let mount = candidate(&out, "holder_inertia");
     let hz = num(&mount["params"]["mount_hz"]);
-    assert!((5.0..=10.0).contains(&hz), "{mount}");
+    assert!((20.0..=32.0).contains(&hz), "{mount}");
+    let gain = num(&mount["params"]["mount_gain"]);
+    assert!((0.7..=1.3).contains(&gain), "{mount}");
+    let (before, after) = heldout_before_after(&out);
+    assert!(after <= 0.6 * before, "{before} → {after} N");
+    let out = diagnosis_as_rigs_record(("holder_inertia", Form::Literature, 1));
+    assert_eq!(
+        out["verdict"]["effect"], "holder_inertia",
+        "{}",
+        out["verdict"]
+    );
 }
 
 /// Elasto-plastic presliding on the paper's protocol (250 Hz, 3 mN,

@@ -138,9 +138,11 @@ pub const CANDIDATES: [Candidate; 8] = [
         effect: "holder_inertia",
         grid_name: "mount",
         grid: &[
-            0.0, 0.003, 0.01, 0.03, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0,
+            0.0, 0.003, 0.01, 0.03, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0,
+            13.0, 14.0, 15.0, 16.0, 17.0, 18.0, 19.0, 20.0, 21.0, 22.0, 23.0, 24.0, 25.0, 26.0,
+            27.0, 28.0, 29.0, 30.0,
         ],
-        linear: &["mass_kg", "mass_smooth_kg"],
+        linear: &["mass_kg", "mass_smooth_kg", "mount_gain"],
         columns: inertia,
         on_grid: Some(inertia_on_grid),
         grid_params: mount_params,
@@ -733,27 +735,75 @@ const FALL_ADVANCE_M: f64 = 0.000_2;
 /// jumps of the needle's velocity (a start or stop is an impulse m·Δv,
 /// which a sampled load cell shows on the first sample after it), and the
 /// smooth rest, the second difference of position over ±10 ms with the
-/// jumps' kinks taken out (else every jump is also a 20 ms triangle).
+/// jumps' kinks taken out (else every jump is also a 20 ms triangle);
+/// and, through a ringing mount, the tissue's own force less itself
+/// ([`tissue_force_n`]; zero for a drive's lag, which passes it as it is).
 fn inertia(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
     let mut cols = Vec::new();
     inertia_on_grid(p, &[g], &mut |_, c| cols = c);
     cols
 }
 
-/// [`inertia`] at each of `grid`'s values, the two accelerations made
-/// once for all the mounts they are felt through.
+/// [`inertia`] at each of `grid`'s values, the two accelerations and the
+/// tissue's force made once for all the mounts they are felt through.
 fn inertia_on_grid(p: &Prepared, grid: &[f64], each: &mut dyn FnMut(usize, Columns)) {
     let rate = p.trial.rate_hz();
     let (step, smooth) = accelerations(p);
+    let tissue_n = tissue_force_n(p);
     for (gi, &g) in grid.iter().enumerate() {
         each(
             gi,
             match resonance_at(g) {
-                Some(mode) => ring([step.clone(), smooth.clone()], mode, rate).into(),
-                None => vec![lag(step.clone(), g, rate), lag(smooth.clone(), g, rate)],
+                Some(mode) => {
+                    let signals = [step.clone(), smooth.clone(), tissue_n.clone()];
+                    let holds = [Hold::Step, Hold::Step, Hold::Ramp];
+                    let [step, smooth, mut mounted] = ring(signals, mode, rate, holds);
+                    for (m, f) in mounted.iter_mut().zip(&p.fitted_n) {
+                        *m -= f;
+                    }
+                    vec![step, smooth, mounted]
+                }
+                None => vec![
+                    lag(step.clone(), g, rate),
+                    lag(smooth.clone(), g, rate),
+                    vec![0.0; p.trial.len()],
+                ],
             },
         );
     }
+}
+
+/// The tissue's force as a ringing mount passes it to the load cell
+/// ([`inertia`]'s third column, that force through the mount less the
+/// nominal): the holder's mass hangs on the mount between the load cell
+/// and the needle, so the load cell reads the tissue's force through the
+/// mount as it reads the holder's inertia (m·ÿ + c·ẏ + k·y = F + m·a for
+/// the mount's deflection y; the load cell reads k·y), and a force that
+/// falls at once, a puncture's, rings. The force is the nominal at its
+/// best for the trial ([`Prepared::fitted_n`]), taken to change evenly
+/// between samples ([`Hold::Ramp`]): a fall lies anywhere between two
+/// samples, and the mount's mean response to a fall at a time drawn
+/// evenly over the interval is its response to that ramp. The mount
+/// takes a quarter of its period to pass a fall on, and the nominal's
+/// loading curve, fitted to the measured force, runs on until the
+/// measured force has fallen far: the tissue's force fell before the
+/// first sample after the peak
+/// ([`crate::fit::trial::TrialFit::puncture_index`]) that lies three
+/// noise sd below that curve.
+fn tissue_force_n(p: &Prepared) -> Vec<f64> {
+    let mut tissue_n = p.fitted_n.clone();
+    let n = p.trial.len();
+    let peak = p.geometry.puncture_index;
+    let loaded = (peak + 1..n).find(|&i| p.phase[i] != LOADING);
+    if let Some(fallen) = loaded {
+        let below = |i: &usize| p.trial.f_n[*i] < p.fitted_n[*i] - 3.0 * p.noise_n;
+        let fell = (peak + 1..fallen).find(below).unwrap_or(fallen);
+        let fallen_n = tissue_n[fallen];
+        for f in &mut tissue_n[fell..fallen] {
+            *f = fallen_n;
+        }
+    }
+    tissue_n
 }
 
 /// The needle's acceleration as [`inertia`] splits it: the jumps of its
@@ -792,14 +842,18 @@ fn accelerations(p: &Prepared) -> (Vec<f64>, Vec<f64>) {
 }
 
 /// A compliant mount's mode at grid value `g` of [`inertia`] (from 1 on):
-/// 5–40 Hz, a benchtop stage's and holder's first modes, lightly damped
-/// (a bolted joint) or well damped (an elastomer): (Hz, damping ratio).
-/// `None` below 1: `g` is a first-order lag in s.
+/// 5–40 Hz, a benchtop stage's and holder's first modes, a third of an
+/// octave apart (a ring a sixth of an octave off drifts by a tenth of a
+/// cycle over the first cycle, in which a damped ring is most of its
+/// size), lightly damped (a bolted joint), less so, or well damped (an
+/// elastomer): (Hz, damping ratio). `None` below 1: `g` is a first-order
+/// lag in s.
 fn resonance_at(g: f64) -> Option<(f64, f64)> {
-    const HZ: [f64; 4] = [5.0, 10.0, 20.0, 40.0];
-    const ZETA: [f64; 2] = [0.1, 0.3];
-    let k = (g >= 1.0).then(|| (g as usize - 1).min(HZ.len() * ZETA.len() - 1))?;
-    Some((HZ[k % HZ.len()], ZETA[k / HZ.len()]))
+    const THIRDS_OF_OCTAVE: usize = 10;
+    const ZETA: [f64; 3] = [0.05, 0.15, 0.4];
+    let k = (g >= 1.0).then(|| (g as usize - 1).min(THIRDS_OF_OCTAVE * ZETA.len() - 1))?;
+    let hz = 5.0 * 2f64.powf((k % THIRDS_OF_OCTAVE) as f64 / 3.0);
+    Some((hz, ZETA[k / THIRDS_OF_OCTAVE]))
 }
 
 fn mount_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
@@ -809,39 +863,102 @@ fn mount_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
     }
 }
 
-/// `signals` (accelerations) as the load cell feels them through a
-/// mount ringing at `hz` with damping ratio `zeta`: the mount's deflection
-/// y'' + 2ζω·y' + ω²·y = ω²·a, integrated semi-implicitly in sub-steps
-/// of a tenth of a radian (stable at any rate; a trial without one,
-/// too short to have a rate, is left as it is). The signals are stepped
-/// side by side: each step waits on the one before, and two such chains
-/// run in the time of one.
+/// How a sampled signal runs between its samples.
+#[derive(Clone, Copy, PartialEq)]
+enum Hold {
+    /// At a sample's value over the interval up to it (an acceleration's
+    /// pulse, put on the sample after it).
+    Step,
+    /// Straight from one sample's value to the next.
+    Ramp,
+}
+
+/// `signals` as the load cell feels them through a mount ringing at `hz`
+/// with damping ratio `zeta`: the mount's deflection
+/// y'' + 2ζω·y' + ω²·y = ω²·a, stepped a sample at a time by its exact
+/// solution over the mean sample interval for the way each signal runs
+/// between samples ([`Mount`]; a trial without a rate, too short to have
+/// one, is left as it is). The signals are stepped side by side: each
+/// step waits on the one before, and such chains run together in the time
+/// of one.
 fn ring<const K: usize>(
     mut signals: [Vec<f64>; K],
-    (hz, zeta): (f64, f64),
+    mode: (f64, f64),
     rate_hz: f64,
+    holds: [Hold; K],
 ) -> [Vec<f64>; K] {
     if !(rate_hz.is_finite() && rate_hz > 0.0) {
         return signals;
     }
-    let w = std::f64::consts::TAU * hz;
-    let steps = ((w / rate_hz / 0.1).ceil() as usize).max(1);
-    let h = 1.0 / (rate_hz * steps as f64);
+    let mount = Mount::over(mode, 1.0 / rate_hz);
     let (mut y, mut dy) = ([0.0; K], [0.0; K]);
     let n = signals.iter().map(Vec::len).min().unwrap_or(0);
+    let mut before = signals
+        .each_ref()
+        .map(|s| s.first().copied().unwrap_or(0.0));
+    let Mount { phi, start, end } = mount;
     for i in 0..n {
-        let a = signals.each_ref().map(|s| s[i]);
-        for _ in 0..steps {
-            for k in 0..K {
-                dy[k] += (w * w * (a[k] - y[k]) - 2.0 * zeta * w * dy[k]) * h;
-                y[k] += dy[k] * h;
-            }
-        }
-        for k in 0..K {
-            signals[k][i] = y[k];
+        for (k, signal) in signals.iter_mut().enumerate() {
+            let now = signal[i];
+            let from = if holds[k] == Hold::Step {
+                now
+            } else {
+                before[k]
+            };
+            let next_y = phi[0][0] * y[k] + phi[0][1] * dy[k] + start[0] * from + end[0] * now;
+            dy[k] = phi[1][0] * y[k] + phi[1][1] * dy[k] + start[1] * from + end[1] * now;
+            y[k] = next_y;
+            before[k] = now;
+            signal[i] = y[k];
         }
     }
     signals
+}
+
+/// One sample interval of a mount's ring ([`ring`]), solved once: the
+/// state (y, y') after it is Φ·(y, y') + s·a₀ + e·a₁ for an input running
+/// straight from a₀ to a₁ (a held input is a₀ = a₁). Φ, s and e are the
+/// responses to each unit start, found by integrating the mount's
+/// equation over the interval in 64 fourth-order Runge–Kutta steps (a
+/// tenth of a radian at most at 40 Hz and 100 Hz: exact to rounding).
+struct Mount {
+    phi: [[f64; 2]; 2],
+    start: [f64; 2],
+    end: [f64; 2],
+}
+
+impl Mount {
+    fn over((hz, zeta): (f64, f64), interval_s: f64) -> Self {
+        let w = std::f64::consts::TAU * hz;
+        const STEPS: usize = 64;
+        let h = interval_s / STEPS as f64;
+        // The state after the interval from `state`, the input running
+        // from `a0` to `a1`.
+        let solve = |mut state: [f64; 2], (a0, a1): (f64, f64)| {
+            let slope = |[y, dy]: [f64; 2], at: f64| {
+                let a = a0 + (a1 - a0) * at / interval_s;
+                [dy, w * w * (a - y) - 2.0 * zeta * w * dy]
+            };
+            for j in 0..STEPS {
+                let at = j as f64 * h;
+                let add = |s: [f64; 2], d: [f64; 2], by: f64| [s[0] + by * d[0], s[1] + by * d[1]];
+                let k1 = slope(state, at);
+                let k2 = slope(add(state, k1, h / 2.0), at + h / 2.0);
+                let k3 = slope(add(state, k2, h / 2.0), at + h / 2.0);
+                let k4 = slope(add(state, k3, h), at + h);
+                for d in 0..2 {
+                    state[d] += h / 6.0 * (k1[d] + 2.0 * k2[d] + 2.0 * k3[d] + k4[d]);
+                }
+            }
+            state
+        };
+        let (from_y, from_dy) = (solve([1.0, 0.0], (0.0, 0.0)), solve([0.0, 1.0], (0.0, 0.0)));
+        Self {
+            phi: [[from_y[0], from_dy[0]], [from_y[1], from_dy[1]]],
+            start: solve([0.0; 2], (1.0, 0.0)),
+            end: solve([0.0; 2], (0.0, 1.0)),
+        }
+    }
 }
 
 /// First-order lag of time constant `tau_s` (none at 0).
@@ -1106,10 +1223,11 @@ mod tests {
     #[test]
     fn grid_values_name_the_law_they_stand_for() {
         assert_eq!(resonance_at(0.03), None);
-        assert_eq!(resonance_at(1.0), Some((5.0, 0.1)));
-        assert_eq!(resonance_at(4.0), Some((40.0, 0.1)));
-        assert_eq!(resonance_at(5.0), Some((5.0, 0.3)));
-        assert_eq!(resonance_at(8.0), Some((40.0, 0.3)));
+        assert_eq!(resonance_at(1.0), Some((5.0, 0.05)));
+        assert_eq!(resonance_at(4.0), Some((10.0, 0.05)));
+        assert_eq!(resonance_at(10.0), Some((40.0, 0.05)));
+        assert_eq!(resonance_at(11.0), Some((5.0, 0.15)));
+        assert_eq!(resonance_at(30.0), Some((40.0, 0.4)));
         assert_eq!(stribeck_speed_mps(0.5), None);
         assert_eq!(stribeck_speed_mps(1.0), Some(0.00025));
         assert_eq!(stribeck_speed_mps(4.0), Some(0.002));
@@ -1121,7 +1239,7 @@ mod tests {
     #[test]
     fn a_mount_rings_at_its_mode_and_settles_on_the_acceleration() {
         let rate_hz = 1000.0;
-        let [rung] = ring([vec![1.0; 4000]], (10.0, 0.1), rate_hz);
+        let [rung] = ring([vec![1.0; 4000]], (10.0, 0.1), rate_hz, [Hold::Step]);
         let peak = rung.iter().copied().fold(f64::MIN, f64::max);
         let peak_at = rung.iter().position(|&y| y == peak).unwrap();
         assert!((peak - 1.73).abs() < 0.02, "{peak}");
@@ -1131,6 +1249,9 @@ mod tests {
             "{peak_at}"
         );
         assert!((rung[3999] - 1.0).abs() < 1e-3, "{}", rung[3999]);
-        assert_eq!(ring([vec![1.0, 2.0]], (10.0, 0.1), 0.0), [vec![1.0, 2.0]]);
+        assert_eq!(
+            ring([vec![1.0, 2.0]], (10.0, 0.1), 0.0, [Hold::Step]),
+            [vec![1.0, 2.0]]
+        );
     }
 }

@@ -44,7 +44,8 @@ pub enum Form {
     /// presliding with his exponent 2, walls stiffening exponentially
     /// (Fung's collagen), cutting growing with the square root of depth
     /// and loaded again over the first millimetres past the puncture, a
-    /// load cell on a mount ringing at 8 Hz, a drift that accelerates as a
+    /// load cell reading the holder's inertia and the tissue's force
+    /// through a mount ringing at 25 Hz, a drift that accelerates as a
     /// bridge warms up, breathing whose period wanders by ±20 %.
     Literature,
 }
