@@ -633,12 +633,14 @@ fn grid_starts(
 ) -> Vec<TissueShift> {
     let t_ref_s = (p.trial.t_s[0] + p.trial.t_s[p.trial.len() - 1]) / 2.0;
     let mut harmonics = Harmonics::new();
+    // The best phase moves little from one amplitude to the next.
+    let mut guess = None;
     let mut per_amplitude: Vec<(f64, TissueShift)> =
         [0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 2.8, 4.0]
             .map(|a| a * 1e-3)
             .into_iter()
-            .filter_map(|amplitude_m| {
-                let mut at_phase = |k: usize| {
+            .map(|amplitude_m| {
+                let at_phase = |k: usize| {
                     let (s, c) = (TAU * k as f64 / GRID_PHASES as f64).sin_cos();
                     let shift = TissueShift {
                         omega_rad_s: omega,
@@ -655,17 +657,9 @@ fn grid_starts(
                         .sum();
                     (e, shift)
                 };
-                // Every other phase, then the two beside the best of those.
-                let least = |a: &(f64, TissueShift), b: &(f64, TissueShift)| a.0.total_cmp(&b.0);
-                let (best_k, best) = (0..GRID_PHASES)
-                    .step_by(2)
-                    .map(|k| (k, at_phase(k)))
-                    .min_by(|a, b| least(&a.1, &b.1))?;
-                [best_k + 1, best_k + GRID_PHASES - 1]
-                    .map(|k| at_phase(k % GRID_PHASES))
-                    .into_iter()
-                    .chain([best])
-                    .min_by(least)
+                let (k, best) = least_phase(at_phase, guess);
+                guess = Some(k);
+                best
             })
             .collect();
     per_amplitude.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -678,6 +672,62 @@ fn grid_starts(
 
 /// Phases of the start grid: LM finds the phase between them.
 const GRID_PHASES: usize = 16;
+
+/// The grid phase of least error (`at_phase(k)`: its error and shift)
+/// and its index, in a third of the sixteen evaluations: from `guess`
+/// (the best at the amplitude before, which the next moves little from)
+/// it walks downhill a phase at a time; with none, it tries every other
+/// phase, then the two beside the best of those. Where the error over the
+/// phase has one valley this is the least of all sixteen; where it has
+/// two (friction flipping with the tissue's velocity can make a second)
+/// it may be the other's bottom — a start for Levenberg–Marquardt, which
+/// is given several.
+fn least_phase(
+    mut at_phase: impl FnMut(usize) -> (f64, TissueShift),
+    guess: Option<usize>,
+) -> (usize, (f64, TissueShift)) {
+    let beside = |k: usize, by: usize| (k + by) % GRID_PHASES;
+    let mut at = |k: usize| (k, at_phase(k));
+    let Some(k0) = guess else {
+        let mut best = at(0);
+        for k in (2..GRID_PHASES).step_by(2) {
+            let here = at(k);
+            if here.1 .0 < best.1 .0 {
+                best = here;
+            }
+        }
+        let k = best.0;
+        let mut least = best;
+        for here in [at(beside(k, 1)), at(beside(k, GRID_PHASES - 1))] {
+            if here.1 .0 < least.1 .0 {
+                least = here;
+            }
+        }
+        return least;
+    };
+    let mut best = at(k0);
+    let (up, down) = (at(beside(k0, 1)), at(beside(k0, GRID_PHASES - 1)));
+    let (mut next, by) = match (up.1 .0 < best.1 .0, down.1 .0 < best.1 .0) {
+        (false, false) => return best,
+        (true, false) => (up, 1),
+        (false, true) => (down, GRID_PHASES - 1),
+        (true, true) => {
+            if down.1 .0 < up.1 .0 {
+                (down, GRID_PHASES - 1)
+            } else {
+                (up, 1)
+            }
+        }
+    };
+    for _ in 0..GRID_PHASES {
+        if next.1 .0 >= best.1 .0 {
+            break;
+        }
+        best = next;
+        next = at(beside(best.0, by));
+    }
+    best
+}
 
 /// Starts from the grid at one frequency (a round after the first, at
 /// the frequency it found): the force is far from linear in the
@@ -1036,6 +1086,42 @@ pub fn fit_shifts(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The phase of least error is found from any guess where the error
+    /// has one valley over the phase (walking either way round, across
+    /// phase 0), and with no guess; where it has two, the walk stops at
+    /// the bottom of the guess's own.
+    #[test]
+    fn the_least_phase_is_found_downhill_from_any_guess() {
+        let shift = TissueShift {
+            omega_rad_s: 1.0,
+            t_ref_s: 0.0,
+            coeffs_m: [0.0; 4],
+            wander: PhaseWander::NONE,
+        };
+        let around = |k: usize, to: usize| {
+            let d = (k as i64 - to as i64).rem_euclid(GRID_PHASES as i64);
+            d.min(GRID_PHASES as i64 - d) as f64
+        };
+        for bottom in [0, 5, 11, 15] {
+            let valley = |k: usize| (1.0 + around(k, bottom).powi(2), shift);
+            for guess in [None, Some(0), Some(3), Some(8), Some(14)] {
+                let (k, (e, _)) = least_phase(valley, guess);
+                assert_eq!((k, e), (bottom, 1.0), "bottom {bottom}, guess {guess:?}");
+            }
+        }
+        // Valleys at 2 (the deeper) and 10.
+        let two = |k: usize| (around(k, 2).min(around(k, 10) + 0.5), shift);
+        assert_eq!(least_phase(two, Some(9)).0, 10);
+        assert_eq!(least_phase(two, Some(4)).0, 2);
+        let evaluations = std::cell::Cell::new(0);
+        let counted = |k: usize| {
+            evaluations.set(evaluations.get() + 1);
+            (around(k, 7), shift)
+        };
+        least_phase(counted, Some(6));
+        assert!(evaluations.get() <= 5, "{}", evaluations.get());
+    }
 
     /// The candidates are the highest peaks, each between bins by a
     /// parabola, and half of each (a fundamental whose second harmonic is
