@@ -6,7 +6,8 @@
 //!
 //! Each adds its force to the sample's in the order the simulator always
 //! did, so that a dataset is the same, bit for bit, whatever the code's
-//! shape.
+//! shape; the literature form's mount instead passes on the force the
+//! tissue effects made (see `Added::add`).
 
 use std::f64::consts::TAU;
 
@@ -296,8 +297,11 @@ pub(super) struct Added {
 }
 
 impl Added {
-    /// Add each effect's force at this sample to `f_n`, in `effects`'
-    /// order; `in_tissue` is false once the needle is out.
+    /// Add each effect's force at this sample to `f_n`, in `effects'`
+    /// order; `in_tissue` is false once the needle is out. The literature
+    /// form's mount passes on every force the tissue exerts, and the load
+    /// cell's drift lies beyond it: in that form the mount comes after
+    /// relaxation and before drift, whatever the list's order (and once).
     pub fn add(
         &mut self,
         (effects, form): (&[Effect], Form),
@@ -305,15 +309,35 @@ impl Added {
         in_tissue: bool,
         f_n: &mut f64,
     ) {
+        let mounted = form == Form::Literature;
         for effect in effects {
             match *effect {
                 Effect::Viscoelasticity { k_n_per_m, tau_s } => {
                     self.relaxing
                         .add(form, (k_n_per_m, tau_s), k, in_tissue, f_n)
                 }
-                Effect::HolderInertia { mass_kg } => self.holder.add(form, mass_kg, k, f_n),
-                Effect::SensorDrift { rate_n_per_s } => *f_n += drift_n(form, rate_n_per_s, k.t_s),
+                Effect::HolderInertia { mass_kg } if !mounted => {
+                    self.holder.add(form, mass_kg, k, f_n)
+                }
+                Effect::SensorDrift { rate_n_per_s } if !mounted => {
+                    *f_n += drift_n(form, rate_n_per_s, k.t_s)
+                }
                 _ => {}
+            }
+        }
+        if !mounted {
+            return;
+        }
+        let mass = effects.iter().find_map(|e| match *e {
+            Effect::HolderInertia { mass_kg } => Some(mass_kg),
+            _ => None,
+        });
+        if let Some(mass_kg) = mass {
+            self.holder.add(form, mass_kg, k, f_n);
+        }
+        for effect in effects {
+            if let Effect::SensorDrift { rate_n_per_s } = *effect {
+                *f_n += drift_n(form, rate_n_per_s, k.t_s);
             }
         }
     }
@@ -377,9 +401,9 @@ struct Holder {
     /// The literature form's mount: the force the load cell reads
     /// through it and its rate, and the force driving it at the sample
     /// before.
-    mount: f64,
-    mount_rate: f64,
-    drive: f64,
+    mount_n: f64,
+    mount_rate_n_per_s: f64,
+    drive_n: f64,
     /// The alternate form's acceleration, as the drive reaches it.
     a_filtered: f64,
 }
@@ -400,15 +424,15 @@ impl Holder {
             let (w, zeta) = (TAU * 25.0, 0.2);
             let steps = ((dt * w / 0.1).ceil() as usize).max(1);
             let h = dt / steps as f64;
-            let drive = *f_n + mass_kg * a;
+            let drive_n = *f_n + mass_kg * a;
             for j in 1..=steps {
-                let at = self.drive + (drive - self.drive) * j as f64 / steps as f64;
-                self.mount_rate +=
-                    (w * w * (at - self.mount) - 2.0 * zeta * w * self.mount_rate) * h;
-                self.mount += self.mount_rate * h;
+                let at_n = self.drive_n + (drive_n - self.drive_n) * j as f64 / steps as f64;
+                self.mount_rate_n_per_s +=
+                    (w * w * (at_n - self.mount_n) - 2.0 * zeta * w * self.mount_rate_n_per_s) * h;
+                self.mount_n += self.mount_rate_n_per_s * h;
             }
-            self.drive = drive;
-            *f_n = self.mount;
+            self.drive_n = drive_n;
+            *f_n = self.mount_n;
             return;
         }
         // Alternate: the drive reaches its speed over ~10 ms.
