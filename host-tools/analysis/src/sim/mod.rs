@@ -1271,4 +1271,35 @@ mod tests {
         let b = insertion(&LIVER1, &Plan::PAPER).0;
         assert_eq!(a, b);
     }
+
+    /// The literature mount passes on what relaxation adds and lies
+    /// before the load cell's drift, however the effects are listed: a
+    /// trial is the same whatever their order, and differs from one
+    /// without the mount.
+    #[test]
+    fn the_literature_mount_bears_the_tissue_and_not_the_drift_in_any_order() {
+        let sensor = Sensor {
+            rate_hz: 250.0,
+            noise_n: 0.0,
+            encoder_m: 1e-6,
+        };
+        let run = |list: &str| {
+            let effects = effects::parse_list(list).unwrap();
+            let mut rng = ChaCha8Rng::seed_from_u64(3);
+            let protocol = insert_dwell_withdraw(&LIVER1, 0, &mut rng);
+            simulate_trial_in(
+                &LIVER1,
+                &protocol,
+                &effects,
+                Form::Literature,
+                &sensor,
+                &mut rng,
+            )
+            .0
+        };
+        let all = run("viscoelasticity,holder_inertia,sensor_drift");
+        assert_eq!(all, run("sensor_drift,holder_inertia,viscoelasticity"));
+        assert_eq!(all, run("holder_inertia,sensor_drift,viscoelasticity"));
+        assert_ne!(all, run("viscoelasticity,sensor_drift"));
+    }
 }
