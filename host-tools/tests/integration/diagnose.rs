@@ -1064,6 +1064,8 @@ fn a_report_is_written_with_its_figure() {
     assert!(status.status.success());
     let html = std::fs::read_to_string(&page).unwrap();
     assert!(html.contains("depth_dependent_cutting") && html.contains("gap.svg"));
+    // Each candidate's parameters as it was fitted, the named one's too.
+    assert!(html.contains("cutting_per_m_n_per_m = "), "no parameters");
     // The waterfall: the nominal, each effect, the noise floor and the
     // level below which the gap counts as explained, each labelled.
     for label in [

@@ -68,12 +68,13 @@ pub fn write(
     let mut rows = String::new();
     for c in &out.candidates {
         rows += &format!(
-            "<tr><td>{}</td><td>{:.4}</td><td>{:.1} %</td><td>{:.1}</td><td>{}</td></tr>\n",
+            "<tr><td>{}</td><td>{:.4}</td><td>{:.1} %</td><td>{:.1}</td><td>{}</td><td style=\"text-align: left\">{}</td></tr>\n",
             c.effect,
             c.heldout_rms_n,
             100.0 * c.shrink,
             c.paired_t,
             if c.significant { "yes" } else { "no" },
+            page::escape(&params_line(&c.params)),
         );
     }
     let charts = withheld_charts(p, withheld);
@@ -89,12 +90,39 @@ pub fn write(
     let body = format!(
         "<h1>Sim-to-real gap</h1>\n<p class=\"verdict {verdict_class}\"><b>Verdict:</b> {verdict}.</p>\n\
          <h2>The gap, effect by effect (held out)</h2>\n{waterfall}\n\
-         <h2>Candidates, held out</h2>\n<table><tr><th>effect</th><th>held-out RMS (N)</th><th>shrink</th><th>paired t</th><th>significant</th></tr>\n{rows}</table>\n\
+         <h2>Candidates, held out</h2>\n<table><tr><th>effect</th><th>held-out RMS (N)</th><th>shrink</th><th>paired t</th><th>significant</th><th style=\"text-align: left\">its parameters, fitted on every trial (units in the names)</th></tr>\n{rows}</table>\n\
          <h2>A withheld trial: the model with and without the named effect, and the residual by phase</h2>\n{force}{residual}\
          <p class=\"caption\">The same figure for print: <a href=\"{svg_name}\">{svg_name}</a>.</p>"
     );
     let html = page::standalone("needle diagnose", &body, &charts)?;
     std::fs::write(path, html).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// A candidate's parameters as `name = value`, four significant figures:
+/// what a researcher compares with the rig (a mount's mode, a mass, a
+/// relaxation time).
+fn params_line(params: &std::collections::BTreeMap<&'static str, f64>) -> String {
+    params
+        .iter()
+        .map(|(name, value)| format!("{name} = {}", four_figures(*value)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// `value` to four significant figures: in decimals from a thousandth to
+/// a hundred thousand (a relaxation time, a stiffness), else as a power
+/// of ten (a presliding length, a damping).
+fn four_figures(value: f64) -> String {
+    if value == 0.0 || !value.is_finite() {
+        return format!("{value}");
+    }
+    let magnitude = value.abs().log10().floor() as i32;
+    if (-3..6).contains(&magnitude) {
+        let decimals = (3 - magnitude).max(0) as usize;
+        format!("{value:.decimals$}")
+    } else {
+        format!("{value:.3e}")
+    }
 }
 
 /// The withheld trial against time — measured, the nominal with the
@@ -242,4 +270,22 @@ fn waterfall_svg(out: &Diagnosis) -> String {
     }
     svg += "</svg>";
     svg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Four significant figures whatever the size, zero as zero.
+    #[test]
+    fn parameters_read_to_four_figures() {
+        assert_eq!(four_figures(25.198421), "25.20");
+        assert_eq!(four_figures(0.0003), "3.000e-4");
+        assert_eq!(four_figures(0.002), "0.002000");
+        assert_eq!(four_figures(-5193.3233), "-5193");
+        assert_eq!(four_figures(0.00007), "7.000e-5");
+        assert_eq!(four_figures(0.0), "0");
+        let params = std::collections::BTreeMap::from([("mount_hz", 25.198), ("mass_kg", 0.15)]);
+        assert_eq!(params_line(&params), "mass_kg = 0.1500, mount_hz = 25.20");
+    }
 }
