@@ -110,18 +110,23 @@ fn params_line(params: &std::collections::BTreeMap<&'static str, f64>) -> String
 }
 
 /// `value` to four significant figures: in decimals from a thousandth to
-/// a hundred thousand (a relaxation time, a stiffness), else as a power
-/// of ten (a presliding length, a damping).
+/// ten thousand (a relaxation time, a stiffness), else as a power of ten
+/// (a presliding length, a damping). The power is the one the value has
+/// once rounded (9.99996 reads 10.00).
 fn four_figures(value: f64) -> String {
-    if value == 0.0 || !value.is_finite() {
-        return format!("{value}");
+    if value == 0.0 {
+        return "0".into();
     }
-    let magnitude = value.abs().log10().floor() as i32;
-    if (-3..6).contains(&magnitude) {
-        let decimals = (3 - magnitude).max(0) as usize;
-        format!("{value:.decimals$}")
-    } else {
-        format!("{value:.3e}")
+    let scientific = format!("{value:.3e}");
+    let power = scientific
+        .split_once('e')
+        .and_then(|(_, p)| p.parse::<i32>().ok());
+    match power {
+        Some(p) if (-3..4).contains(&p) => {
+            let decimals = (3 - p).max(0) as usize;
+            format!("{value:.decimals$}")
+        }
+        _ => scientific,
     }
 }
 
@@ -285,6 +290,12 @@ mod tests {
         assert_eq!(four_figures(-5193.3233), "-5193");
         assert_eq!(four_figures(0.00007), "7.000e-5");
         assert_eq!(four_figures(0.0), "0");
+        assert_eq!(four_figures(-0.0), "0");
+        assert_eq!(four_figures(9.99996), "10.00");
+        assert_eq!(four_figures(99999.5), "1.000e5");
+        assert_eq!(four_figures(12345.6), "1.235e4");
+        assert_eq!(four_figures(-0.0005), "-5.000e-4");
+        assert_eq!(four_figures(f64::NAN), "NaN");
         let params = std::collections::BTreeMap::from([("mount_hz", 25.198), ("mass_kg", 0.15)]);
         assert_eq!(params_line(&params), "mass_kg = 0.1500, mount_hz = 25.20");
     }
