@@ -1886,7 +1886,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     progress("done");
     needle_io::note!("{}", report::headline(&out));
     if let Some(path) = &args.residuals {
-        write_residuals(path, &fitted_and_baseline(data.clone()).0)?;
+        write_residuals(path, &with_fitted(data.clone()))?;
     }
     if let Some(path) = &args.report {
         let withheld = withheld_overlay(&data, &out);

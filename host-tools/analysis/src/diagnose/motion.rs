@@ -688,36 +688,29 @@ fn least_phase(
 ) -> (usize, (f64, TissueShift)) {
     let beside = |k: usize, by: usize| (k + by) % GRID_PHASES;
     let mut at = |k: usize| (k, at_phase(k));
+    // The later of two only where strictly lower: ties keep the first.
+    let lower = |a: (usize, (f64, TissueShift)), b: (usize, (f64, TissueShift))| {
+        if b.1 .0 < a.1 .0 {
+            b
+        } else {
+            a
+        }
+    };
     let Some(k0) = guess else {
-        let mut best = at(0);
-        for k in (2..GRID_PHASES).step_by(2) {
-            let here = at(k);
-            if here.1 .0 < best.1 .0 {
-                best = here;
-            }
-        }
+        let first = at(0);
+        let best = (2..GRID_PHASES).step_by(2).map(&mut at).fold(first, lower);
         let k = best.0;
-        let mut least = best;
-        for here in [at(beside(k, 1)), at(beside(k, GRID_PHASES - 1))] {
-            if here.1 .0 < least.1 .0 {
-                least = here;
-            }
-        }
-        return least;
+        return [at(beside(k, 1)), at(beside(k, GRID_PHASES - 1))]
+            .into_iter()
+            .fold(best, lower);
     };
     let mut best = at(k0);
     let (up, down) = (at(beside(k0, 1)), at(beside(k0, GRID_PHASES - 1)));
-    let (mut next, by) = match (up.1 .0 < best.1 .0, down.1 .0 < best.1 .0) {
-        (false, false) => return best,
-        (true, false) => (up, 1),
-        (false, true) => (down, GRID_PHASES - 1),
-        (true, true) => {
-            if down.1 .0 < up.1 .0 {
-                (down, GRID_PHASES - 1)
-            } else {
-                (up, 1)
-            }
-        }
+    // Downhill the way the lower neighbour lies (up on a tie).
+    let (mut next, by) = if down.1 .0 < up.1 .0 {
+        (down, GRID_PHASES - 1)
+    } else {
+        (up, 1)
     };
     for _ in 0..GRID_PHASES {
         if next.1 .0 >= best.1 .0 {

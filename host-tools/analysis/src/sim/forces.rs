@@ -310,34 +310,30 @@ impl Added {
         f_n: &mut f64,
     ) {
         let mounted = form == Form::Literature;
+        let (mut mount_kg, mut drift_beyond_n) = (None, None);
         for effect in effects {
             match *effect {
                 Effect::Viscoelasticity { k_n_per_m, tau_s } => {
                     self.relaxing
                         .add(form, (k_n_per_m, tau_s), k, in_tissue, f_n)
                 }
-                Effect::HolderInertia { mass_kg } if !mounted => {
-                    self.holder.add(form, mass_kg, k, f_n)
+                Effect::HolderInertia { mass_kg } if mounted => {
+                    mount_kg.get_or_insert(mass_kg);
                 }
-                Effect::SensorDrift { rate_n_per_s } if !mounted => {
-                    *f_n += drift_n(form, rate_n_per_s, k.t_s)
+                Effect::HolderInertia { mass_kg } => self.holder.add(form, mass_kg, k, f_n),
+                Effect::SensorDrift { rate_n_per_s } if mounted => {
+                    *drift_beyond_n.get_or_insert(0.0) += drift_n(form, rate_n_per_s, k.t_s)
                 }
+                Effect::SensorDrift { rate_n_per_s } => *f_n += drift_n(form, rate_n_per_s, k.t_s),
                 _ => {}
             }
         }
-        if !mounted {
-            return;
-        }
-        let mass = effects.iter().find_map(|e| match *e {
-            Effect::HolderInertia { mass_kg } => Some(mass_kg),
-            _ => None,
-        });
-        if let Some(mass_kg) = mass {
-            self.holder.add(form, mass_kg, k, f_n);
-        }
-        for effect in effects {
-            if let Effect::SensorDrift { rate_n_per_s } = *effect {
-                *f_n += drift_n(form, rate_n_per_s, k.t_s);
+        if mounted {
+            if let Some(mass_kg) = mount_kg {
+                self.holder.add(form, mass_kg, k, f_n);
+            }
+            if let Some(drift) = drift_beyond_n {
+                *f_n += drift;
             }
         }
     }
