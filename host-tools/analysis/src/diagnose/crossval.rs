@@ -176,6 +176,24 @@ impl PerTrial<'_> {
             let r = self.reduce(g, &shared);
             reduced.merge(&r);
         }
+        self.fit_reduced(n, &reduced).1
+    }
+
+    /// One trial's whole-trial sums with its own columns taken out
+    /// ([`Self::reduce`]), for [`Self::fit_reduced`]: a search that fits
+    /// many sets of the same trials reduces each trial once.
+    pub fn reduced(&self, g: &Gram) -> Gram {
+        self.reduce(g, &self.shared(g.n))
+    }
+
+    /// The shared θ (full length, the per-trial entries 0) from the sum
+    /// of the trials' [`Self::reduced`] sums, and the trials' squared
+    /// error under it, each with its own columns at their best (the
+    /// reduced sums' error: what [`Self::for_trial`] leaves, but for the
+    /// ridge).
+    pub fn fit_reduced(&self, n: usize, reduced: &Gram) -> (f64, Vec<f64>) {
+        let shared = self.shared(n);
+        let mut ridged = reduced.clone();
         // The trials' own columns are near some combination of the
         // shared ones in every trial (the friction scale is nearly the
         // friction basis at the nominal's coefficients): that direction
@@ -183,15 +201,16 @@ impl PerTrial<'_> {
         let s = shared.len();
         for (i, &col) in shared.iter().enumerate() {
             if col < self.ridged {
-                reduced.ata[i * s + i] *= 1.0 + RIDGE;
+                ridged.ata[i * s + i] *= 1.0 + RIDGE;
             }
         }
-        let th = reduced.solve();
+        let th = ridged.solve();
+        let sse = reduced.sse(&th);
         let mut full = vec![0.0; n];
         for (k, &i) in shared.iter().enumerate() {
             full[i] = th[k];
         }
-        full
+        (sse, full)
     }
 
     /// θ for one trial: `shared` with this trial's own columns fitted to
@@ -357,5 +376,53 @@ mod tests {
         grams.iter().for_each(|g| all.merge(g));
         let pooled = all.solve();
         assert!(grams.iter().map(|g| g.sse(&pooled)).sum::<f64>() > 1.0);
+    }
+
+    /// The trials reduced once and summed give the shared θ of
+    /// `solve_shared` and, as their error, what each trial's own columns
+    /// at their best leave of it (a search's fold fits use the one for
+    /// the other): noisy trials, two shared columns, one of them ridged.
+    #[test]
+    fn reduced_sums_fit_and_score_as_the_trials_do() {
+        let grams: Vec<Gram> = [(1.0, 0.3), (-4.0, 0.5), (7.0, -0.2)]
+            .iter()
+            .map(|&(c, tilt)| {
+                let mut g = Gram::new(3);
+                for i in 0..60 {
+                    let x = i as f64 * 0.2;
+                    let wobble = ((i * 7919) % 13) as f64 / 13.0 - 0.5;
+                    g.add(
+                        &[1.0, x, x * x * 0.1],
+                        c + 2.0 * x + tilt * x * x * 0.1 + wobble,
+                    );
+                }
+                g
+            })
+            .collect();
+        let per = PerTrial {
+            own: &[0],
+            ridged: 2,
+        };
+        let refs: Vec<&Gram> = grams.iter().collect();
+        let shared = per.solve_shared(&refs);
+        let sse: f64 = grams
+            .iter()
+            .map(|g| g.sse(&per.for_trial(g, &shared)))
+            .sum();
+        let mut sum = per.reduced(&grams[0]);
+        grams[1..].iter().for_each(|g| sum.merge(&per.reduced(g)));
+        let (reduced_sse, reduced_shared) = per.fit_reduced(3, &sum);
+        for (a, b) in shared.iter().zip(&reduced_shared) {
+            assert!(
+                (a - b).abs() < 1e-12,
+                "{shared:?} against {reduced_shared:?}"
+            );
+        }
+        assert!(sse > 1.0, "{sse}");
+        // Equal but for the 1e-9 ridge the own columns are solved with.
+        assert!(
+            (reduced_sse - sse).abs() < 1e-7 * sse,
+            "{reduced_sse} against {sse}"
+        );
     }
 }

@@ -542,16 +542,27 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         .iter()
         .map(|gs| gs.iter().map(total).collect())
         .collect();
+    // Each trial's sums with its own spread columns taken out, once: every
+    // fold fits most of the same trials at every grid value.
+    let reduced: Vec<Vec<Gram>> = totals
+        .iter()
+        .map(|gs| gs.iter().map(|g| per.reduced(g)).collect())
+        .collect();
     // The shared θ over `trials` and their error, each trial with its own
     // spread columns.
     let fit = |gi: usize, trials: &mut dyn Iterator<Item = usize>| {
-        let picked: Vec<&Gram> = trials.map(|j| &totals[gi][j]).collect();
-        let shared = per.solve_shared(&picked);
-        let sse: f64 = picked
-            .iter()
-            .map(|g| g.sse(&per.for_trial(g, &shared)))
-            .sum();
-        (sse, shared)
+        let mut sum: Option<Gram> = None;
+        for j in trials {
+            match &mut sum {
+                Some(s) => s.merge(&reduced[gi][j]),
+                None => sum = Some(reduced[gi][j].clone()),
+            }
+        }
+        let n = totals[gi].first().map_or(0, |g| g.n);
+        match sum {
+            Some(sum) => per.fit_reduced(n, &sum),
+            None => (0.0, vec![0.0; n]),
+        }
     };
     let best_fit = |trials: &dyn Fn(usize) -> bool| {
         (0..per_grid.len())
