@@ -431,38 +431,99 @@ impl Supports {
 
 /// A trial's `base` (the sums of its `fixed` columns) with the `extra`
 /// columns appended: only their products with every column and the
-/// residual are summed here.
+/// residual are summed here, and the first `kept` extra columns, those of
+/// the trial's last call, have theirs taken from that call (`reused`).
 fn extended(
     p: &Prepared,
     fixed: &[Vec<f64>],
     supports: &Supports,
     base: &[Gram; PHASES.len()],
-    extra: &[Vec<f64>],
+    (extra, kept, reused): (&[Vec<f64>], usize, &mut Reused),
 ) -> [Gram; PHASES.len()] {
     let mut g: [Gram; PHASES.len()] = std::array::from_fn(|ph| base[ph].with_columns(extra.len()));
-    let nf = fixed.len();
-    for (ph, r, fixed_within) in &supports.runs {
+    let (nf, ne) = (fixed.len(), extra.len());
+    let kept = if reused.sums.len() == ne {
+        kept.min(ne)
+    } else {
+        0
+    };
+    if kept == 0 {
+        *reused = Reused {
+            sums: vec![Vec::new(); ne],
+            pairs: vec![vec![0.0; ne * ne]; supports.runs.len()],
+        };
+    }
+    let changed: Vec<bool> = (0..ne).map(|e| e >= kept).collect();
+    for (e, ce) in extra.iter().enumerate().skip(kept) {
+        reused.sums[e] = by_fixed(p, fixed, supports, ce);
+    }
+    for (run, (ph, r, _)) in supports.runs.iter().enumerate() {
         let (gp, r) = (&mut g[*ph], r.clone());
         let n = gp.n;
         let within: Vec<_> = extra.iter().map(|c| support(c, &r)).collect();
+        let pairs = &mut reused.pairs[run];
         for (e, ce) in extra.iter().enumerate() {
             let se = &within[e];
             if se.is_empty() {
                 continue;
             }
             let row = nf + e;
-            for (f, cf) in fixed.iter().enumerate() {
-                let v = dot_over(ce, se, cf, &fixed_within[f]);
+            let (with_fixed, with_residual) = &reused.sums[e][run];
+            for (f, v) in with_fixed.iter().enumerate() {
                 gp.ata[row * n + f] += v;
                 gp.ata[f * n + row] += v;
             }
-            for (e2, c2) in extra.iter().enumerate() {
-                gp.ata[row * n + nf + e2] += dot_over(ce, se, c2, &within[e2]);
+            for (e2, c2) in extra.iter().enumerate().skip(e) {
+                if changed[e] || changed[e2] {
+                    pairs[e * ne + e2] = dot_over(ce, se, c2, &within[e2]);
+                }
+                let v = pairs[e * ne + e2];
+                gp.ata[row * n + nf + e2] += v;
+                if e2 != e {
+                    gp.ata[(nf + e2) * n + row] += v;
+                }
             }
-            gp.aty[row] += dot_over(ce, se, &p.residual_n, &r);
+            gp.aty[row] += with_residual;
         }
     }
     g
+}
+
+/// What a trial's last [`extended`] call made of its extra columns: each
+/// one's products with the fixed columns and the residual in each phase
+/// run, and each pair's in each run. A candidate whose grid values share
+/// columns (a mount's accelerations and the tissue's force through it at
+/// each of its stiffnesses) has them summed once.
+#[derive(Default)]
+struct Reused {
+    sums: Vec<Vec<(Vec<f64>, f64)>>,
+    pairs: Vec<Vec<f64>>,
+}
+
+/// Column `c`'s products with each of the `fixed` columns and with the
+/// residual, in each of the trial's phase runs.
+fn by_fixed(
+    p: &Prepared,
+    fixed: &[Vec<f64>],
+    supports: &Supports,
+    c: &[f64],
+) -> Vec<(Vec<f64>, f64)> {
+    supports
+        .runs
+        .iter()
+        .map(|(_, r, fixed_within)| {
+            let sc = support(c, r);
+            if sc.is_empty() {
+                return (vec![0.0; fixed.len()], 0.0);
+            }
+            let with_fixed = fixed
+                .iter()
+                .zip(fixed_within)
+                .map(|(cf, sf)| dot_over(c, &sc, cf, sf))
+                .collect();
+            (with_fixed, dot_over(c, &sc, &p.residual_n, r))
+        })
+        .collect()
 }
 
 fn total(gs: &[Gram; PHASES.len()]) -> Gram {
@@ -524,8 +585,15 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         Some(c) => {
             let mut per_grid: Vec<Vec<_>> = grid.iter().map(|_| Vec::new()).collect();
             for (j, p) in data.iter().enumerate() {
-                c.columns_on_grid(p, &mut |gi, extra| {
-                    let g = extended(p, &fixed_cols[j], &supports[j], &base[j], &extra);
+                let mut reused = Reused::default();
+                c.columns_on_grid(p, &mut |gi, extra, kept| {
+                    let g = extended(
+                        p,
+                        &fixed_cols[j],
+                        &supports[j],
+                        &base[j],
+                        (extra, kept, &mut reused),
+                    );
                     debug_assert_eq!(per_grid[gi].len(), j, "each grid value once a trial");
                     per_grid[gi].push(g);
                 });
