@@ -24,7 +24,8 @@ pub type OnGrid = fn(&Prepared, &[f64], &mut Each<'_>);
 /// What takes a candidate's columns at a grid value: the value's index in
 /// the grid, the columns, and how many of them, from the first, are those
 /// given at the call before for the same trial (so that what was made of
-/// them may be used again; 0 at a trial's first call).
+/// them may be used again; 0 at a trial's first call, and after a call
+/// with another number of columns).
 pub type Each<'a> = dyn FnMut(usize, &[Vec<f64>], usize) + 'a;
 
 /// One candidate effect.
@@ -755,24 +756,24 @@ const MOUNTS: usize = {
 
 /// A mount's stiffness as [`held_by_mount`] has it, and the modes it is
 /// searched at.
-struct Stiffness {
+struct MountStiffness {
     /// `None`: stiff, the needle goes where the stage goes.
     k_n_per_m: Option<f64>,
     /// The lowest and highest of [`mount_at`]'s frequencies, in thirds of
     /// an octave from 5 Hz, and every how many thirds between them.
-    lowest: usize,
-    highest: usize,
-    every: usize,
+    lowest_third: usize,
+    highest_third: usize,
+    every_thirds: usize,
 }
 
-impl Stiffness {
+impl MountStiffness {
     /// How many modes (frequency and damping ratio) it is searched at.
     const fn modes(&self) -> usize {
         self.frequencies() * DAMPING_RATIOS.len()
     }
 
     const fn frequencies(&self) -> usize {
-        (self.highest - self.lowest) / self.every + 1
+        (self.highest_third - self.lowest_third) / self.every_thirds + 1
     }
 }
 
@@ -786,30 +787,30 @@ impl Stiffness {
 /// value in every round). Stiffer than about 100 kN/m, a newton's change
 /// is taken up within 10 µm of travel, an encoder count or a few: the
 /// stiff mount.
-const MOUNT_STIFFNESS: [Stiffness; 4] = [
-    Stiffness {
+const MOUNT_STIFFNESS: [MountStiffness; 4] = [
+    MountStiffness {
         k_n_per_m: None,
-        lowest: 0,
-        highest: THIRDS_OF_OCTAVE - 1,
-        every: 1,
+        lowest_third: 0,
+        highest_third: THIRDS_OF_OCTAVE - 1,
+        every_thirds: 1,
     },
-    Stiffness {
+    MountStiffness {
         k_n_per_m: Some(3.0e4),
-        lowest: 7,
-        highest: 9,
-        every: 2,
+        lowest_third: 7,
+        highest_third: 9,
+        every_thirds: 2,
     },
-    Stiffness {
+    MountStiffness {
         k_n_per_m: Some(1.0e4),
-        lowest: 5,
-        highest: 9,
-        every: 2,
+        lowest_third: 5,
+        highest_third: 9,
+        every_thirds: 2,
     },
-    Stiffness {
+    MountStiffness {
         k_n_per_m: Some(3.0e3),
-        lowest: 2,
-        highest: 8,
-        every: 2,
+        lowest_third: 2,
+        highest_third: 8,
+        every_thirds: 2,
     },
 ];
 
@@ -838,19 +839,17 @@ fn inertia_on_grid(p: &Prepared, grid: &[f64], each: &mut Each<'_>) {
     let (step, smooth) = accelerations(p);
     let tissue_n = tissue_force_n(p);
     let sticking = Sticking::of(p);
-    let [_, compliance @ ..] = MOUNT_STIFFNESS.map(|s| match s.k_n_per_m {
-        Some(k_n_per_m) => {
-            let held_n = held_by_mount(&tissue_n, &sticking, k_n_per_m);
-            held_n.iter().zip(&tissue_n).map(|(h, t)| h - t).collect()
-        }
-        None => Vec::new(),
+    // What each stiffness's give changes in the tissue's force.
+    let give_n: [Option<Vec<f64>>; MOUNT_STIFFNESS.len()] = MOUNT_STIFFNESS.map(|s| {
+        let held_n = held_by_mount(&tissue_n, &sticking, s.k_n_per_m?);
+        Some(held_n.iter().zip(&tissue_n).map(|(h, t)| h - t).collect())
     });
     let mut modes: Vec<AtMode> = Vec::new();
     for (gi, &g) in grid.iter().enumerate() {
         match mount_at(g) {
-            Some((mode, k)) => match modes.iter_mut().find(|(m, _)| *m == mode) {
-                Some((_, at)) => at.push((gi, k)),
-                None => modes.push((mode, vec![(gi, k)])),
+            Some((mode, s)) => match modes.iter_mut().find(|(m, _)| *m == mode) {
+                Some((_, at)) => at.push((gi, s)),
+                None => modes.push((mode, vec![(gi, s)])),
             },
             None => {
                 let lagged = |s: &[f64]| lag(s.to_vec(), g, rate);
@@ -862,28 +861,33 @@ fn inertia_on_grid(p: &Prepared, grid: &[f64], each: &mut Each<'_>) {
             }
         }
     }
-    // Every mode's signals rung together; a mode's stiffnesses differ in
-    // the last column alone.
-    let mut chains = Vec::new();
-    for (mode, _) in &modes {
-        chains.push((&step[..], *mode, Hold::Step));
-        chains.push((&smooth[..], *mode, Hold::Step));
-        chains.push((&tissue_n[..], *mode, Hold::Ramp));
-    }
-    let mut rung = ring_each(chains, rate).into_iter();
-    for (_, at) in modes {
-        let mut next = || rung.next().unwrap_or_default();
-        let (step, smooth, mut mounted) = (next(), next(), next());
-        for (m, f) in mounted.iter_mut().zip(&p.fitted_n) {
-            *m -= f;
-        }
-        let mut cols = [step, smooth, mounted, vec![0.0; n]];
-        for (i, &(gi, k)) in at.iter().enumerate() {
-            match k {
-                0 => cols[3].fill(0.0),
-                _ => cols[3].clone_from(&compliance[k - 1]),
+    // Eight modes' signals rung together (and held at once, not every
+    // mode's); the grid values are handed on mode by mode, out of the
+    // grid's order, so that a mode's stiffnesses, which differ in the give
+    // alone, keep its first three columns.
+    for group in modes.chunks(CHAINS) {
+        let chains = group.iter().flat_map(|(mode, _)| {
+            [
+                (&step[..], *mode, Hold::Step),
+                (&smooth[..], *mode, Hold::Step),
+                (&tissue_n[..], *mode, Hold::Ramp),
+            ]
+        });
+        let mut rung = ring_each(chains.collect(), rate).into_iter();
+        for (_, at) in group {
+            let mut next = || rung.next().unwrap_or_default();
+            let (step, smooth, mut mounted) = (next(), next(), next());
+            for (m, f) in mounted.iter_mut().zip(&p.fitted_n) {
+                *m -= f;
             }
-            each(gi, &cols, if i == 0 { 0 } else { 3 });
+            let mut cols = [step, smooth, mounted, vec![0.0; n]];
+            for (i, &(gi, s)) in at.iter().enumerate() {
+                match &give_n[s] {
+                    Some(give_n) => cols[3].clone_from(give_n),
+                    None => cols[3].fill(0.0),
+                }
+                each(gi, &cols, if i == 0 { 0 } else { 3 });
+            }
         }
     }
 }
@@ -895,8 +899,8 @@ type AtMode = ((f64, f64), Vec<(usize, usize)>);
 /// The tissue's force `tissue_n` as a compliant mount of stiffness
 /// `k_n_per_m` passes it on: while the needle slides with the stage the
 /// mount bears what the tissue resists with, but where the tissue's force
-/// turns over while the needle sticks — at a turn, at the start of a
-/// withdrawal, at a stop — the stage moves on and only the mount gives,
+/// turns over while the needle is held — at a turn, at the start of a
+/// withdrawal, at a start after a rest — the stage moves on and only the mount gives,
 /// the force changing by k per metre of the stage's travel until it
 /// reaches the force the needle slides at. At rest the force held lies in
 /// the static band (a stop from a force above it slides the needle on
@@ -933,9 +937,11 @@ fn held_by_mount(tissue_n: &[f64], s: &Sticking, k_n_per_m: f64) -> Vec<f64> {
 }
 
 /// What [`held_by_mount`] needs of a trial: where the stage is, how fast
-/// the needle moves and how much of it is in the tissue, sample by
-/// sample; the half width of the zero-velocity band, m/s; and the static
-/// band per unit length (D_n ≤ 0, D_p ≥ 0), N/m.
+/// it moves (as the encoder reads it: the needle is held where that lies
+/// within the zero-velocity band, or where the mount has yet to take up
+/// a turn) and how much of the needle is in the tissue, sample by sample;
+/// the half width of the zero-velocity band, m/s; and the static band per
+/// unit length (D_n ≤ 0, D_p ≥ 0), N/m.
 struct Sticking<'a> {
     x_m: &'a [f64],
     v_mps: &'a [f64],
@@ -1033,7 +1039,8 @@ const DAMPING_RATIOS: [f64; 3] = [0.05, 0.15, 0.4];
 
 /// The mount at grid value `g` of [`inertia`] (from 1 on): its mode, 5–40
 /// Hz, a benchtop stage's and holder's first modes, a third of an octave
-/// apart (a ring a sixth of an octave off drifts by a tenth of a cycle
+/// apart on a stiff mount (two thirds on a compliant one,
+/// [`MOUNT_STIFFNESS`]; a ring a sixth of an octave off drifts by a tenth of a cycle
 /// over the first cycle, in which a damped ring is most of its size),
 /// lightly damped (a bolted joint), less so, or well damped (an
 /// elastomer), as (Hz, damping ratio); and its stiffness, an index into
@@ -1045,7 +1052,7 @@ fn mount_at(g: f64) -> Option<((f64, f64), usize)> {
     for (s, stiffness) in MOUNT_STIFFNESS.iter().enumerate() {
         let frequencies = stiffness.frequencies();
         if m < stiffness.modes() {
-            let third = stiffness.lowest + m % frequencies * stiffness.every;
+            let third = stiffness.lowest_third + m % frequencies * stiffness.every_thirds;
             let hz = 5.0 * 2f64.powf(third as f64 / 3.0);
             return Some(((hz, DAMPING_RATIOS[m / frequencies]), s));
         }
@@ -1105,7 +1112,11 @@ fn ring_each(chains: Vec<(&[f64], (f64, f64), Hold)>, rate_hz: f64) -> Vec<Vec<f
     }
     let n = chains.iter().map(|(s, ..)| s.len()).min().unwrap_or(0);
     let count = chains.len();
-    let quiet = vec![0.0; n];
+    let quiet = if count.is_multiple_of(CHAINS) {
+        Vec::new()
+    } else {
+        vec![0.0; n]
+    };
     let mut batch: Vec<Chain> = Vec::with_capacity(CHAINS);
     let mut rung = Vec::with_capacity(count);
     let mut mounts: Vec<((f64, f64), Mount)> = Vec::new();

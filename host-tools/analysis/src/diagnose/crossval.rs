@@ -179,9 +179,10 @@ impl PerTrial<'_> {
         self.fit_reduced(n, &reduced).1
     }
 
-    /// One trial's whole-trial sums with its own columns taken out
-    /// ([`Self::reduce`]), for [`Self::fit_reduced`]: a search that fits
-    /// many sets of the same trials reduces each trial once.
+    /// One trial's whole-trial sums over the shared columns with its own
+    /// columns taken out (their Schur complement), for
+    /// [`Self::fit_reduced`]: a search that fits many sets of the same
+    /// trials reduces each trial once.
     pub fn reduced(&self, g: &Gram) -> Gram {
         self.reduce(g, &self.shared(g.n))
     }
@@ -190,7 +191,7 @@ impl PerTrial<'_> {
     /// of the trials' [`Self::reduced`] sums, and the trials' squared
     /// error under it, each with its own columns at their best (the
     /// reduced sums' error: what [`Self::for_trial`] leaves, but for the
-    /// ridge).
+    /// 1e-9 ridge the own columns are solved with).
     pub fn fit_reduced(&self, n: usize, reduced: &Gram) -> (f64, Vec<f64>) {
         let shared = self.shared(n);
         let mut ridged = reduced.clone();

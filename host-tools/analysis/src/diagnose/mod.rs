@@ -442,6 +442,10 @@ fn extended(
 ) -> [Gram; PHASES.len()] {
     let mut g: [Gram; PHASES.len()] = std::array::from_fn(|ph| base[ph].with_columns(extra.len()));
     let (nf, ne) = (fixed.len(), extra.len());
+    debug_assert!(
+        kept == 0 || reused.sums.len() == ne,
+        "kept columns of another count"
+    );
     let kept = if reused.sums.len() == ne {
         kept.min(ne)
     } else {
@@ -453,7 +457,6 @@ fn extended(
             pairs: vec![vec![0.0; ne * ne]; supports.runs.len()],
         };
     }
-    let changed: Vec<bool> = (0..ne).map(|e| e >= kept).collect();
     for (e, ce) in extra.iter().enumerate().skip(kept) {
         reused.sums[e] = by_fixed(p, fixed, supports, ce);
     }
@@ -474,7 +477,7 @@ fn extended(
                 gp.ata[f * n + row] += v;
             }
             for (e2, c2) in extra.iter().enumerate().skip(e) {
-                if changed[e] || changed[e2] {
+                if e >= kept || e2 >= kept {
                     pairs[e * ne + e2] = dot_over(ce, se, c2, &within[e2]);
                 }
                 let v = pairs[e * ne + e2];
