@@ -1513,9 +1513,29 @@ impl Bar {
         (before.powi(2) - after.powi(2)) / gap_ms
     }
 
-    /// Whether a step of the waterfall takes [`MIN_STEP_SHARE`] of the gap.
-    fn a_cause(self, before: f64, after: f64) -> bool {
-        self.share_of_gap(before, after) >= MIN_STEP_SHARE
+    /// Whether a step of the waterfall from `left` to `after` is a cause
+    /// of the gap: it takes [`MIN_STEP_SHARE`] of it, or half that and
+    /// explains the phase where it takes most ([`Bar::explains_a_phase`]).
+    fn a_cause(self, left: &Scored, after: &Scored) -> bool {
+        let share = self.share_of_gap(left.rms(), after.rms());
+        share >= MIN_STEP_SHARE
+            || (share >= MIN_STEP_SHARE / 2.0 && self.explains_a_phase(left, after))
+    }
+
+    /// Whether most of what a step takes (held out) it takes in one phase
+    /// and leaves that phase within [`PHASE_LEFT`] of the noise: a dwell's
+    /// relaxation beside a larger misfit of the insertion is a small share
+    /// of the whole gap, but it is the dwell's cause, where a flexible
+    /// candidate taking part of the first effect's structured misfit
+    /// leaves most of it in place.
+    fn explains_a_phase(self, left: &Scored, after: &Scored) -> bool {
+        let noise_ms = self.noise_n * self.noise_n;
+        let phases = || left.by_phase.iter().zip(&after.by_phase);
+        let taken: f64 = phases().map(|((b, _), (a, _))| (b - a).max(0.0)).sum();
+        phases().any(|(&(before, n), &(after, _))| {
+            let excess = |sse: f64| sse / n.max(1) as f64 - noise_ms;
+            n > 0 && before - after >= 0.5 * taken && excess(after) <= PHASE_LEFT * excess(before)
+        })
     }
 }
 
@@ -1529,6 +1549,10 @@ impl Bar {
 /// there took 0.32–0.36 (`both_effects_of_a_pair_are_named`): the bar
 /// half as far again as the first, under half the second.
 pub const MIN_STEP_SHARE: f64 = 0.15;
+
+/// Most of a phase's excess over the noise (in mean square) a step may
+/// leave and still explain the phase ([`Bar::explains_a_phase`]).
+const PHASE_LEFT: f64 = 0.1;
 
 /// The waterfall from the first effect: each further effect is the
 /// candidate of most shrink that is significant against what the effects
@@ -1569,7 +1593,7 @@ fn waterfall(
         };
         // A backfit that undoes the step's gain ends the waterfall, and
         // so does a step too small to be a cause of the gap.
-        if scored.rms() >= left.rms() || !bar.a_cause(left.rms(), scored.rms()) {
+        if scored.rms() >= left.rms() || !bar.a_cause(left, &scored) {
             break;
         }
         steps.push((cj, scored));
@@ -1988,6 +2012,61 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Held-out errors with mean squares `ms` (N²) by phase, 1000 samples
+    /// in each of the first three phases, none in the others.
+    fn scored_by_phase(ms: [f64; 3]) -> Scored {
+        let mut by_phase = [(0.0, 0); PHASES.len()];
+        for (k, m) in ms.iter().enumerate() {
+            by_phase[k] = (m * 1000.0, 1000);
+        }
+        Scored {
+            per_trial: vec![(ms.iter().sum::<f64>() * 1000.0, 3000)],
+            by_phase,
+            grid_value: 0.0,
+            theta: Vec::new(),
+            fold_theta: Vec::new(),
+            trial_theta: Vec::new(),
+        }
+    }
+
+    /// A step that leaves one phase at the noise is a cause at half the
+    /// share of the gap a step must otherwise take; one that takes as
+    /// much but leaves most of each phase it touches is not, and neither
+    /// is one under half the share. Noise 12 mN; the baseline's gap
+    /// (mean square above the noise) 0.0116 N², of which the first effect
+    /// left 0.0035 N² a sample in one phase and 0.0065 in another.
+    #[test]
+    fn a_step_that_explains_a_phase_is_a_cause_at_half_the_share() {
+        let noise = 0.012_f64;
+        let n2 = noise * noise;
+        let bar = Bar {
+            noise_n: noise,
+            baseline_n: (0.0116 + n2).sqrt(),
+        };
+        let left = scored_by_phase([n2, 0.0035 + n2, 0.0065 + n2]);
+        // Takes the first-phase excess whole: a tenth of the gap.
+        let explains = scored_by_phase([n2, n2 + 0.00002, 0.0065 + n2]);
+        let share = bar.share_of_gap(left.rms(), explains.rms());
+        assert!(
+            share > MIN_STEP_SHARE / 2.0 && share < MIN_STEP_SHARE,
+            "{share}"
+        );
+        assert!(bar.a_cause(&left, &explains));
+        // As much taken, spread over both phases, most of each left.
+        let spread = scored_by_phase([n2, 0.0035 * 0.4 + n2, 0.0065 * 0.6 + n2]);
+        let spread_share = bar.share_of_gap(left.rms(), spread.rms());
+        assert!(
+            spread_share >= share && spread_share < MIN_STEP_SHARE,
+            "{spread_share}"
+        );
+        assert!(!bar.a_cause(&left, &spread));
+        // A phase explained, but under a twentieth of the gap.
+        let left_small = scored_by_phase([n2, 0.0035 + n2, 0.0006 + n2]);
+        let small = scored_by_phase([n2, 0.0035 + n2, n2]);
+        assert!(bar.share_of_gap(left_small.rms(), small.rms()) < MIN_STEP_SHARE / 2.0);
+        assert!(!bar.a_cause(&left_small, &small));
+    }
 
     /// The rounds [`KeptRounds`] asks for and the one it keeps, for rounds
     /// whose held-out RMS are `rms` in turn (`None`: cannot be made),
