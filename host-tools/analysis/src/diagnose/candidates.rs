@@ -900,9 +900,9 @@ type AtMode = ((f64, f64), Vec<(usize, usize)>);
 /// `k_n_per_m` passes it on: while the needle slides with the stage the
 /// mount bears what the tissue resists with, but where the tissue's force
 /// turns over while the needle is held — at a turn, at the start of a
-/// withdrawal, at a start after a rest — the stage moves on and only the mount gives,
-/// the force changing by k per metre of the stage's travel until it
-/// reaches the force the needle slides at. At rest the force held lies in
+/// withdrawal, at a start after a rest — the stage moves on and only the
+/// mount gives, the force changing by k per metre of the stage's travel
+/// until it reaches the force the needle slides at. At rest the force held lies in
 /// the static band (a stop from a force above it slides the needle on
 /// until it is back at the band's edge, as the nominal's held force is).
 /// Outside the tissue's friction (on the capsule, out of the tissue) the
@@ -1040,8 +1040,9 @@ const DAMPING_RATIOS: [f64; 3] = [0.05, 0.15, 0.4];
 /// The mount at grid value `g` of [`inertia`] (from 1 on): its mode, 5–40
 /// Hz, a benchtop stage's and holder's first modes, a third of an octave
 /// apart on a stiff mount (two thirds on a compliant one,
-/// [`MOUNT_STIFFNESS`]; a ring a sixth of an octave off drifts by a tenth of a cycle
-/// over the first cycle, in which a damped ring is most of its size),
+/// [`MOUNT_STIFFNESS`]; a ring a sixth of an octave off drifts by a
+/// tenth of a cycle over the first cycle, in which a damped ring is most
+/// of its size),
 /// lightly damped (a bolted joint), less so, or well damped (an
 /// elastomer), as (Hz, damping ratio); and its stiffness, an index into
 /// [`MOUNT_STIFFNESS`]. Listed stiffness by stiffness, damping ratio by
@@ -1112,11 +1113,6 @@ fn ring_each(chains: Vec<(&[f64], (f64, f64), Hold)>, rate_hz: f64) -> Vec<Vec<f
     }
     let n = chains.iter().map(|(s, ..)| s.len()).min().unwrap_or(0);
     let count = chains.len();
-    let quiet = if count.is_multiple_of(CHAINS) {
-        Vec::new()
-    } else {
-        vec![0.0; n]
-    };
     let mut batch: Vec<Chain> = Vec::with_capacity(CHAINS);
     let mut rung = Vec::with_capacity(count);
     let mut mounts: Vec<((f64, f64), Mount)> = Vec::new();
@@ -1135,7 +1131,7 @@ fn ring_each(chains: Vec<(&[f64], (f64, f64), Hold)>, rate_hz: f64) -> Vec<Vec<f
         }
     }
     if !batch.is_empty() {
-        let real = batch.len();
+        let (real, quiet) = (batch.len(), vec![0.0; n]);
         batch.resize(CHAINS, Chain::new(&quiet, Mount::QUIET, Hold::Step));
         rung.extend(step_chains(batch, n).into_iter().take(real));
     }

@@ -170,12 +170,7 @@ impl PerTrial<'_> {
     /// trials' whole-trial sums.
     pub fn solve_shared(&self, trials: &[&Gram]) -> Vec<f64> {
         let n = trials.first().map_or(0, |g| g.n);
-        let shared = self.shared(n);
-        let mut reduced = Gram::new(shared.len());
-        for g in trials {
-            let r = self.reduce(g, &shared);
-            reduced.merge(&r);
-        }
+        let reduced: Vec<Gram> = trials.iter().map(|g| self.reduced(g)).collect();
         self.fit_reduced(n, &reduced).1
     }
 
@@ -187,13 +182,21 @@ impl PerTrial<'_> {
         self.reduce(g, &self.shared(g.n))
     }
 
-    /// The shared θ (full length, the per-trial entries 0) from the sum
-    /// of the trials' [`Self::reduced`] sums, and the trials' squared
-    /// error under it, each with its own columns at their best (the
-    /// reduced sums' error: what [`Self::for_trial`] leaves, but for the
-    /// 1e-9 ridge the own columns are solved with).
-    pub fn fit_reduced(&self, n: usize, reduced: &Gram) -> (f64, Vec<f64>) {
+    /// The shared θ (full length `n`, the per-trial entries 0) from the
+    /// trials' [`Self::reduced`] sums, and the trials' squared error under
+    /// it, each with its own columns at their best (the summed reduced
+    /// sums' error: what [`Self::for_trial`] leaves, but for the 1e-9
+    /// ridge the own columns are solved with).
+    pub fn fit_reduced<'g>(
+        &self,
+        n: usize,
+        trials: impl IntoIterator<Item = &'g Gram>,
+    ) -> (f64, Vec<f64>) {
         let shared = self.shared(n);
+        let mut reduced = Gram::new(shared.len());
+        for g in trials {
+            reduced.merge(g);
+        }
         let mut ridged = reduced.clone();
         // The trials' own columns are near some combination of the
         // shared ones in every trial (the friction scale is nearly the
@@ -410,9 +413,8 @@ mod tests {
             .iter()
             .map(|g| g.sse(&per.for_trial(g, &shared)))
             .sum();
-        let mut sum = per.reduced(&grams[0]);
-        grams[1..].iter().for_each(|g| sum.merge(&per.reduced(g)));
-        let (reduced_sse, reduced_shared) = per.fit_reduced(3, &sum);
+        let reduced: Vec<Gram> = grams.iter().map(|g| per.reduced(g)).collect();
+        let (reduced_sse, reduced_shared) = per.fit_reduced(3, &reduced);
         for (a, b) in shared.iter().zip(&reduced_shared) {
             assert!(
                 (a - b).abs() < 1e-12,

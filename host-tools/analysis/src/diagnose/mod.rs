@@ -622,18 +622,8 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     // The shared θ over `trials` and their error, each trial with its own
     // spread columns.
     let fit = |gi: usize, trials: &mut dyn Iterator<Item = usize>| {
-        let mut sum: Option<Gram> = None;
-        for j in trials {
-            match &mut sum {
-                Some(s) => s.merge(&reduced[gi][j]),
-                None => sum = Some(reduced[gi][j].clone()),
-            }
-        }
         let n = totals[gi].first().map_or(0, |g| g.n);
-        match sum {
-            Some(sum) => per.fit_reduced(n, &sum),
-            None => (0.0, vec![0.0; n]),
-        }
+        per.fit_reduced(n, trials.map(|j| &reduced[gi][j]))
     };
     let best_fit = |trials: &dyn Fn(usize) -> bool| {
         (0..per_grid.len())
