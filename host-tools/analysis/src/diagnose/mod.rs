@@ -1282,7 +1282,7 @@ pub const NOTHING_LEFT_FACTOR: f64 = 1.1;
 /// Least share of the gap above the noise floor (in mean square) the
 /// named effects must take away, when they leave it open, to be named
 /// as its cause rather than as the closest candidates — unless the first
-/// explains a phase ([`Bar::explains_a_phase`]): a dwell's relaxation is
+/// explains a phase (`Bar::explains_a_phase`): a dwell's relaxation is
 /// the dwell's cause beside a larger misfit elsewhere that no candidate
 /// takes, and that misfit is left open (`explained: false`, with the
 /// phase it lies in) rather than hiding the relaxation.
