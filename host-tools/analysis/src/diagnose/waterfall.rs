@@ -1,0 +1,188 @@
+//! The waterfall: the first effect, then each further one the withheld
+//! trials support against what the effects before it left, each judged
+//! once the nominal is found again under it.
+
+use super::backfit::{
+    backfitting, scored_with_backfit, worse, Backfitted, Backfitting, BACKFIT_ROUNDS,
+};
+use super::candidates::{Backfit, Candidate, CANDIDATES};
+use super::prepare::Prepared;
+use super::significance::{improvement, Bar, Consistency, MIN_SHRINK, NOTHING_LEFT_FACTOR};
+use super::{score, Nominal, Scored};
+
+/// The waterfall from the first effect: each further effect is the
+/// candidate of most shrink that is significant against what the effects
+/// before it left (with the nominal found again under them), until none
+/// is, a backfit undoes a step's gain, a step is not a cause of the gap
+/// ([`Bar::a_cause`]), or [`MOST_EFFECTS`] are named.
+pub(super) fn waterfall(
+    (ci, (alone, cleaned, fixed)): (usize, Backfitted<'static>),
+    bar: Bar,
+    nominal: Nominal,
+    progress: &mut dyn FnMut(&str),
+) -> Vec<(usize, Scored)> {
+    let mut steps = vec![(ci, alone)];
+    let (mut cur, mut fixed) = (cleaned, fixed);
+    while steps.len() < MOST_EFFECTS {
+        let Some((_, left)) = steps.last() else { break };
+        // Within a tenth of the noise floor nothing is left to take.
+        if left.rms() <= NOTHING_LEFT_FACTOR * bar.noise_n {
+            break;
+        }
+        progress(&format!("searching for effect {}", steps.len() + 1));
+        let mut next: Vec<(usize, Scored)> = CANDIDATES
+            .iter()
+            .enumerate()
+            .filter(|(cj, _)| steps.iter().all(|(ci, _)| ci != cj))
+            .map(|(cj, c)| (cj, score(&cur, &fixed, Some(c))))
+            .filter(|(_, with)| bar.worthy(left.rms(), with.rms(), improvement(left, with).1))
+            .collect();
+        next.sort_by(|a, b| a.1.rms().total_cmp(&b.1.rms()));
+        let contenders: Vec<Contender> = next
+            .iter()
+            .map(|(cj, with)| Contender::of(*cj, with))
+            .collect();
+        let Some((cj, (scored, cleaned, kept))) =
+            best_backfitted(&cur, (&fixed, left.rms()), &contenders, nominal, progress)
+        else {
+            break;
+        };
+        // A backfit that undoes the step's gain ends the waterfall, and
+        // so does a step too small to be a cause of the gap.
+        if scored.rms() >= left.rms() || !bar.a_cause(left, &scored) {
+            break;
+        }
+        steps.push((cj, scored));
+        (cur, fixed) = (cleaned, kept);
+    }
+    steps
+}
+
+/// A candidate significant for a step: which, its grid value, and the
+/// held-out RMS it leaves as columns.
+#[derive(Clone, Copy)]
+pub(super) struct Contender {
+    ci: usize,
+    grid_value: f64,
+    rms: f64,
+}
+
+impl Contender {
+    pub(super) fn of(ci: usize, scored: &Scored) -> Self {
+        Self {
+            ci,
+            grid_value: scored.grid_value,
+            rms: scored.rms(),
+        }
+    }
+}
+
+/// Least share of what the leading contender takes as columns (in mean
+/// square) that tissue motion, a contender beside it, must take as
+/// columns to get its round in the tissue's frame; under it, its round
+/// is one as columns, and only if it wins that way is it fitted in its
+/// frame. A frame round fits every trial's displacement (about a second
+/// of a 10-trial diagnosis of 15 000 samples a trial, where a round as
+/// columns refits the nominal only), and columns that take so much less
+/// than the leader's are the linear part of another effect's residual
+/// more than a motion of the tissue. Alone or leading, the motion always
+/// gets its frame.
+const FRAME_SHARE: f64 = 0.5;
+
+/// Of `contenders` (best first), the one that leaves least beside
+/// `fixed` (which left `before_rms`) once the nominal is found again
+/// under it: alone, an effect is judged against a nominal that took up
+/// part of it, and a rival can look better beside that nominal than the
+/// effect itself. The [`BACKFIT_TRIED`] leading ones get one round each,
+/// the winner the rest of its backfit from there (the nominal's own rules
+/// for what is backfitted, a device's model never, hold for it as for
+/// one).
+pub(super) fn best_backfitted<'c>(
+    data: &[Prepared],
+    (fixed, before_rms): (&[(&'c Candidate, f64)], f64),
+    contenders: &[Contender],
+    nominal: Nominal,
+    progress: &mut dyn FnMut(&str),
+) -> Option<(usize, Backfitted<'c>)> {
+    let with = |c: &Contender| {
+        let mut set = fixed.to_vec();
+        set.push((&CANDIDATES[c.ci], c.grid_value));
+        set
+    };
+    if let [c] = contenders {
+        return Some((
+            c.ci,
+            scored_with_backfit(data, &with(c), nominal, BACKFIT_ROUNDS),
+        ));
+    }
+    let taken = |c: &Contender| before_rms.powi(2) - c.rms.powi(2);
+    let lead_taken = contenders.first().map_or(0.0, taken);
+    let may_move = |c: &Contender| {
+        CANDIDATES[c.ci].backfit != Backfit::TissueFrame || taken(c) >= FRAME_SHARE * lead_taken
+    };
+    // Only the best so far is kept: each holds a copy of the data.
+    let mut best: Option<(&Contender, Backfitting)> = None;
+    for c in contenders.iter().take(BACKFIT_TRIED) {
+        progress(&format!(
+            "backfitting the nominal under {}",
+            CANDIDATES[c.ci].effect
+        ));
+        let tried = backfitting(data, &with(c), nominal, may_move(c)).more(1);
+        let rms = |b: &Backfitting| b.state.0.rms();
+        if best
+            .as_ref()
+            .is_none_or(|(_, b)| rms(&tried).total_cmp(&rms(b)).is_lt())
+        {
+            best = Some((c, tried));
+        }
+    }
+    let (c, winner) = best?;
+    let state = winner.more(BACKFIT_ROUNDS).state;
+    if may_move(c) {
+        return Some((c.ci, state));
+    }
+    // A motion that won as columns is fitted in its frame after all, and
+    // stands where that leaves the withheld trials no worse.
+    let framed = scored_with_backfit(data, &with(c), nominal, BACKFIT_ROUNDS);
+    Some((
+        c.ci,
+        if worse(framed.0.rms(), state.0.rms()) {
+            state
+        } else {
+            framed
+        },
+    ))
+}
+
+/// Most effects the waterfall names.
+const MOST_EFFECTS: usize = 4;
+
+/// Candidates tried with their backfit when none is significant without
+/// it: the three of most shrink.
+const BACKFIT_TRIED: usize = 3;
+
+/// The candidate of most shrink, among the [`BACKFIT_TRIED`] leading ones,
+/// that is significant against the baseline once backfitted.
+pub(super) fn backfitted_first<'c>(
+    data: &[Prepared],
+    baseline: &Scored,
+    ranked: &[(usize, Scored, f64, Consistency)],
+    nominal: Nominal,
+) -> Option<(usize, Backfitted<'c>)> {
+    ranked
+        .iter()
+        .filter(|r| r.2 > 0.0)
+        .take(BACKFIT_TRIED)
+        .map(|(ci, s, ..)| {
+            let fixed = [(&CANDIDATES[*ci], s.grid_value)];
+            (
+                *ci,
+                scored_with_backfit(data, &fixed, nominal, BACKFIT_ROUNDS),
+            )
+        })
+        .filter(|(_, (alone, ..))| {
+            let (shrink, consistency) = improvement(baseline, alone);
+            shrink >= MIN_SHRINK && consistency.holds()
+        })
+        .max_by(|a, b| b.1 .0.rms().total_cmp(&a.1 .0.rms()))
+}
