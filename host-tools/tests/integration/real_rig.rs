@@ -348,6 +348,30 @@ fn relaxation_at_three_speeds_is_named_beside_the_membranes() {
     assert_eq!(v["explained"], true, "{v}");
 }
 
+/// Membranes of a newton beside a relaxation of 50 mN in the dwell: the
+/// membranes take nearly all of the gap, and relaxation, explaining the
+/// dwell, is named after them on what they left.
+#[test]
+fn relaxation_is_named_after_membranes_many_times_its_size() {
+    let out = Skin {
+        effects: "viscoelasticity=5",
+        layers: 2,
+        seed: 1,
+        spread: 0.15,
+        ..SKIN
+    }
+    .diagnosis();
+    let v = &out["verdict"];
+    let named: Vec<&str> = v["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["effect"].as_str().unwrap())
+        .collect();
+    assert_eq!(named, ["internal_structures", "viscoelasticity"], "{v}");
+    assert_eq!(v["explained"], true, "{v}");
+}
+
 /// After the fall real skin climbs again 1.2–3.3× within 3 mm: the layer
 /// beneath the ruptured capsule loads before it cuts. The simulator's
 /// literature form of depth-dependent cutting has it (40 % of the
