@@ -918,6 +918,28 @@ fn the_json_has_the_issues_keys_sorted_best_first() {
     assert!(by_phase.keys().all(|k| phases.contains(&k.as_str())));
     let share: f64 = by_phase.values().map(|p| num(&p["share"])).sum();
     assert!((share - 1.0).abs() < 1e-9);
+    // Each trial's held-out RMS, by file: the pooled RMS lies between the
+    // trials' least and greatest, before and after the named effects.
+    for (by_trial, pooled) in [
+        (
+            &out["baseline"]["by_trial"],
+            &out["baseline"]["heldout_rms_n"],
+        ),
+        (
+            &out["verdict"]["left_by_trial"],
+            &out["verdict"]["heldout_rms_after_n"],
+        ),
+    ] {
+        let rms: Vec<f64> = by_trial.as_object().unwrap().values().map(num).collect();
+        assert_eq!(rms.len(), 10, "{by_trial}");
+        let (least, most) = rms
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &r| (a.min(r), b.max(r)));
+        assert!(
+            least <= num(pooled) && num(pooled) <= most,
+            "{by_trial} {pooled}"
+        );
+    }
     let where_ = out["where"].as_array().unwrap();
     assert!(where_
         .windows(2)

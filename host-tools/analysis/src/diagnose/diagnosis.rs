@@ -50,7 +50,14 @@ pub struct Baseline {
     /// spread correction's value here is fitted as if shared).
     pub corrections: BTreeMap<&'static str, f64>,
     pub by_phase: ByPhase,
+    /// Held-out RMS of each trial, by file (N).
+    pub by_trial: ByTrial,
 }
+
+/// Held-out RMS of each trial, by file (N): which insertions the model
+/// misses, where one trial's misfit (a membrane the detector did not
+/// find, a bad recording) would otherwise hide in the pooled RMS.
+pub type ByTrial = BTreeMap<String, f64>;
 
 /// A stretch of the residual: a phase and 5 mm of position.
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -110,6 +117,8 @@ pub struct Verdict {
     pub closest: Vec<&'static str>,
     /// Where what is left lies.
     pub left_by_phase: ByPhase,
+    /// What is left of each trial, held out, by file (N).
+    pub left_by_trial: ByTrial,
 }
 
 /// One step of the waterfall.

@@ -32,7 +32,8 @@ mod significance;
 mod waterfall;
 
 pub use diagnosis::{
-    Baseline, ByPhase, CandidateScore, Diagnosis, PhaseShare, Place, ResidualTests, Step, Verdict,
+    Baseline, ByPhase, ByTrial, CandidateScore, Diagnosis, PhaseShare, Place, ResidualTests, Step,
+    Verdict,
 };
 pub use motion::{PhaseWander, TissueShift};
 
@@ -941,6 +942,7 @@ pub fn diagnose_with_progress(
                 .zip(baseline.theta.iter().copied())
                 .collect(),
             by_phase: by_phase(&baseline),
+            by_trial: by_trial(data, &baseline),
         },
         where_residual: where_(data),
         residual_tests: residual_tests(data),
@@ -954,6 +956,7 @@ pub fn diagnose_with_progress(
             explained: !gap_open,
             closest,
             left_by_phase: by_phase(left),
+            left_by_trial: by_trial(data, left),
         },
         skipped: None,
     }
@@ -1071,6 +1074,13 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> Withheld {
         augmented_n,
         label,
     }
+}
+
+fn by_trial(data: &[Prepared], s: &Scored) -> ByTrial {
+    data.iter()
+        .zip(&s.per_trial)
+        .map(|(p, &(sse, n))| (p.file.clone(), (sse / n.max(1) as f64).sqrt()))
+        .collect()
 }
 
 fn by_phase(s: &Scored) -> ByPhase {

@@ -77,6 +77,7 @@ pub fn write(
             page::escape(&params_line(&c.params)),
         );
     }
+    let trial_rows = by_trial_rows(out);
     let charts = withheld_charts(p, withheld);
     let svg_name = svg
         .file_name()
@@ -90,12 +91,45 @@ pub fn write(
     let body = format!(
         "<h1>Sim-to-real gap</h1>\n<p class=\"verdict {verdict_class}\"><b>Verdict:</b> {verdict}.</p>\n\
          <h2>The gap, effect by effect (held out)</h2>\n{waterfall}\n\
+         <h2>Each trial, held out: the nominal and what the named effects leave</h2>\n\
+         <table><tr><th style=\"text-align: left\">trial</th><th>nominal (N)</th><th>after (N)</th></tr>\n{trial_rows}</table>\n\
          <h2>Candidates, held out</h2>\n<table><tr><th>effect</th><th>held-out RMS (N)</th><th>shrink</th><th>paired t</th><th>significant</th><th style=\"text-align: left\">its parameters, fitted on every trial (units in the names)</th></tr>\n{rows}</table>\n\
          <h2>A withheld trial: the model with and without the named effect, and the residual by phase</h2>\n{force}{residual}\
          <p class=\"caption\">The same figure for print: <a href=\"{svg_name}\">{svg_name}</a>.</p>"
     );
     let html = page::standalone("needle diagnose", &body, &charts)?;
     std::fs::write(path, html).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// One row a trial, most left first: which insertions the model misses.
+fn by_trial_rows(out: &Diagnosis) -> String {
+    let mut trials: Vec<(&String, f64, f64)> = out
+        .baseline
+        .by_trial
+        .iter()
+        .map(|(file, &before)| {
+            let after = out
+                .verdict
+                .left_by_trial
+                .get(file)
+                .copied()
+                .unwrap_or(f64::NAN);
+            (file, before, after)
+        })
+        .collect();
+    trials.sort_by(|a, b| b.2.total_cmp(&a.2));
+    trials
+        .iter()
+        .map(|(file, before, after)| {
+            let name = std::path::Path::new(file.as_str())
+                .file_name()
+                .map_or_else(|| file.to_string(), |n| n.to_string_lossy().into_owned());
+            format!(
+                "<tr><td style=\"text-align: left\">{}</td><td>{before:.4}</td><td>{after:.4}</td></tr>\n",
+                page::escape(&name)
+            )
+        })
+        .collect()
 }
 
 /// A candidate's parameters as `name = value`, four significant figures:

@@ -2,7 +2,7 @@
 //! ([`MIN_SHRINK`]), consistently over the withheld trials
 //! ([`Consistency`]), by at least [`MIN_EFFECT_FLOORS`] of the noise
 //! floor ([`Bar::worthy`]); and, to stand as a cause of the gap rather
-//! than the closest candidate, take enough of it or explain a phase
+//! than the closest candidate, take enough of it or explain where it acts
 //! ([`Bar::a_cause`], [`Bar::names_the_gap`]).
 
 use super::crossval::paired_t;
