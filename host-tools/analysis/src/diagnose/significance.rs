@@ -240,12 +240,15 @@ mod tests {
     /// is one that leaves a phase at the noise but takes most of its gain
     /// elsewhere, nor one under half the share of what was left; one
     /// that takes a sliver of the whole gap but most of what the first
-    /// effect left, and explains its phase, is. Noise 12 mN; the
+    /// effect left, and explains its phase, is; so is one acting in three
+    /// phases, none holding half of its gain, that explains all three,
+    /// and not one that leaves two of them at a half and a quarter of
+    /// their excess. Noise 12 mN; the
     /// baseline's gap (mean square above the noise) 0.0116 N², of which
     /// the first effect left 0.0035 N² a sample in phase 1 and 0.0065 in
     /// phase 2.
     #[test]
-    fn a_step_that_explains_a_phase_is_a_cause_at_half_the_share() {
+    fn a_step_that_explains_where_it_acts_is_a_cause_on_what_was_left() {
         let noise = 0.012_f64;
         let n2 = noise * noise;
         let bar = Bar {
