@@ -48,12 +48,26 @@ pub fn headline(out: &Diagnosis) -> String {
         out.baseline.heldout_rms_n,
         v.heldout_rms_after_n,
         100.0 * v.shrink,
-        if !v.explained {
-            "; the gap left is more than 1.5 noise floors: not explained"
+        if v.explained {
+            String::new()
         } else {
-            ""
+            format!(
+                "; the gap left is more than 1.5 noise floors: not explained{}",
+                where_left(v)
+            )
         },
     )
+}
+
+/// Where most of what the named effects leave lies: the phase of most
+/// squared residual and its share (`unexplained` names the phase where
+/// the gap lies).
+fn where_left(v: &super::Verdict) -> String {
+    v.left_by_phase
+        .iter()
+        .max_by(|a, b| a.1.share.total_cmp(&b.1.share))
+        .map(|(phase, p)| format!(", most of it in the {phase} ({:.0} %)", 100.0 * p.share))
+        .unwrap_or_default()
 }
 
 /// Write the page to `path`: `p`, a withheld trial, drawn with its
@@ -332,5 +346,29 @@ mod tests {
         assert_eq!(four_figures(f64::NAN), "NaN");
         let params = std::collections::BTreeMap::from([("mount_hz", 25.198), ("mass_kg", 0.15)]);
         assert_eq!(params_line(&params), "mass_kg = 0.1500, mount_hz = 25.20");
+    }
+
+    /// A gap left open says the phase it mostly lies in, with its share.
+    #[test]
+    fn a_gap_left_open_names_the_phase_it_lies_in() {
+        let share = |share| super::super::PhaseShare { rms_n: 0.1, share };
+        let verdict = super::super::Verdict {
+            effect: "viscoelasticity",
+            shrink: 0.14,
+            second: "none",
+            effects: Vec::new(),
+            heldout_rms_after_n: 0.0888,
+            explained: false,
+            closest: vec!["viscoelasticity"],
+            left_by_phase: [
+                ("dwell", share(0.01)),
+                ("insertion", share(0.714)),
+                ("loading", share(0.26)),
+            ]
+            .into_iter()
+            .collect(),
+            left_by_trial: Default::default(),
+        };
+        assert_eq!(where_left(&verdict), ", most of it in the insertion (71 %)");
     }
 }
