@@ -616,18 +616,48 @@ fn sliding_friction_n(p: &Prepared, sign: f64) -> f64 {
 /// muscle fascia differ tenfold): walking back from the peak, the residual
 /// comes down to a little above the level it fell to (2 % of the wall
 /// force, three noise sd at least), and the straight line from there to
-/// the peak, carried on to that level, says where the wall began to load.
+/// the peak, carried on to that level, says where the wall began to load
+/// — no earlier than where the wall before it gave way, and from no lower
+/// than the level that one fell to: the tip reaches a deeper membrane only
+/// past the one above it, and a wall that gives way as the stage stops
+/// falls to the dwell's level, which need not be the one it rose from.
 fn walls(p: &Prepared, n: f64) -> Vec<Vec<f64>> {
-    let mut col = vec![0.0; p.trial.len()];
-    let (x, r) = (&p.trial.x_m, &p.residual_n);
-    for &(peak, x_peak, wall_n) in &p.structures {
-        let after = r[peak + 1..(peak + 6).min(r.len())].iter().sum::<f64>()
+    let found = Found {
+        x_m: &p.trial.x_m,
+        residual_n: &p.residual_n,
+        structures: &p.structures,
+        puncture_x_m: p.geometry.puncture_x_m,
+        noise_n: p.noise_n,
+    };
+    vec![wall_column(&found, n)]
+}
+
+/// What [`walls`] reads of a trial: its positions and residual, the
+/// structures the detector found (last sample held, its position, the
+/// wall force), where the capsule gave way and the load cell's noise.
+struct Found<'a> {
+    x_m: &'a [f64],
+    residual_n: &'a [f64],
+    structures: &'a [(usize, f64, f64)],
+    puncture_x_m: f64,
+    noise_n: f64,
+}
+
+/// [`walls`]' one column: every wall found, each stiffening as s^n.
+fn wall_column(found: &Found, n: f64) -> Vec<f64> {
+    let (x, r) = (found.x_m, found.residual_n);
+    let mut col = vec![0.0; x.len()];
+    let mut before: Option<(usize, f64)> = None;
+    for &(peak, x_peak, wall_n) in found.structures {
+        let fell_to = r[peak + 1..(peak + 6).min(r.len())].iter().sum::<f64>()
             / (peak + 6).min(r.len()).saturating_sub(peak + 1).max(1) as f64;
-        let level = (0.02 * wall_n).max(3.0 * p.noise_n).min(0.5 * wall_n);
-        let begun = (0..peak)
+        let (gave_way, foot) = before.map_or((0, fell_to), |(i, level)| (i, fell_to.max(level)));
+        let level = (0.02 * wall_n).max(3.0 * found.noise_n).min(0.5 * wall_n);
+        let begun = (gave_way..peak)
             .rev()
-            .find(|&i| r[i] <= after + level || x[i] <= p.geometry.puncture_x_m)
-            .unwrap_or(0);
+            .find(|&i| r[i] <= foot + level || x[i] <= found.puncture_x_m)
+            .unwrap_or(gave_way);
+        before = Some((peak + 1, fell_to));
         let start_m = x[begun] - (x_peak - x[begun]) * level / (wall_n - level).max(1e-9);
         let stretch_m = (x_peak - start_m).max(1e-6);
         for i in (0..=peak).rev() {
@@ -638,7 +668,7 @@ fn walls(p: &Prepared, n: f64) -> Vec<Vec<f64>> {
             col[i] += wall_n * s.powf(n);
         }
     }
-    vec![col]
+    col
 }
 
 /// Cutting that depends on depth: growing with depth past the surface
@@ -1648,6 +1678,45 @@ mod tests {
             held_by_mount(&[0.8, 0.1, 0.0, 0.0], &out, 1.0e4),
             [0.8, 0.1, 0.0, 0.0]
         );
+    }
+
+    /// Two membranes, 1 µm a sample: the first rises from sample 100 to
+    /// 3.8 N at 199 and falls to −0.23 N; the second rises from 300 to
+    /// 2.3 N at 399 and gives way as the stage stops, falling to the
+    /// dwell's −0.32 N. Each wall's column is its own rise: nothing between
+    /// them, where a second wall read from the dwell's level would reach
+    /// back over the first.
+    #[test]
+    fn a_wall_begins_past_the_one_before_it_from_the_level_that_one_fell_to() {
+        let x_m: Vec<f64> = (0..500).map(|i| i as f64 * 1e-6).collect();
+        let rise =
+            |i: usize, from: usize, to_n: f64| -0.25 + (to_n + 0.25) * (i - from) as f64 / 99.0;
+        let residual_n: Vec<f64> = (0..500)
+            .map(|i| match i {
+                100..=199 => rise(i, 100, 3.8),
+                200..=299 => -0.23,
+                300..=399 => rise(i, 300, 2.3),
+                400.. => -0.32,
+                _ => -0.25,
+            })
+            .collect();
+        let structures = [(199, x_m[199], 4.03), (399, x_m[399], 2.62)];
+        let found = Found {
+            x_m: &x_m,
+            residual_n: &residual_n,
+            structures: &structures,
+            puncture_x_m: 0.0,
+            noise_n: 0.012,
+        };
+        let col = wall_column(&found, 1.0);
+        assert!(col[..95].iter().all(|&c| c == 0.0), "{:?}", &col[..100]);
+        assert!(
+            col[200..295].iter().all(|&c| c == 0.0),
+            "{:?}",
+            &col[200..300]
+        );
+        assert!((col[199] - 4.03).abs() < 1e-9 && (col[399] - 2.62).abs() < 1e-9);
+        assert!(col[400..].iter().all(|&c| c == 0.0));
     }
 
     /// Each compliant stiffness is searched at the modes a holder of

@@ -861,19 +861,29 @@ pub fn diagnose_with_progress(
         .filter(|r| significant(r.2, r.3))
         .map(|(ci, s, ..)| Contender::of(*ci, s))
         .collect();
-    let first = best_backfitted(data, (&[], baseline.rms()), &contenders, nominal, progress)
-        .or_else(|| {
-            // Before calling a gap unexplained, the leading candidates get
-            // their backfit: an effect the nominal's fit took up (a drift
-            // along an insertion at constant speed is a friction slope)
-            // shows only once the nominal is found again without it.
-            (baseline.rms() > EXPLAINED_FACTOR * noise)
-                .then(|| {
-                    progress("no candidate significant: backfitting the leading ones");
-                    backfitted_first(data, &baseline, &ranked, nominal)
-                })
-                .flatten()
-        });
+    let first = best_backfitted(data, (&[], baseline.rms()), &contenders, nominal, progress);
+    // Before calling a gap unexplained, the leading candidates get their
+    // backfit: an effect the nominal's fit took up (a drift along an
+    // insertion at constant speed is a friction slope) shows only once
+    // the nominal is found again without it. So too where the significant
+    // ones leave the gap open without being its cause: a small one that
+    // holds (walls read in a moving tissue) must not hide a large one the
+    // backfit makes significant (the tissue's motion).
+    let closes = |(ci, (s, ..)): &(usize, backfit::Backfitted)| {
+        s.rms() <= EXPLAINED_FACTOR * noise || bar.names_the_gap(&baseline, &[(*ci, s.clone())])
+    };
+    let first = match first {
+        Some(first) if closes(&first) => Some(first),
+        first if baseline.rms() > EXPLAINED_FACTOR * noise => {
+            progress("no candidate closes the gap: backfitting the leading ones");
+            let leading = backfitted_first(data, &baseline, &ranked, nominal);
+            match (first, leading) {
+                (Some(a), Some(b)) => Some(if b.1 .0.rms() < a.1 .0.rms() { b } else { a }),
+                (a, b) => a.or(b),
+            }
+        }
+        first => first,
+    };
     let mut steps = match first {
         Some(first) => waterfall(first, bar, nominal, progress),
         None => Vec::new(),
