@@ -106,6 +106,16 @@ fn num(v: &Value) -> f64 {
     v.as_f64().unwrap()
 }
 
+/// The effects a verdict's waterfall names, in turn.
+pub(crate) fn named_in_turn(verdict: &Value) -> Vec<&str> {
+    verdict["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["effect"].as_str().unwrap())
+        .collect()
+}
+
 /// [`simulate_jittered`]'s dataset on the paper's protocol with a 3 mN
 /// load cell at 250 Hz, diagnosed.
 fn diagnosis_on_the_papers_rig(case: (&str, Form, u64)) -> Value {
@@ -636,13 +646,7 @@ fn a_bristles_ramp_is_set_by_the_friction_ahead() {
 fn the_misfit_of_the_first_effects_form_is_not_a_second_effect() {
     let out = diagnosis_on_the_papers_rig(("presliding_hysteresis", Form::Literature, 2));
     let v = &out["verdict"];
-    let named: Vec<&str> = v["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| s["effect"].as_str().unwrap())
-        .collect();
-    assert_eq!(named, ["presliding_hysteresis"], "{v}");
+    assert_eq!(named_in_turn(v), ["presliding_hysteresis"], "{v}");
 }
 
 /// A bridge warming through the body it is bonded to: its drift starts

@@ -9,6 +9,7 @@
 
 use std::path::Path;
 
+use crate::diagnose::named_in_turn;
 use needle_analysis::detect::{detect_dataset, Detection};
 use needle_analysis::diagnose::{diagnose, load, Nominal, UNEXPLAINED};
 use needle_analysis::fit::{fit_dataset, to_toml, Estimate, FitReport, RELAXATION_PRIOR};
@@ -338,13 +339,11 @@ fn relaxation_at_three_speeds_is_named_beside_the_membranes() {
     }
     .diagnosis();
     let v = &out["verdict"];
-    let named: Vec<&str> = v["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["effect"].as_str().unwrap())
-        .collect();
-    assert_eq!(named, ["internal_structures", "viscoelasticity"], "{v}");
+    assert_eq!(
+        named_in_turn(v),
+        ["internal_structures", "viscoelasticity"],
+        "{v}"
+    );
     assert_eq!(v["explained"], true, "{v}");
 }
 
@@ -362,13 +361,11 @@ fn relaxation_is_named_after_membranes_many_times_its_size() {
     }
     .diagnosis();
     let v = &out["verdict"];
-    let named: Vec<&str> = v["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["effect"].as_str().unwrap())
-        .collect();
-    assert_eq!(named, ["internal_structures", "viscoelasticity"], "{v}");
+    assert_eq!(
+        named_in_turn(v),
+        ["internal_structures", "viscoelasticity"],
+        "{v}"
+    );
     assert_eq!(v["explained"], true, "{v}");
 }
 
