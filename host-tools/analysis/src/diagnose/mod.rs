@@ -869,11 +869,10 @@ pub fn diagnose_with_progress(
     // ones leave the gap open without being its cause: a small one that
     // holds (walls read in a moving tissue) must not hide a large one the
     // backfit makes significant (the tissue's motion).
-    let closes = |(ci, (s, ..)): &(usize, backfit::Backfitted)| {
-        s.rms() <= EXPLAINED_FACTOR * noise || bar.names_the_gap(&baseline, &[(*ci, s.clone())])
-    };
+    let stands =
+        |(ci, (s, ..)): &(usize, backfit::Backfitted)| bar.stand(&baseline, &[(*ci, s.clone())]);
     let first = match first {
-        Some(first) if closes(&first) => Some(first),
+        Some(first) if stands(&first) => Some(first),
         first if baseline.rms() > EXPLAINED_FACTOR * noise => {
             progress("no candidate closes the gap: backfitting the leading ones");
             let leading = backfitted_first(data, &baseline, &ranked, nominal);
@@ -909,7 +908,7 @@ pub fn diagnose_with_progress(
     // the named effects leave mostly open theirs: they stand as the
     // closest, and the verdict is `unexplained`.
     let closest: Vec<&str> = steps.iter().map(|(ci, _)| CANDIDATES[*ci].effect).collect();
-    let credible = !gap_open || bar.names_the_gap(&baseline, &steps);
+    let credible = bar.stand(&baseline, &steps);
     let effect = match steps.first() {
         Some((ci, _)) if credible => CANDIDATES[*ci].effect,
         Some(_) => UNEXPLAINED,

@@ -3,7 +3,7 @@
 //! ([`Consistency`]), by at least [`MIN_EFFECT_FLOORS`] of the noise
 //! floor ([`Bar::worthy`]); and, to stand as a cause of the gap rather
 //! than the closest candidate, take enough of it or explain where it acts
-//! ([`Bar::a_cause`], [`Bar::names_the_gap`]).
+//! ([`Bar::a_cause`], [`Bar::stand`]).
 
 use super::crossval::paired_t;
 use super::Scored;
@@ -130,11 +130,22 @@ impl Bar {
                 && self.explains_where_it_acts(left, after))
     }
 
+    /// Whether the effects of `steps` stand as the gap's cause: they
+    /// leave it within [`EXPLAINED_FACTOR`] noise floors, or it open but
+    /// named ([`Bar::names_the_gap`]); otherwise they are only the
+    /// closest candidates.
+    pub(super) fn stand(self, baseline: &Scored, steps: &[(usize, Scored)]) -> bool {
+        steps
+            .last()
+            .is_some_and(|(_, last)| last.rms() <= EXPLAINED_FACTOR * self.noise_n)
+            || self.names_the_gap(baseline, steps)
+    }
+
     /// Whether the effects of `steps` are named as the cause of a gap
     /// they leave open, rather than standing as the closest candidates:
     /// together they take [`MOST_OF_GAP`] of it, or the first explains
     /// the phases it acts in ([`Bar::explains_where_it_acts`]).
-    pub(super) fn names_the_gap(self, baseline: &Scored, steps: &[(usize, Scored)]) -> bool {
+    fn names_the_gap(self, baseline: &Scored, steps: &[(usize, Scored)]) -> bool {
         let (Some((_, first)), Some((_, last))) = (steps.first(), steps.last()) else {
             return false;
         };
