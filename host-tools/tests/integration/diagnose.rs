@@ -124,6 +124,48 @@ fn diagnosis_on_the_papers_rig(case: (&str, Form, u64)) -> Value {
     diagnosis_of(dir.path())
 }
 
+/// Trials whose capsules differ in shape, not only in scale (five of
+/// liver 1, five with its a1 30 % up and its a2 30 % down, as one tissue
+/// differs from the next), and no effect: each trial's own loading slope
+/// takes the shape, the loading is left at the noise and the verdict is
+/// `none`. With a shared shape and each trial's scale alone the loading
+/// kept 21.6 mN on a 5.0 mN floor.
+#[test]
+fn capsules_of_other_shapes_are_spread_not_an_effect() {
+    let dir = tempfile::tempdir().unwrap();
+    let other = TissueParams {
+        a1_n_per_m: LIVER1.a1_n_per_m * 1.3,
+        a2_n_per_m2: LIVER1.a2_n_per_m2 * 0.7,
+        ..LIVER1
+    };
+    for (k, tissue) in [&LIVER1, &other].into_iter().enumerate() {
+        let part = tempfile::tempdir().unwrap();
+        Dataset {
+            tissue_name: "liver1",
+            tissue,
+            effects: &[],
+            trials: 5,
+            seed: 40 + k as u64,
+            sensor: SENSOR,
+            through: false,
+            form: Form::Standard,
+            rig: Rig::default(),
+        }
+        .write(part.path())
+        .unwrap();
+        for j in 0..5 {
+            let from = part.path().join(format!("trial_{j:03}.csv"));
+            std::fs::copy(from, dir.path().join(format!("trial_{k}{j}.csv"))).unwrap();
+        }
+    }
+    let out = diagnosis_of(dir.path());
+    let noise = num(&out["noise_floor_n"]);
+    let loading = num(&out["baseline"]["by_phase"]["loading"]["rms_n"]);
+    println!("loading {:.1} mN on {:.1}", loading * 1e3, noise * 1e3);
+    assert!(loading < 1.2 * noise, "{loading} on {noise}");
+    assert_eq!(out["verdict"]["effect"], "none", "{}", out["verdict"]);
+}
+
 /// The diagnosis's own scores of `effect`'s candidate.
 fn candidate<'a>(out: &'a Value, effect: &str) -> &'a Value {
     out["candidates"]

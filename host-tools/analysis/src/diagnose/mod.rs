@@ -151,7 +151,8 @@ pub const NOMINAL_CORRECTIONS: [&str; 15] = [
 
 /// The corrections each trial has its own value of, fitted on the trial
 /// itself, withheld or not: the capsule's stiffness (so the puncture
-/// force), the cutting force, the scale of friction, the force held
+/// force) and the loading curve's slope beside it (so its shape: no
+/// two insertions' capsules are one curve scaled), the cutting force, the scale of friction, the force held
 /// in the first dwell (where a trial's tissue stops in its static band)
 /// and at the band in later rests, and where the withdrawal lets go (its
 /// relaxed surface). Real tissue
@@ -162,13 +163,13 @@ pub const NOMINAL_CORRECTIONS: [&str; 15] = [
 /// physics with spread was called `unexplained`. The rule is fixed before
 /// any effect is looked at, and an effect must explain what these
 /// per-trial numbers cannot. Indices into [`NOMINAL_CORRECTIONS`]:
-/// `cutting_force_n`, `let_go_shift_m`, `friction_scale`, `stiffness_scale`,
+/// `a1_n_per_m`, `cutting_force_n`, `let_go_shift_m`, `friction_scale`, `stiffness_scale`,
 /// `held_first_dwell`, the withdrawal's stick (`stick_held_n`,
 /// `stick_n_per_m`), `held_at_band` and `friction_scale_let_go`: the
 /// friction of a withdrawal once the tissue it dragged out has let go,
 /// its own scale: the shaft then slides through tissue that was
 /// stretched and let go, whose friction the insertion need not set.
-pub const SPREAD: [usize; 9] = [6, 7, 8, 9, 10, 11, 12, 13, 14];
+pub const SPREAD: [usize; 10] = [0, 6, 7, 8, 9, 10, 11, 12, 13, 14];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
