@@ -11,16 +11,12 @@
 # is one.
 set -euo pipefail
 runs=${1:-3}
-cd "$(dirname "$0")/.."
-cargo build --release -q -p host-tools
-needle=${CARGO_TARGET_DIR:-target}/release/needle
+. "$(dirname "$0")/common.sh"
 pin=()
 if command -v taskset > /dev/null; then pin=(taskset -c 0); fi
 # `time` prints seconds with a point for awk to read.
 export LC_ALL=C
 TIMEFORMAT='%U %S'
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
 for effect in none presliding_hysteresis viscoelasticity tissue_motion; do
   hidden=$effect
   [ "$effect" = none ] && hidden=""

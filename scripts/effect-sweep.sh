@@ -19,11 +19,7 @@
 set -euo pipefail
 seed=${1:?usage: scripts/effect-sweep.sh SEED [OUT]}
 out=${2:-/dev/stdout}
-cd "$(dirname "$0")/.."
-cargo build --release -q -p host-tools
-needle=${CARGO_TARGET_DIR:-target}/release/needle
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+. "$(dirname "$0")/common.sh"
 : > "$work/lines"
 # One case's dataset in $1 with the effects $2 and a load cell of noise sd
 # $3 ($proto, $rate and $form as the loops below set them).

@@ -14,11 +14,7 @@
 set -euo pipefail
 seed=${1:?usage: scripts/no-effect-grid.sh SEED [OUT]}
 out=${2:-/dev/stdout}
-cd "$(dirname "$0")/.."
-cargo build --release -q -p host-tools
-needle=${CARGO_TARGET_DIR:-target}/release/needle
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+. "$(dirname "$0")/common.sh"
 : > "$work/lines"
 for tissue in liver1 liver1_journal skin_phantom liver1_rational liver2; do
   for rate in 100 250 1000; do

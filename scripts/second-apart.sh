@@ -18,11 +18,7 @@
 set -euo pipefail
 seed=${1:-2}
 out=${2:-/dev/stdout}
-cd "$(dirname "$0")/.."
-cargo build --release -q -p host-tools
-needle=${CARGO_TARGET_DIR:-target}/release/needle
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+. "$(dirname "$0")/common.sh"
 python3 validation/second-apart/generate.py "$work/data" --seed "$seed" > /dev/null
 : > "$work/lines"
 for d in "$work"/data/*/; do

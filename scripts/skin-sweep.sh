@@ -17,11 +17,7 @@
 set -euo pipefail
 seeds=${1:-1 2 3 4 5 6}
 out=${2:-/dev/stdout}
-cd "$(dirname "$0")/.."
-cargo build --release -q -p host-tools
-needle=${CARGO_TARGET_DIR:-target}/release/needle
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+. "$(dirname "$0")/common.sh"
 : > "$work/lines"
 for seed in $seeds; do
   for case in "viscoelasticity=5:standard:0" "viscoelasticity=5:literature:0" \
