@@ -87,10 +87,16 @@ pub fn fall(c: &DetectConfig, st: &mut PunctureState, s: &DetectInput) -> Fall {
     }
 }
 
-/// One sample while loading the capsule.
+/// One sample while loading the capsule. A fall with the needle drawn
+/// back from where the force stood at its peak is no puncture: a capsule
+/// gives way under a tip that presses on, or stands, never one that
+/// retreats, and the force falls at every start of a withdrawal (the
+/// tip's load lets go) — which, where no puncture was seen (an artery
+/// that rolls over), still finds the detector armed.
 pub fn update(c: &DetectConfig, st: &mut PunctureState, s: DetectInput) -> Option<Event> {
     let f = fall(c, st, &s);
-    let punctured = f.drop >= f.needed && f.peak >= c.puncture_min_peak;
+    let pressing = s.x >= st.peak_x;
+    let punctured = pressing && f.drop >= f.needed && f.peak >= c.puncture_min_peak;
     punctured.then(|| {
         let confidence = confidence_permille(f.drop, f.needed);
         event(&s, EventKind::Puncture, st.peak_x, f.peak, confidence)
@@ -232,6 +238,27 @@ mod tests {
         let (index, peak_n) = first_puncture(&c, &f).unwrap();
         assert_eq!(index, 120);
         assert!((peak_n - 2.38).abs() < 1e-6, "{peak_n}");
+    }
+
+    /// A climb to 2.4 N, the stage stopped there: the same sharp fall is
+    /// a puncture with the needle standing, and none with it drawn back a
+    /// micrometre a sample (a withdrawal's start).
+    #[test]
+    fn a_fall_as_the_needle_draws_back_is_no_puncture() {
+        let c = config(LIVER1.puncture_drop_to_n);
+        let fall_with = |back_nm_per_sample: i32| {
+            let mut st = PunctureState::default();
+            let climb = (0..120).map(|i| (i, 1000 * i, 0.02 * f64::from(i)));
+            let held = (120..150).map(|i| (i, 120_000, 2.4));
+            let fallen = (150..160).map(|i| (i, 120_000 - back_nm_per_sample * (i - 149), 1.0));
+            climb
+                .chain(held)
+                .chain(fallen)
+                .find_map(|(i, x_nm, f)| update(&c, &mut st, loading(i as u32, x_nm, f)))
+                .map(|e| e.index)
+        };
+        assert_eq!(fall_with(0), Some(150));
+        assert_eq!(fall_with(1000), None);
     }
 
     #[test]
