@@ -56,7 +56,7 @@ pub use self::significance::{
     EXPLAINED_FACTOR, MIN_EFFECT_FLOORS, MIN_SHRINK, MIN_STEP_SHARE, MIN_T, MOST_OF_GAP,
     NOTHING_LEFT_FACTOR,
 };
-use self::waterfall::{backfitted_first, best_backfitted, waterfall, Contender};
+use self::waterfall::{backfitted_first, best_backfitted, displaces, waterfall, Contender};
 
 #[derive(Debug, clap::Args)]
 pub struct DiagnoseArgs {
@@ -869,7 +869,8 @@ pub fn diagnose_with_progress(
     // the nominal is found again without it. So too where the significant
     // ones leave the gap open without being its cause: a small one that
     // holds (walls read in a moving tissue) must not hide a large one the
-    // backfit makes significant (the tissue's motion).
+    // backfit makes significant (the tissue's motion). The backfitted one
+    // stands where it leaves less consistently ([`displaces`]).
     let stands =
         |(ci, (s, ..)): &(usize, backfit::Backfitted)| bar.stand(&baseline, &[(*ci, s.clone())]);
     let first = match first {
@@ -878,7 +879,7 @@ pub fn diagnose_with_progress(
             progress("no candidate closes the gap: backfitting the leading ones");
             let leading = backfitted_first(data, &baseline, &ranked, nominal);
             match (first, leading) {
-                (Some(a), Some(b)) => Some(if b.1 .0.rms() < a.1 .0.rms() { b } else { a }),
+                (Some(a), Some(b)) => Some(if displaces(&b.1 .0, &a.1 .0) { b } else { a }),
                 (a, b) => a.or(b),
             }
         }

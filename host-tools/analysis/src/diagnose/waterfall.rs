@@ -160,7 +160,7 @@ pub(super) fn best_backfitted<'c>(
 /// up some of the trials' spread, more on some trials than on others; a
 /// pooled gain that half the trials do not share is that, not the
 /// rival's physics, and the ranking as columns stands.
-fn displaces(rival: &Scored, best: &Scored) -> bool {
+pub(super) fn displaces(rival: &Scored, best: &Scored) -> bool {
     let (shrink, consistency) = improvement(best, rival);
     shrink > 0.0 && consistency.holds()
 }
