@@ -151,19 +151,20 @@ pub const NOMINAL_CORRECTIONS: [&str; 15] = [
 
 /// The corrections each trial has its own value of, fitted on the trial
 /// itself, withheld or not: the capsule's stiffness (so the puncture
-/// force) and the loading curve's slope beside it (so its shape: no
-/// two insertions' capsules are one curve scaled), the cutting force, the scale of friction, the force held
-/// in the first dwell (where a trial's tissue stops in its static band)
-/// and at the band in later rests, and where the withdrawal lets go (its
-/// relaxed surface). Real tissue
+/// force) and the loading curve's slope beside it (so its shape: no two
+/// insertions' capsules are one curve scaled), the cutting force, the
+/// scale of friction, the force held in the first dwell (where a trial's
+/// tissue stops in its static band) and at the band in later rests, and
+/// where the withdrawal lets go (its relaxed surface). Real tissue
 /// differs from one insertion to the next in these (the paper: puncture
 /// 2.30 ± 0.83 N, cutting 0.94 ± 0.36 N; real withdrawals let go 1.5–9 mm
-/// before the first contact, a different place each time), and that spread is not an
-/// unmodelled effect: judged with them shared, a dataset of the nominal
-/// physics with spread was called `unexplained`. The rule is fixed before
-/// any effect is looked at, and an effect must explain what these
-/// per-trial numbers cannot. Indices into [`NOMINAL_CORRECTIONS`]:
-/// `a1_n_per_m`, `cutting_force_n`, `let_go_shift_m`, `friction_scale`, `stiffness_scale`,
+/// before the first contact, a different place each time), and that
+/// spread is not an unmodelled effect: judged with them shared, a dataset
+/// of the nominal physics with spread was called `unexplained`. The rule
+/// is fixed before any effect is looked at, and an effect must explain
+/// what these per-trial numbers cannot. Indices into
+/// [`NOMINAL_CORRECTIONS`]: `a1_n_per_m`, `cutting_force_n`,
+/// `let_go_shift_m`, `friction_scale`, `stiffness_scale`,
 /// `held_first_dwell`, the withdrawal's stick (`stick_held_n`,
 /// `stick_n_per_m`), `held_at_band` and `friction_scale_let_go`: the
 /// friction of a withdrawal once the tissue it dragged out has let go,
