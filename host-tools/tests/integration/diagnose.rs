@@ -166,6 +166,78 @@ fn capsules_of_other_shapes_are_spread_not_an_effect() {
     assert_eq!(out["verdict"]["effect"], "none", "{}", out["verdict"]);
 }
 
+/// A tip that lets its cutting force go over a tenth of a millimetre as
+/// it is first drawn back (the tissue ahead of it was compressed), on the
+/// paper's protocol with no effect: it is the nominal's tip, each trial's
+/// own, not an effect, and the verdict is `none` (3.2 mN held out on a
+/// 3.2 mN noise floor). With the nominal's tip dropping its force at once
+/// 16.1 mN were held out and the verdict was `unexplained`.
+#[test]
+fn a_tip_that_lets_go_over_its_compliance_is_the_nominal() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate_jittered(
+        dir.path(),
+        ("", Form::Standard, 3),
+        ProtocolKind::Paper,
+        (250.0, 0.003),
+    );
+    for entry in std::fs::read_dir(dir.path()).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "csv") {
+            with_a_compliant_tip(&path, LIVER1.cutting_force_n, 0.1e-3);
+        }
+    }
+    let out = diagnosis_of(dir.path());
+    let (before, after) = heldout_before_after(&out);
+    let noise = num(&out["noise_floor_n"]);
+    println!(
+        "{:.1} -> {:.1} mN on {:.1}: {}",
+        before * 1e3,
+        after * 1e3,
+        noise * 1e3,
+        out["verdict"]
+    );
+    assert_eq!(out["verdict"]["effect"], "none", "{}", out["verdict"]);
+}
+
+/// Rewrites a trial's force as if its tip let `load_n` go linearly over
+/// `compliance_m` of its first retraction from the deepest point, rather
+/// than at once (the simulator's tip drops it at once).
+fn with_a_compliant_tip(path: &Path, load_n: f64, compliance_m: f64) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let mut rows: Vec<[f64; 3]> = lines
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|c| c.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    // The first stop at the deepest point: the oscillation after it
+    // comes back to within an encoder step of it.
+    let deepest_m = rows.iter().map(|r| r[1]).fold(f64::MIN, f64::max);
+    let front_at = rows.iter().position(|r| r[1] >= deepest_m - 2e-6).unwrap();
+    let front_m = rows[front_at][1];
+    for i in front_at..rows.len() {
+        let back_m = front_m - rows[i][1];
+        if back_m >= compliance_m {
+            break;
+        }
+        // The sample before the encoder's first step back can have the
+        // stage, and the simulator's force, already on its way.
+        let set_off = rows.get(i + 1).is_some_and(|next| next[1] < rows[i][1])
+            && rows[i][2] < rows[i - 1][2] - 0.5 * load_n;
+        if back_m > 0.0 || set_off {
+            rows[i][2] += load_n * (1.0 - back_m / compliance_m);
+        }
+    }
+    let mut out = format!("{header}\n");
+    for r in &rows {
+        out += &format!("{},{},{}\n", r[0], r[1], r[2]);
+    }
+    std::fs::write(path, out).unwrap();
+}
+
 /// The diagnosis's own scores of `effect`'s candidate.
 fn candidate<'a>(out: &'a Value, effect: &str) -> &'a Value {
     out["candidates"]
@@ -639,7 +711,9 @@ fn stribecks_raise_at_low_speed_is_taken_by_its_own_law() {
 /// fall overshoots by half the fall and rings, as every stop and
 /// reversal does. Named on the paper's protocol (250 Hz, 3 mN, each trial
 /// 15 % its own, seed 2) with the mode found within a third of an octave
-/// and the tissue's force passed through it whole (its gain near 1), and
+/// and the tissue's force passed through it nearly whole (its gain 0.69;
+/// each trial's tip unloading on its first retraction takes a little of
+/// the ring there: 0.74 without that column), and
 /// on insert–dwell–withdraw as rigs record it (100 Hz, 12 mN, seed 1),
 /// where the fall's ring lies on a sample or two.
 #[test]
@@ -651,7 +725,7 @@ fn a_holder_on_a_ringing_mount_is_named() {
     let hz = num(&mount["params"]["mount_hz"]);
     assert!((20.0..=32.0).contains(&hz), "{mount}");
     let gain = num(&mount["params"]["mount_gain"]);
-    assert!((0.7..=1.3).contains(&gain), "{mount}");
+    assert!((0.65..=1.3).contains(&gain), "{mount}");
     let (before, after) = heldout_before_after(&out);
     assert!(after <= 0.6 * before, "{before} → {after} N");
     let out = diagnosis_as_rigs_record(("holder_inertia", Form::Literature, 1));

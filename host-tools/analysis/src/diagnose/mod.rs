@@ -29,6 +29,7 @@ mod motion;
 pub mod prepare;
 mod report;
 mod significance;
+mod tip;
 mod waterfall;
 
 pub use diagnosis::{
@@ -46,7 +47,7 @@ use needle_io::trial::{Skipped, Unreadable};
 use self::candidates::{Candidate, CANDIDATES};
 use self::crossval::{folds, Gram, PerTrial};
 use self::figure::Withheld;
-use self::prepare::{prepare, Prepared, DWELL, LOADING, PHASES, WITHDRAWAL};
+use self::prepare::{prepare, Prepared, LOADING, PHASES, WITHDRAWAL};
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
 use crate::fit::{fit_tared, TrialFit};
 
@@ -130,8 +131,9 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
 /// nominal's own friction term, the stiffness scale its own loading
 /// force, the held terms the force it holds in its first dwell
 /// (`held_in_first_dwell`) and at the static band in the rests after it
-/// (`held_at_the_band`), which [`SPREAD`] frees per trial.
-pub const NOMINAL_CORRECTIONS: [&str; 15] = [
+/// (`held_at_the_band`), and the tip's load as it lets go on the first
+/// retraction (`tip_unloading`), which [`SPREAD`] frees per trial.
+pub const NOMINAL_CORRECTIONS: [&str; 16] = [
     "a1_n_per_m",
     "a2_n_per_m2",
     "cp_n_per_m",
@@ -147,6 +149,7 @@ pub const NOMINAL_CORRECTIONS: [&str; 15] = [
     "stick_n_per_m",
     "held_at_band",
     "friction_scale_let_go",
+    "tip_unloading_n",
 ];
 
 /// The corrections each trial has its own value of, fitted on the trial
@@ -155,7 +158,8 @@ pub const NOMINAL_CORRECTIONS: [&str; 15] = [
 /// insertions' capsules are one curve scaled), the cutting force, the
 /// scale of friction, the force held in the first dwell (where a trial's
 /// tissue stops in its static band) and at the band in later rests, and
-/// where the withdrawal lets go (its relaxed surface). Real tissue
+/// where the withdrawal lets go (its relaxed surface), and the tip's load
+/// as it unloads on the first retraction (`Prepared::tip_unloading`). Real tissue
 /// differs from one insertion to the next in these (the paper: puncture
 /// 2.30 ± 0.83 N, cutting 0.94 ± 0.36 N; real withdrawals let go 1.5–9 mm
 /// before the first contact, a different place each time), and that
@@ -166,11 +170,12 @@ pub const NOMINAL_CORRECTIONS: [&str; 15] = [
 /// [`NOMINAL_CORRECTIONS`]: `a1_n_per_m`, `cutting_force_n`,
 /// `let_go_shift_m`, `friction_scale`, `stiffness_scale`,
 /// `held_first_dwell`, the withdrawal's stick (`stick_held_n`,
-/// `stick_n_per_m`), `held_at_band` and `friction_scale_let_go`: the
+/// `stick_n_per_m`), `held_at_band`, `friction_scale_let_go` (the
 /// friction of a withdrawal once the tissue it dragged out has let go,
 /// its own scale: the shaft then slides through tissue that was
-/// stretched and let go, whose friction the insertion need not set.
-pub const SPREAD: [usize; 10] = [0, 6, 7, 8, 9, 10, 11, 12, 13, 14];
+/// stretched and let go, whose friction the insertion need not set) and
+/// `tip_unloading_n`.
+pub const SPREAD: [usize; 11] = [0, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
@@ -230,6 +235,7 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
     cols.extend(dragged_tent(p));
     cols.push(held_at_the_band(p));
     cols.push(after_n);
+    cols.push(p.tip_unloading.clone());
     cols.extend(set.iter().flat_map(|(c, g)| (c.columns)(p, *g)));
     cols
 }
@@ -243,7 +249,7 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
 /// [`held_at_the_band`].)
 fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
     let mut held = vec![0.0; p.trial.len()];
-    let Some(first) = first_dwell(p) else {
+    let Some(first) = p.first_dwell() else {
         return held;
     };
     // Only where the nominal holds: a dwell's first samples can still be
@@ -273,16 +279,6 @@ fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
     held
 }
 
-/// The samples of a trial's first dwell, if it has one.
-fn first_dwell(p: &Prepared) -> Option<std::ops::Range<usize>> {
-    let start = p.phase.iter().position(|&ph| ph == DWELL)?;
-    let len = p.phase[start..]
-        .iter()
-        .take_while(|&&ph| ph == DWELL)
-        .count();
-    Some(start..start + len)
-}
-
 /// The force the nominal holds at its static band (D_p·l or D_n·l) in the
 /// rests after the first dwell. The band is a friction of the trial's own
 /// tissue, but `needle fit` sets it from the few stops that reach it —
@@ -291,7 +287,7 @@ fn first_dwell(p: &Prepared) -> Option<std::ops::Range<usize>> {
 /// first dwell's is. (The first dwell has [`held_in_first_dwell`].)
 fn held_at_the_band(p: &Prepared) -> Vec<f64> {
     let mut held = vec![0.0; p.trial.len()];
-    let Some(first) = first_dwell(p) else {
+    let Some(first) = p.first_dwell() else {
         return held;
     };
     for (i, h) in held.iter_mut().enumerate().skip(first.end) {

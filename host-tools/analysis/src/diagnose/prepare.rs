@@ -107,6 +107,10 @@ pub struct Prepared {
     /// first step out (up to 10 ms before the withdrawal phase) to where
     /// the dragged tissue slipped; empty if it never stuck.
     pub stick: std::ops::Range<usize>,
+    /// The tip's unloading on its first retraction from the cutting
+    /// front, 1 to 0 over the compliance chosen on the trial
+    /// (the `tip` module); made once, with the rest of the trial.
+    pub tip_unloading: Vec<f64>,
     /// The first sample of the needle out of the tissue for good as the
     /// measured force has it (see `came_free` in this module); the trial's length if it
     /// does not say.
@@ -123,6 +127,16 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// The samples of the trial's first dwell, if it has one.
+    pub fn first_dwell(&self) -> Option<std::ops::Range<usize>> {
+        let start = self.phase.iter().position(|&ph| ph == DWELL)?;
+        let len = self.phase[start..]
+            .iter()
+            .take_while(|&&ph| ph == DWELL)
+            .count();
+        Some(start..start + len)
+    }
+
     /// Replace the nominal model by another one sample for sample (the
     /// device's, from its residual stream).
     pub fn use_nominal(&mut self, model_n: Vec<f64>) -> anyhow::Result<()> {
@@ -308,7 +322,7 @@ pub fn prepare(
     let came_free = came_free(&trial, &geometry, &stick);
     let a_mps2 = acceleration(&trial);
     let structures = structures(&trial, params, &residual_n);
-    Prepared {
+    let mut prepared = Prepared {
         stick,
         came_free,
         fitted_n: nominal_n.clone(),
@@ -328,9 +342,12 @@ pub fn prepare(
         cutting,
         structures,
         trial,
+        tip_unloading: Vec::new(),
         search: Default::default(),
         sudden: Default::default(),
-    }
+    };
+    prepared.tip_unloading = super::tip::unloading(&prepared);
+    prepared
 }
 
 /// ρ, the capsule's relaxation (x_s3 = x_s1 + ρ·(x_s2 − x_s1)), that
