@@ -101,7 +101,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         effect: "rate_dependent_friction",
         grid_name: "law",
         grid: &[-0.75, -0.5, -0.25, 0.5, 1.0, 2.0, 3.0, 4.0],
-        linear: &["rate_gain", "b_correction_ns_per_m2"],
+        linear: &["rate_gain"],
         columns: rate_friction,
         on_grid: None,
         grid_params: rate_law_params,
@@ -522,36 +522,43 @@ fn rate_law_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
     }
 }
 
-/// Sliding damping l·v·(|v|/v_ref)^q beside l·v itself. At rest the
-/// nominal's Karnopp friction holds the sliding force it had when the
-/// needle stopped, and so do these (a dwell after a fast insertion holds
-/// that speed's damping).
+/// Sliding damping l·v·(|v|/v_ref)^q. At rest the nominal's Karnopp
+/// friction holds the sliding force it had when the needle stopped, and
+/// so does this (a dwell after a fast insertion holds that speed's
+/// damping).
 ///
 /// Or Stribeck's law (grid values from [`STRIBECK_FROM`] on): friction
 /// per length raised at low speed, l·sgn(v)·e^{−(|v|/v_s)²}, the raise
 /// gone by a few v_s (boundary lubrication giving way to a fluid film;
-/// v_s of 0.25–2 mm/s on the grid), beside l·v.
+/// v_s of 0.25–2 mm/s on the grid).
+///
+/// Not l·v beside it: each trial's viscous friction is its own
+/// ([`super::SPREAD`]), and a shared l·v beside those is fitted only
+/// where a rest holds it otherwise.
 fn rate_friction(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
-    let n = p.trial.len();
-    let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
-    let mut held = (0.0, 0.0);
+    let mut held = 0.0;
     let law = |v: f64| match stribeck_speed_mps(g) {
         Some(v_s) => v.signum() * (-(v / v_s).powi(2)).exp(),
         None if v.abs() > 0.0005 => v * (v.abs() / 0.003).powf(g),
         None => 0.0,
     };
-    for i in 0..n {
-        let (v, l) = (p.velocity.v_mps[i], p.length_m[i]);
-        if l <= 0.0 {
-            held = (0.0, 0.0);
-        } else if v.abs() >= p.params.half_band_mps {
-            held = (l * law(v), l * v);
-            (a[i], b[i]) = held;
-        } else if p.friction_basis[i] != [0.0; 4] {
-            (a[i], b[i]) = held;
-        }
-    }
-    vec![a, b]
+    let column = (0..p.trial.len())
+        .map(|i| {
+            let (v, l) = (p.velocity.v_mps[i], p.length_m[i]);
+            if l <= 0.0 {
+                held = 0.0;
+                0.0
+            } else if v.abs() >= p.params.half_band_mps {
+                held = l * law(v);
+                held
+            } else if p.friction_basis[i] != [0.0; 4] {
+                held
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    vec![column]
 }
 
 /// Friction following the nominal Karnopp value with a lag over x_c of

@@ -156,26 +156,28 @@ pub const NOMINAL_CORRECTIONS: [&str; 16] = [
 /// itself, withheld or not: the capsule's stiffness (so the puncture
 /// force) and the loading curve's slope beside it (so its shape: no two
 /// insertions' capsules are one curve scaled), the cutting force, the
-/// scale of friction, the force held in the first dwell (where a trial's
-/// tissue stops in its static band) and at the band in later rests, and
-/// where the withdrawal lets go (its relaxed surface), and the tip's load
-/// as it unloads on the first retraction (`Prepared::tip_unloading`). Real tissue
-/// differs from one insertion to the next in these (the paper: puncture
-/// 2.30 ± 0.83 N, cutting 0.94 ± 0.36 N; real withdrawals let go 1.5–9 mm
-/// before the first contact, a different place each time), and that
-/// spread is not an unmodelled effect: judged with them shared, a dataset
-/// of the nominal physics with spread was called `unexplained`. The rule
-/// is fixed before any effect is looked at, and an effect must explain
-/// what these per-trial numbers cannot. Indices into
-/// [`NOMINAL_CORRECTIONS`]: `a1_n_per_m`, `cutting_force_n`,
-/// `let_go_shift_m`, `friction_scale`, `stiffness_scale`,
-/// `held_first_dwell`, the withdrawal's stick (`stick_held_n`,
-/// `stick_n_per_m`), `held_at_band`, `friction_scale_let_go` (the
-/// friction of a withdrawal once the tissue it dragged out has let go,
-/// its own scale: the shaft then slides through tissue that was
-/// stretched and let go, whose friction the insertion need not set) and
-/// `tip_unloading_n`.
-pub const SPREAD: [usize; 11] = [0, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
+/// scale of friction and its viscous part each way beside it (a tissue's
+/// Coulomb and viscous friction need not scale together from one
+/// insertion to the next), the force held in the first dwell (where a
+/// trial's tissue stops in its static band) and at the band in later
+/// rests, where the withdrawal lets go (its relaxed surface), and the
+/// tip's load as it unloads on the first retraction
+/// (`Prepared::tip_unloading`). Real tissue differs from one insertion to
+/// the next in these (the paper: puncture 2.30 ± 0.83 N, cutting 0.94 ±
+/// 0.36 N; real withdrawals let go 1.5–9 mm before the first contact, a
+/// different place each time), and that spread is not an unmodelled
+/// effect: judged with them shared, a dataset of the nominal physics with
+/// spread was called `unexplained`. The rule is fixed before any effect
+/// is looked at, and an effect must explain what these per-trial numbers
+/// cannot. Indices into [`NOMINAL_CORRECTIONS`]: `a1_n_per_m`,
+/// `bp_ns_per_m2`, `bn_ns_per_m2`, `cutting_force_n`, `let_go_shift_m`,
+/// `friction_scale`, `stiffness_scale`, `held_first_dwell`, the
+/// withdrawal's stick (`stick_held_n`, `stick_n_per_m`), `held_at_band`,
+/// `friction_scale_let_go` (the friction of a withdrawal once the tissue
+/// it dragged out has let go, its own scale: the shaft then slides
+/// through tissue that was stretched and let go, whose friction the
+/// insertion need not set) and `tip_unloading_n`.
+pub const SPREAD: [usize; 13] = [0, 3, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
