@@ -124,6 +124,56 @@ fn diagnosis_on_the_papers_rig(case: (&str, Form, u64)) -> Value {
     diagnosis_of(dir.path())
 }
 
+/// Trials whose friction differs in shape, not only in scale (five of
+/// the journal's liver 1, which has a Coulomb friction, five with its
+/// viscous friction 50 % up each way and its Coulomb friction as it
+/// was), and no effect: each trial's own viscous friction takes it, the
+/// nominal is left at the noise (5.0 mN on 5.0) and the verdict is
+/// `none`. With each trial's friction the shared shape scaled it kept
+/// 7.3 mN.
+#[test]
+fn friction_of_other_shapes_is_spread_not_an_effect() {
+    let journal = tissue("liver1_journal").unwrap();
+    let more_viscous = TissueParams {
+        bp_ns_per_m2: journal.bp_ns_per_m2 * 1.5,
+        bn_ns_per_m2: journal.bn_ns_per_m2 * 1.5,
+        ..journal
+    };
+    let dir = tempfile::tempdir().unwrap();
+    two_tissues(dir.path(), [&journal, &more_viscous], Rig::default());
+    let out = diagnosis_of(dir.path());
+    let (before, _) = heldout_before_after(&out);
+    let noise = num(&out["noise_floor_n"]);
+    println!("{:.1} mN on {:.1}", before * 1e3, noise * 1e3);
+    assert!(before < 1.2 * noise, "{before} on {noise}");
+    assert_eq!(out["verdict"]["effect"], "none", "{}", out["verdict"]);
+}
+
+/// Five trials of each of `tissues` in `dir` (`trial_{k}{j}.csv`), no
+/// effect, on `rig`.
+fn two_tissues(dir: &Path, tissues: [&TissueParams; 2], rig: Rig) {
+    for (k, tissue) in tissues.into_iter().enumerate() {
+        let part = tempfile::tempdir().unwrap();
+        Dataset {
+            tissue_name: "liver1",
+            tissue,
+            effects: &[],
+            trials: 5,
+            seed: 40 + k as u64,
+            sensor: SENSOR,
+            through: false,
+            form: Form::Standard,
+            rig,
+        }
+        .write(part.path())
+        .unwrap();
+        for j in 0..5 {
+            let from = part.path().join(format!("trial_{j:03}.csv"));
+            std::fs::copy(from, dir.join(format!("trial_{k}{j}.csv"))).unwrap();
+        }
+    }
+}
+
 /// Trials whose capsules differ in shape, not only in scale (five of
 /// liver 1, five with its a1 30 % up and its a2 30 % down, as one tissue
 /// differs from the next), and no effect: each trial's own loading slope
@@ -138,26 +188,7 @@ fn capsules_of_other_shapes_are_spread_not_an_effect() {
         a2_n_per_m2: LIVER1.a2_n_per_m2 * 0.7,
         ..LIVER1
     };
-    for (k, tissue) in [&LIVER1, &other].into_iter().enumerate() {
-        let part = tempfile::tempdir().unwrap();
-        Dataset {
-            tissue_name: "liver1",
-            tissue,
-            effects: &[],
-            trials: 5,
-            seed: 40 + k as u64,
-            sensor: SENSOR,
-            through: false,
-            form: Form::Standard,
-            rig: Rig::default(),
-        }
-        .write(part.path())
-        .unwrap();
-        for j in 0..5 {
-            let from = part.path().join(format!("trial_{j:03}.csv"));
-            std::fs::copy(from, dir.path().join(format!("trial_{k}{j}.csv"))).unwrap();
-        }
-    }
+    two_tissues(dir.path(), [&LIVER1, &other], Rig::default());
     let out = diagnosis_of(dir.path());
     let noise = num(&out["noise_floor_n"]);
     let loading = num(&out["baseline"]["by_phase"]["loading"]["rms_n"]);
