@@ -231,10 +231,58 @@ fn a_tip_that_lets_go_over_its_compliance_is_the_nominal() {
     assert_eq!(out["verdict"]["effect"], "none", "{}", out["verdict"]);
 }
 
-/// Rewrites a trial's force as if its tip let `load_n` go linearly over
-/// `compliance_m` of its first retraction from the deepest point, rather
-/// than at once (the simulator's tip drops it at once).
-fn with_a_compliant_tip(path: &Path, load_n: f64, compliance_m: f64) {
+/// A misfit no effect is and the nominal cannot take, a few noise floors
+/// but under a hundredth of the puncture force (a slow wander of the
+/// load cell's reading, 9 mN RMS, its phase each trial's own), on the
+/// paper's protocol with no effect: within the nominal's tolerance, the
+/// verdict is `none` (`unexplained` on the noise floor alone).
+#[test]
+fn a_misfit_within_the_nominals_tolerance_is_none() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate_jittered(
+        dir.path(),
+        ("", Form::Standard, 3),
+        ProtocolKind::Paper,
+        (250.0, 0.003),
+    );
+    let mut trial = 0.0;
+    for entry in std::fs::read_dir(dir.path()).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "csv") {
+            trial += 1.0;
+            rewrite_trial(&path, |rows| {
+                for row in rows {
+                    let wander_n: f64 = [0.5, 1.3, 2.9]
+                        .iter()
+                        .enumerate()
+                        .map(|(j, hz)| {
+                            let phase = 1.7 * trial + 2.3 * j as f64;
+                            0.0073 * (std::f64::consts::TAU * hz * row[0] + phase).sin()
+                        })
+                        .sum();
+                    row[2] += wander_n;
+                }
+            });
+        }
+    }
+    let out = diagnosis_of(dir.path());
+    let (before, after) = heldout_before_after(&out);
+    let (noise, tolerance) = (num(&out["noise_floor_n"]), num(&out["explained_below_n"]));
+    println!(
+        "{:.1} -> {:.1} mN on {:.1}, explained below {:.1}: {}",
+        before * 1e3,
+        after * 1e3,
+        noise * 1e3,
+        tolerance * 1e3,
+        out["verdict"]
+    );
+    assert!(after > 1.5 * noise, "{after} on {noise}");
+    assert_eq!(out["verdict"]["effect"], "none", "{}", out["verdict"]);
+    assert_eq!(out["verdict"]["explained"], true, "{}", out["verdict"]);
+}
+
+/// Rewrites a trial's rows (`t_s`, `x_m`, `f_n`) with `edit`.
+fn rewrite_trial(path: &Path, edit: impl FnOnce(&mut [[f64; 3]])) {
     let text = std::fs::read_to_string(path).unwrap();
     let mut lines = text.lines();
     let header = lines.next().unwrap();
@@ -244,6 +292,22 @@ fn with_a_compliant_tip(path: &Path, load_n: f64, compliance_m: f64) {
             [v[0], v[1], v[2]]
         })
         .collect();
+    edit(&mut rows);
+    let mut out = format!("{header}\n");
+    for r in &rows {
+        out += &format!("{},{},{}\n", r[0], r[1], r[2]);
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+/// Rewrites a trial's force as if its tip let `load_n` go linearly over
+/// `compliance_m` of its first retraction from the deepest point, rather
+/// than at once (the simulator's tip drops it at once).
+fn with_a_compliant_tip(path: &Path, load_n: f64, compliance_m: f64) {
+    rewrite_trial(path, |rows| compliant_tip(rows, load_n, compliance_m));
+}
+
+fn compliant_tip(rows: &mut [[f64; 3]], load_n: f64, compliance_m: f64) {
     // The first stop at the deepest point: the oscillation after it
     // comes back to within an encoder step of it.
     let deepest_m = rows.iter().map(|r| r[1]).fold(f64::MIN, f64::max);
@@ -262,11 +326,6 @@ fn with_a_compliant_tip(path: &Path, load_n: f64, compliance_m: f64) {
             rows[i][2] += load_n * (1.0 - back_m / compliance_m);
         }
     }
-    let mut out = format!("{header}\n");
-    for r in &rows {
-        out += &format!("{},{},{}\n", r[0], r[1], r[2]);
-    }
-    std::fs::write(path, out).unwrap();
 }
 
 /// The diagnosis's own scores of `effect`'s candidate.
@@ -1157,13 +1216,17 @@ fn a_decoded_stream_names_the_drift_and_the_device_models_gap_has_it_closest() {
     assert!(num(&host["verdict"]["shrink"]) > 0.5);
     // Against the firmware's own model (its residual stream): what the
     // device's online geometry misses in the dwell and at the reversals
-    // leaves the gap open (not explained), the drift the first effect
-    // named or, if none is significant, the closest candidate.
+    // leaves more than 1.5 noise floors (within the nominal's tolerance
+    // of 1 % of the puncture force, so `explained` may say either), the
+    // drift the first effect named or, if none is significant, the
+    // closest candidate.
     let device = diagnose_live(&["--device-model"]);
     let v = &device["verdict"];
     println!("against the device's model: {v}");
     let closest = v["closest"].as_array().unwrap();
-    assert_eq!(v["explained"], false, "{v}");
+    let left = num(&v["heldout_rms_after_n"]);
+    let noise = num(&device["noise_floor_n"]);
+    assert!(left > 1.5 * noise, "{left} on {noise}: {v}");
     assert_eq!(closest[0], "sensor_drift", "{v}");
     assert!(
         v["effect"] == "unexplained" || v["effect"] == "sensor_drift",

@@ -16,6 +16,10 @@ pub struct Diagnosis {
     pub tare_n: BTreeMap<String, f64>,
     /// The sensor's noise, the trials' mean (N).
     pub noise_floor_n: f64,
+    /// The held-out RMS at or under which what is left counts as
+    /// explained (N): 1.5 noise floors or 1 % of the trials' mean
+    /// puncture force, the larger.
+    pub explained_below_n: f64,
     /// The nominal with its corrections, each trial's spread its own.
     pub baseline: Baseline,
     /// Where the nominal's residual lies: phase × 5 mm of position,
@@ -110,7 +114,7 @@ pub struct Verdict {
     /// The waterfall: each named effect in turn.
     pub effects: Vec<Step>,
     pub heldout_rms_after_n: f64,
-    /// What is left is within [`super::EXPLAINED_FACTOR`] noise floors.
+    /// What is left is within [`Diagnosis::explained_below_n`].
     pub explained: bool,
     /// The effects the waterfall took, named or (when they leave the gap
     /// mostly open) only the closest.

@@ -54,8 +54,8 @@ use crate::fit::{fit_tared, TrialFit};
 pub use self::backfit::heldout_rms_with_displacement;
 use self::significance::{gap_taken, improvement, Bar, Consistency};
 pub use self::significance::{
-    EXPLAINED_FACTOR, MIN_EFFECT_FLOORS, MIN_SHRINK, MIN_STEP_SHARE, MIN_T, MOST_OF_GAP,
-    NOTHING_LEFT_FACTOR,
+    EXPLAINED_FACTOR, MIN_EFFECT_FLOORS, MIN_SHRINK, MIN_STEP_SHARE, MIN_T, MODEL_TOLERANCE,
+    MOST_OF_GAP, NOTHING_LEFT_FACTOR,
 };
 use self::waterfall::{backfitted_first, best_backfitted, displaces, waterfall, Contender};
 
@@ -903,7 +903,8 @@ pub fn diagnose_with_progress(
     }
     let after = steps.last().map(|(_, s)| s.clone());
     let left = after.as_ref().unwrap_or(&baseline);
-    let gap_open = left.rms() > EXPLAINED_FACTOR * noise;
+    let explained_below_n = explained_below_n(data, noise);
+    let gap_open = left.rms() > explained_below_n;
     // Never `none` over a gap: a residual well above the noise that no
     // candidate takes away is something none of them is. Nor is a gap
     // the named effects leave mostly open theirs: they stand as the
@@ -944,6 +945,7 @@ pub fn diagnose_with_progress(
         trials: data.len(),
         tare_n,
         noise_floor_n: noise,
+        explained_below_n,
         baseline: Baseline {
             heldout_rms_n: baseline.rms(),
             corrections: NOMINAL_CORRECTIONS
@@ -1112,6 +1114,20 @@ fn by_phase(s: &Scored) -> ByPhase {
 /// Noise floor: robust sample-to-sample noise of the force, averaged.
 fn noise_floor(data: &[Prepared]) -> f64 {
     data.iter().map(|p| p.noise_n).sum::<f64>() / data.len() as f64
+}
+
+/// The held-out RMS at or under which what is left counts as explained:
+/// [`EXPLAINED_FACTOR`] noise floors, or the nominal's tolerance
+/// ([`MODEL_TOLERANCE`] of the trials' mean puncture force), whichever
+/// is larger.
+fn explained_below_n(data: &[Prepared], noise_n: f64) -> f64 {
+    let punctures: Vec<f64> = data
+        .iter()
+        .map(|p| p.geometry.puncture_force_n)
+        .filter(|&f| f > 0.0)
+        .collect();
+    let mean_n = punctures.iter().sum::<f64>() / punctures.len().max(1) as f64;
+    (EXPLAINED_FACTOR * noise_n).max(MODEL_TOLERANCE * mean_n)
 }
 
 /// Depth bins of the residual: phase, position range, share of the squared

@@ -52,7 +52,9 @@ pub fn headline(out: &Diagnosis) -> String {
             String::new()
         } else {
             format!(
-                "; the gap left is more than 1.5 noise floors: not explained{}",
+                "; the gap left is more than {:.4} N (1.5 noise floors or 1 % of the \
+                 puncture force): not explained{}",
+                out.explained_below_n,
                 where_left(v)
             )
         },
@@ -258,7 +260,7 @@ fn phase_bands(p: &Prepared) -> Vec<Band> {
 /// The waterfall as an inline figure: a bar for the held-out RMS of the
 /// nominal (each trial's spread fitted on the trial), one after each named
 /// effect, the noise floor as a line and the level below which the gap
-/// counts as explained ([`super::EXPLAINED_FACTOR`] noise floors) as
+/// counts as explained ([`Diagnosis::explained_below_n`]) as
 /// another; every bar and line labelled with its name and value.
 fn waterfall_svg(out: &Diagnosis) -> String {
     let mut bars = vec![("nominal".to_owned(), out.baseline.heldout_rms_n)];
@@ -266,7 +268,7 @@ fn waterfall_svg(out: &Diagnosis) -> String {
         bars.push((format!("+ {}", e.label()), e.heldout_rms_after_n));
     }
     let noise = out.noise_floor_n;
-    let explained = super::EXPLAINED_FACTOR * noise;
+    let explained = out.explained_below_n;
     let top = bars.iter().map(|b| b.1).fold(explained, f64::max).max(1e-9) * 1.15;
     // Wide enough that the noise floor's label, at the right, clears the
     // bars.
@@ -306,8 +308,9 @@ fn waterfall_svg(out: &Diagnosis) -> String {
             explained,
             "#36c",
             format!(
-                "explained below {explained:.4} N ({} floors)",
-                super::EXPLAINED_FACTOR
+                "explained below {explained:.4} N ({} floors or {} % of the puncture force)",
+                super::EXPLAINED_FACTOR,
+                100.0 * super::MODEL_TOLERANCE
             ),
             left + 4.0,
         ),
