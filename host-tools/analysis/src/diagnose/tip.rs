@@ -42,8 +42,9 @@ pub(super) fn unloading(p: &Prepared) -> Vec<f64> {
 /// The samples of the first retraction from the cutting front, each with
 /// how far the tip is back from the front (m) and how likely the nominal
 /// has it sliding: from where the tip first draws back from its first
-/// dwell until it is the widest compliance behind the front, outside a
-/// withdrawal's stick (its own columns hold the force there).
+/// dwell until it is the widest compliance behind the front — inside a
+/// withdrawal's stick too, where the tissue round the shaft is dragged
+/// along as a tent while the tip lets go of the tissue ahead of it.
 fn unloading_window(p: &Prepared) -> Option<Vec<(usize, f64, f64)>> {
     let first = p.first_dwell()?;
     let x = &p.trial.x_m;
@@ -90,7 +91,6 @@ fn unloading_window(p: &Prepared) -> Option<Vec<(usize, f64, f64)>> {
         }
         window.push((i, back_m.max(0.0), sliding(i)));
     }
-    window.retain(|(i, ..)| !p.stick.contains(i));
     Some(window)
 }
 
