@@ -271,8 +271,8 @@ fn waterfall_svg(out: &Diagnosis) -> String {
     let explained = out.explained_below_n;
     let top = bars.iter().map(|b| b.1).fold(explained, f64::max).max(1e-9) * 1.15;
     // Wide enough that the noise floor's label, at the right, clears the
-    // bars.
-    let w = 140.0 * bars.len() as f64 + 300.0;
+    // bars and the explained level's, at the left.
+    let w = (140.0 * bars.len() as f64 + 300.0).max(560.0);
     let (h, left, bottom, bar_w) = (316.0, 70.0, 250.0, 90.0);
     let y = |v: f64| bottom - (v / top) * (bottom - 20.0);
     let mut svg = format!(
@@ -307,11 +307,17 @@ fn waterfall_svg(out: &Diagnosis) -> String {
         (
             explained,
             "#36c",
-            format!(
-                "explained below {explained:.4} N ({} floors or {} % of the puncture force)",
-                super::EXPLAINED_FACTOR,
-                100.0 * super::MODEL_TOLERANCE
-            ),
+            if explained > super::EXPLAINED_FACTOR * noise {
+                format!(
+                    "explained below {explained:.4} N ({} % of the puncture force)",
+                    100.0 * super::MODEL_TOLERANCE
+                )
+            } else {
+                format!(
+                    "explained below {explained:.4} N ({} noise floors)",
+                    super::EXPLAINED_FACTOR
+                )
+            },
             left + 4.0,
         ),
     ] {
