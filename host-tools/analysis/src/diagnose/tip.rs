@@ -33,19 +33,27 @@ pub(super) fn unloading(p: &Prepared) -> Vec<f64> {
     else {
         return col;
     };
-    for &(i, back_m, share) in &window {
-        col[i] = share * ramp(back_m, d_m);
+    for s in &window {
+        col[s.i] = s.sliding * ramp(s.back_m, d_m);
     }
     col
 }
 
-/// The samples of the first retraction from the cutting front, each with
-/// how far the tip is back from the front (m) and how likely the nominal
-/// has it sliding: from where the tip first draws back from its first
-/// dwell until it is the widest compliance behind the front — inside a
-/// withdrawal's stick too, where the tissue round the shaft is dragged
-/// along as a tent while the tip lets go of the tissue ahead of it.
-fn unloading_window(p: &Prepared) -> Option<Vec<(usize, f64, f64)>> {
+/// A sample of the first retraction from the cutting front.
+struct Drawn {
+    i: usize,
+    /// How far the tip is behind the front, m.
+    back_m: f64,
+    /// How likely the nominal has the sample sliding (0 to 1).
+    sliding: f64,
+}
+
+/// The samples of the first retraction from the cutting front: from
+/// where the tip first draws back from its first dwell until it is the
+/// widest compliance behind the front — inside a withdrawal's stick too,
+/// where the tissue round the shaft is dragged along as a tent while the
+/// tip lets go of the tissue ahead of it.
+fn unloading_window(p: &Prepared) -> Option<Vec<Drawn>> {
     let first = p.first_dwell()?;
     let x = &p.trial.x_m;
     // Where the tip stopped at the front: the deepest point before the
@@ -78,10 +86,14 @@ fn unloading_window(p: &Prepared) -> Option<Vec<(usize, f64, f64)>> {
     let drawing_back = |i: usize| x[i] < front_m || p.velocity.v_mps[i] < -band_mps;
     let set_off = (front_at..x.len()).find(|&i| drawing_back(i))?;
     // The samples just before, as likely as the nominal has them sliding.
-    let mut window: Vec<(usize, f64, f64)> = (front_at..set_off)
+    let mut window: Vec<Drawn> = (front_at..set_off)
         .rev()
-        .map(|i| (i, 0.0, sliding(i)))
-        .take_while(|&(.., share)| share > 0.0)
+        .map(|i| Drawn {
+            i,
+            back_m: 0.0,
+            sliding: sliding(i),
+        })
+        .take_while(|s| s.sliding > 0.0)
         .collect();
     let widest_m = compliances_m().fold(0.0, f64::max);
     for (i, x_m) in x.iter().enumerate().skip(set_off) {
@@ -89,17 +101,24 @@ fn unloading_window(p: &Prepared) -> Option<Vec<(usize, f64, f64)>> {
         if back_m >= widest_m {
             break;
         }
-        window.push((i, back_m.max(0.0), sliding(i)));
+        window.push(Drawn {
+            i,
+            back_m: back_m.max(0.0),
+            sliding: sliding(i),
+        });
     }
     Some(window)
 }
 
 /// What an unloading of shape `ramp` (of how far the tip is back) and the
 /// trial's friction scaled leave of the residual over `window`.
-fn unloading_sse(p: &Prepared, window: &[(usize, f64, f64)], ramp: impl Fn(f64) -> f64) -> f64 {
+fn unloading_sse(p: &Prepared, window: &[Drawn], ramp: impl Fn(f64) -> f64) -> f64 {
     let mut g = Gram::new(2);
-    for &(i, back_m, share) in window {
-        g.add(&[share * ramp(back_m), p.friction_n[i]], p.residual_n[i]);
+    for s in window {
+        g.add(
+            &[s.sliding * ramp(s.back_m), p.friction_n[s.i]],
+            p.residual_n[s.i],
+        );
     }
     let theta = g.solve();
     g.sse(&theta)
