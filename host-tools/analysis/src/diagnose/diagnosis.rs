@@ -17,8 +17,9 @@ pub struct Diagnosis {
     /// The sensor's noise, the trials' mean (N).
     pub noise_floor_n: f64,
     /// The held-out RMS at or under which what is left counts as
-    /// explained (N): 1.5 noise floors or 1 % of the trials' mean
-    /// puncture force, the larger.
+    /// explained (N): [`super::EXPLAINED_FACTOR`] noise floors or
+    /// [`super::MODEL_TOLERANCE`] of the trials' mean puncture force, the
+    /// larger.
     pub explained_below_n: f64,
     /// The nominal with its corrections, each trial's spread its own.
     pub baseline: Baseline,

@@ -264,10 +264,6 @@ fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
     // A sample sliding by the encoder is not at rest here whatever its
     // alternative.)
     let at_rest = |i: usize| p.velocity.v_mps[i].abs() < p.params.half_band_mps;
-    let mut resting = vec![1.0; p.trial.len()];
-    for &(i, w) in &p.other_side {
-        resting[i] = 1.0 - w;
-    }
     for (i, h) in held
         .iter_mut()
         .enumerate()
@@ -275,7 +271,8 @@ fn held_in_first_dwell(p: &Prepared) -> Vec<f64> {
         .take(first.len())
     {
         if at_rest(i) {
-            *h = resting[i] * (p.friction_n[i] + p.cutting[i] * p.params.cutting_force_n);
+            *h = (1.0 - p.sliding_odds(i))
+                * (p.friction_n[i] + p.cutting[i] * p.params.cutting_force_n);
         }
     }
     held

@@ -127,6 +127,22 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// How likely the nominal has sample `i` sliding: the side of a stop
+    /// or start placed between samples its velocity puts it on, or the
+    /// other ([`Self::other_side`]).
+    pub fn sliding_odds(&self, i: usize) -> f64 {
+        let other = self
+            .other_side
+            .iter()
+            .find(|&&(j, _)| j == i)
+            .map_or(0.0, |&(_, w)| w);
+        if self.velocity.v_mps[i].abs() < self.params.half_band_mps {
+            other
+        } else {
+            1.0 - other
+        }
+    }
+
     /// The samples of the trial's first dwell, if it has one.
     pub fn first_dwell(&self) -> Option<std::ops::Range<usize>> {
         let start = self.phase.iter().position(|&ph| ph == DWELL)?;

@@ -52,9 +52,11 @@ pub fn headline(out: &Diagnosis) -> String {
             String::new()
         } else {
             format!(
-                "; the gap left is more than {:.4} N (1.5 noise floors or 1 % of the \
+                "; the gap left is more than {:.4} N ({} noise floors or {} % of the \
                  puncture force): not explained{}",
                 out.explained_below_n,
+                super::EXPLAINED_FACTOR,
+                100.0 * super::MODEL_TOLERANCE,
                 where_left(v)
             )
         },

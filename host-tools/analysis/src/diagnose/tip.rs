@@ -67,20 +67,6 @@ fn unloading_window(p: &Prepared) -> Option<Vec<Drawn>> {
     }
     let front_m = x[front_at];
     let band_mps = p.params.half_band_mps;
-    // How likely the nominal has sample `i` sliding: its velocity's side
-    // of a stop or start placed between samples, or the other.
-    let sliding = |i: usize| {
-        let other = p
-            .other_side
-            .iter()
-            .find(|&&(j, _)| j == i)
-            .map_or(0.0, |&(_, w)| w);
-        if p.velocity.v_mps[i].abs() < band_mps {
-            other
-        } else {
-            1.0 - other
-        }
-    };
     // Drawing back by the encoder, or by its velocity before the encoder
     // counts a step.
     let drawing_back = |i: usize| x[i] < front_m || p.velocity.v_mps[i] < -band_mps;
@@ -91,7 +77,7 @@ fn unloading_window(p: &Prepared) -> Option<Vec<Drawn>> {
         .map(|i| Drawn {
             i,
             back_m: 0.0,
-            sliding: sliding(i),
+            sliding: p.sliding_odds(i),
         })
         .take_while(|s| s.sliding > 0.0)
         .collect();
@@ -104,7 +90,7 @@ fn unloading_window(p: &Prepared) -> Option<Vec<Drawn>> {
         window.push(Drawn {
             i,
             back_m: back_m.max(0.0),
-            sliding: sliding(i),
+            sliding: p.sliding_odds(i),
         });
     }
     Some(window)
