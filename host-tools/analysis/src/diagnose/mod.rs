@@ -29,6 +29,7 @@ mod motion;
 pub mod prepare;
 mod report;
 mod significance;
+mod stick;
 mod tip;
 mod waterfall;
 
@@ -301,7 +302,7 @@ fn held_at_the_band(p: &Prepared) -> Vec<f64> {
     held
 }
 
-/// The withdrawal's stick ([`prepare::stick`]) as the nominal has it: the
+/// The withdrawal's stick ([`stick::stick`]) as the nominal has it: the
 /// tissue round the shaft, stuck to the needle, pulls back as an elastic
 /// tent from the force the rest held, by its stiffness per metre of
 /// travel, until it slips. Both each trial's own (a tent's stiffness and

@@ -103,7 +103,7 @@ pub struct Prepared {
     /// Interior structures the device's detector found: (sample index,
     /// peak position, wall force = fall of the force there).
     pub structures: Vec<(usize, f64, f64)>,
-    /// The withdrawal's stick ([`stick`]): the samples from the needle's
+    /// The withdrawal's stick (`diagnose::stick`): the samples from the needle's
     /// first step out (up to 10 ms before the withdrawal phase) to where
     /// the dragged tissue slipped; empty if it never stuck.
     pub stick: std::ops::Range<usize>,
@@ -131,16 +131,8 @@ impl Prepared {
     /// or start placed between samples its velocity puts it on, or the
     /// other ([`Self::other_side`]).
     pub fn sliding_odds(&self, i: usize) -> f64 {
-        let other = self
-            .other_side
-            .iter()
-            .find(|&&(j, _)| j == i)
-            .map_or(0.0, |&(_, w)| w);
-        if self.velocity.v_mps[i].abs() < self.params.half_band_mps {
-            other
-        } else {
-            1.0 - other
-        }
+        let v_mps = self.velocity.v_mps[i];
+        odds_of_sliding(&self.other_side, v_mps, self.params.half_band_mps, i)
     }
 
     /// The samples of the trial's first dwell, if it has one.
@@ -322,7 +314,7 @@ pub fn prepare(
     // While the withdrawing needle drags the tissue along, the force is
     // the tent's (the stick's own corrections, per trial), not kinetic
     // friction.
-    let stick = stick(&trial, &phase, &parts.friction_n, &geometry);
+    let stick = super::stick::stick(&trial, &phase, (&parts, params), &geometry);
     let mut parts = parts;
     for i in stick.clone() {
         nominal_n[i] = 0.0;
@@ -522,42 +514,24 @@ fn phases(trial: &Trial, geometry: &TrialFit, parts: &Parts) -> Vec<usize> {
     phase
 }
 
-/// Where a withdrawing needle dragged the tissue along (the paper's
-/// Karnopp band with a tissue of finite stiffness round the shaft): from
-/// the needle's first step out (the withdrawal's first sample, or the
-/// dwell's last ones where the nominal already pulls the needle out:
-/// it sets off before the phases call it moving) until the force snaps
-/// back ([`crate::fit::trial::slipped`]); none: no stick.
-pub fn stick(
-    trial: &Trial,
-    phase: &[usize],
-    friction_n: &[f64],
-    geometry: &TrialFit,
-) -> std::ops::Range<usize> {
-    let Some(first) = phase.iter().position(|&p| p == WITHDRAWAL) else {
-        return 0..0;
-    };
-    let end = (first..phase.len())
-        .find(|&i| phase[i] != WITHDRAWAL)
-        .unwrap_or(phase.len());
-    // At most 10 ms back: the samples the velocity leaves to the force
-    // ([`crate::fit::predict::needle_velocity`]), not a dwell entered by
-    // drifting back.
-    let most_back = crate::fit::predict::window_samples(trial.rate_hz());
-    let mut start = first;
-    while start > 0
-        && first - start < most_back
-        && phase[start - 1] == DWELL
-        && friction_n[start - 1] < 0.0
-    {
-        start -= 1;
+/// How likely a nominal whose velocity at sample `i` is `v_mps` has it
+/// sliding, given the samples its encoder leaves open (`other_side`,
+/// [`Parts::other_side`]).
+pub fn odds_of_sliding(
+    other_side: &[(usize, f64)],
+    v_mps: f64,
+    half_band_mps: f64,
+    i: usize,
+) -> f64 {
+    let other = other_side
+        .iter()
+        .find(|&&(j, _)| j == i)
+        .map_or(0.0, |&(_, w)| w);
+    if v_mps.abs() < half_band_mps {
+        other
+    } else {
+        1.0 - other
     }
-    let deep = (
-        geometry.puncture_x_m,
-        crate::fit::trial::free_level_n(trial, geometry.contact_x_m),
-    );
-    crate::fit::trial::slipped(&trial.f_n[..end], &trial.x_m, start, geometry.noise_n, deep)
-        .map_or(0..0, |s| start..s)
 }
 
 /// Where the measured force says a withdrawing needle came out of the

@@ -1130,8 +1130,10 @@ impl Beyond {
 /// with the needle moving back through it (a needle that starts again
 /// from rest, slower, holds less by Karnopp's law too), landing on a force
 /// still pulling (kinetic friction goes on; a needle let go of reads
-/// zero, the trial's tare): the mean of the 25 samples after the snap's
-/// three below zero by three of its standard errors and by half a noise
+/// zero, the trial's tare, or what the load cell reads with the needle
+/// free, `free_n`, where a drifting bridge has moved that off it): the
+/// mean of the 25 samples after the snap's three below both by three of
+/// its standard errors and by half a noise
 /// sd (the tare taken on the approach leaves a few mN, under half the
 /// noise sd of the rigs in the book). Kinetic friction on a slow
 /// withdrawal can be a few noise sd: five samples could not tell it from
@@ -1175,7 +1177,7 @@ pub fn slipped(
         let after = mean(landing.clone());
         let standard_error_n = noise_n / (landing.len() as f64).sqrt();
         let within_n = (3.0 * standard_error_n).max(0.5 * noise_n);
-        let lands_pulling = after <= -within_n;
+        let lands_pulling = after <= free_n.min(0.0) - within_n;
         let moving = x[low_at.saturating_sub(3)] > x[low_at] && x[low_at] > x[i];
         let step = mean(i..i + 3) - mean(i - 3..i);
         let snap =
@@ -1558,6 +1560,20 @@ mod tests {
             .collect();
         let x = (0..200).map(|k| 0.03 - 2e-5 * f64::from(k)).collect();
         (f, x)
+    }
+
+    /// A tent that slips onto its kinetic friction at sample 100, and
+    /// comes out of the tissue at 160 onto a load cell reading 12 mN
+    /// under its tare (a drifted zero: what it reads with the needle
+    /// free): the slip is where the tent let go, not the larger step out
+    /// of the tissue, which lands on the free level, not on a pull.
+    #[test]
+    fn coming_out_onto_a_drifted_zero_is_no_slip() {
+        let (mut f, x) = tent((-0.6, -0.45), 0.005);
+        for (k, f) in f.iter_mut().enumerate().skip(160) {
+            *f = -0.012 + if k % 2 == 0 { 0.005 } else { -0.005 };
+        }
+        assert_eq!(slipped(&f, &x, 0, 0.005, (0.015, -0.012)), Some(100));
     }
 
     /// A tent that lets go onto a kinetic friction nearly as deep (the
