@@ -10,7 +10,7 @@
 use std::f64::consts::TAU;
 
 use super::motion::{harmonics_along, moved_model, PhaseWander, TissueShift};
-use super::prepare::{Prepared, APPROACH, LOADING};
+use super::prepare::{Prepared, AFTER, APPROACH, LOADING};
 use crate::fit::lsq::Lsq;
 
 /// A candidate's columns for one trial, one vector per linear parameter.
@@ -155,7 +155,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         effect: "sensor_drift",
         grid_name: "thermal_tau_s",
         grid: &[0.0, 10.0, 30.0, 100.0, -10.0, -30.0, -100.0],
-        linear: &["rate_n_per_s"],
+        linear: &["rate_n_per_s", "gain_on_rate_out_of_tissue"],
         columns: drift,
         on_grid: None,
         grid_params: grid_as_named,
@@ -1338,7 +1338,14 @@ fn lag(mut signal: Vec<f64>, tau_s: f64, rate_hz: f64) -> Vec<f64> {
 /// was tared (`fit::trial::tare`: the median of the first half of the
 /// samples before the loading rise, which the approach nearly spans; for
 /// a drift moving one way, its value halfway through that half): the
-/// force holds the drift since then.
+/// force holds the drift since then. Two columns: the drift at one rate
+/// shared by every trial, and at each trial's own rate as the samples with
+/// no tissue on the needle read it ([`rate_out_of_tissue`]; none where
+/// the load cell did not read its zero again after the needle came out),
+/// with one gain (1 where the form is the drift's): a bridge's drift is
+/// the recording's, not the tissue's — which way and how fast it moves
+/// turns on how long the bridge had been powered and what warmed it, and
+/// can differ from one insertion to the next.
 fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let t0 = p.trial.t_s.first().copied().unwrap_or(0.0);
     let lag_s = -tau_s;
@@ -1360,8 +1367,32 @@ fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
     let approach = p.phase.iter().take_while(|&&k| k == APPROACH).count();
     let zero = column.get(approach / 4).copied().unwrap_or(0.0);
     column.iter_mut().for_each(|c| *c -= zero);
-    vec![column]
+    let rate = rate_out_of_tissue(p, &column).unwrap_or(0.0);
+    let own = column.iter().map(|c| rate * c).collect();
+    vec![column, own]
 }
+
+/// A trial's own drift along `column` (per unit of it), by least squares
+/// of the residual over the samples with no tissue on the needle (before
+/// contact, and after it came out): there the load cell reads its zero
+/// and nothing else, so no misfit of the tissue's model can set it. None
+/// where fewer than [`OUT_OF_TISSUE_SAMPLES`] follow the needle's coming
+/// out: the approach alone, before the drift has grown, reads little of
+/// it.
+fn rate_out_of_tissue(p: &Prepared, column: &[f64]) -> Option<f64> {
+    let after = p.phase.iter().filter(|&&k| k == AFTER).count();
+    let out = (0..p.trial.len()).filter(|&i| matches!(p.phase[i], APPROACH | AFTER));
+    let (mut cc, mut cr) = (0.0, 0.0);
+    for i in out {
+        cc += column[i] * column[i];
+        cr += column[i] * p.residual_n[i];
+    }
+    (after >= OUT_OF_TISSUE_SAMPLES && cc > 0.0).then(|| cr / cc)
+}
+
+/// Least samples after the needle came out that read a trial's own
+/// drift: 0.5 s at 100 Hz.
+const OUT_OF_TISSUE_SAMPLES: usize = 50;
 
 /// Tissue motion grid: frequency (breathing, 0.15–0.4 Hz) × amplitude.
 const MOTION_FREQ_HZ: [f64; 5] = [0.15, 0.2, 0.25, 0.3, 0.4];
