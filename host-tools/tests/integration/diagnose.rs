@@ -279,8 +279,8 @@ fn edited_no_effect(
 /// bridge's drift turns on how long it had been powered and what warmed
 /// it): on insert–dwell–withdraw, where the needle comes out and the load
 /// cell reads its zero again, the drift is named, read from each trial's
-/// samples out of tissue. At one rate for every trial the trials' drifts
-/// cancel, and it was not.
+/// samples out of tissue. One rate for every trial would average the
+/// trials' drifts away.
 #[test]
 fn a_drift_of_each_recordings_own_is_named() {
     let idw = (ProtocolKind::InsertDwellWithdraw, (100.0, 0.012));

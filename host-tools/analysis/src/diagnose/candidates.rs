@@ -1375,7 +1375,9 @@ fn drift(p: &Prepared, tau_s: f64) -> Vec<Vec<f64>> {
 /// A trial's own drift along `column` (per unit of it), by least squares
 /// of the residual over the samples with no tissue on the needle (before
 /// contact, and after it came out): there the load cell reads its zero
-/// and nothing else, so no misfit of the tissue's model can set it. None
+/// and nothing else, so no misfit of the tissue's model can set it. Read
+/// on the trial itself, withheld or not, as the nominal's spread is: one
+/// number a trial, from samples the tissue's model does not reach. None
 /// where fewer than [`OUT_OF_TISSUE_SAMPLES`] follow the needle's coming
 /// out: the approach alone, before the drift has grown, reads little of
 /// it.

@@ -103,9 +103,10 @@ pub struct Prepared {
     /// Interior structures the device's detector found: (sample index,
     /// peak position, wall force = fall of the force there).
     pub structures: Vec<(usize, f64, f64)>,
-    /// The withdrawal's stick (`diagnose::stick`): the samples from the needle's
-    /// first step out (up to 10 ms before the withdrawal phase) to where
-    /// the dragged tissue slipped; empty if it never stuck.
+    /// The withdrawal's stick (`diagnose::stick`): the samples from the
+    /// needle's first step out (up to 10 ms before the withdrawal phase)
+    /// to where the dragged tissue slipped with a snap, or where its grip
+    /// gave way without one; empty if it never stuck.
     pub stick: std::ops::Range<usize>,
     /// The tip's unloading on its first retraction from the cutting
     /// front, 1 to 0 over the compliance chosen on the trial

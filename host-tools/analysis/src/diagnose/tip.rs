@@ -11,6 +11,12 @@ fn compliances_m() -> impl Iterator<Item = f64> {
     (0..40).map(|k| 0.01e-3 * 1.1f64.powi(k))
 }
 
+/// The widest of [`compliances_m`]: how far behind the front the tip's
+/// unloading may reach.
+pub(super) fn widest_compliance_m() -> f64 {
+    compliances_m().fold(0.0, f64::max)
+}
+
 /// The tip's force as it unloads on the first retraction from the
 /// cutting front. The tissue ahead of a cutting tip is compressed by the
 /// cutting force; drawn back, the tip lets it go over its contact
@@ -81,7 +87,7 @@ fn unloading_window(p: &Prepared) -> Option<Vec<Drawn>> {
         })
         .take_while(|s| s.sliding > 0.0)
         .collect();
-    let widest_m = compliances_m().fold(0.0, f64::max);
+    let widest_m = widest_compliance_m();
     for (i, x_m) in x.iter().enumerate().skip(set_off) {
         let back_m = front_m - x_m;
         if back_m >= widest_m {
