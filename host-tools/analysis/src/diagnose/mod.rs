@@ -903,18 +903,13 @@ pub fn diagnose_with_progress(
     let left = after.as_ref().unwrap_or(&baseline);
     let explained_below_n = explained_below_n(data, noise);
     let gap_open = left.rms() > explained_below_n;
-    // Never `none` over a gap: a residual well above the noise that no
-    // candidate takes away is something none of them is. Nor is a gap
-    // the named effects leave mostly open theirs: they stand as the
-    // closest, and the verdict is `unexplained`.
     let closest: Vec<&str> = steps.iter().map(|(ci, _)| CANDIDATES[*ci].effect).collect();
     let credible = bar.stand(&baseline, &steps);
-    let effect = match steps.first() {
-        Some((ci, _)) if credible => CANDIDATES[*ci].effect,
-        Some(_) => UNEXPLAINED,
-        None if gap_open => UNEXPLAINED,
-        None => "none",
-    };
+    let effect = verdict_effect(
+        steps.first().map(|(ci, _)| CANDIDATES[*ci].effect),
+        credible,
+        (baseline.rms(), explained_below_n),
+    );
     let second_name = match steps.get(1) {
         Some((cj, _)) if credible => CANDIDATES[*cj].effect,
         _ => "none",
@@ -969,6 +964,28 @@ pub fn diagnose_with_progress(
             left_by_trial: by_trial(data, left),
         },
         skipped: None,
+    }
+}
+
+/// The verdict's first word, from the first effect the waterfall names,
+/// whether the named ones stand as the gap's cause ([`Bar::stand`]), and
+/// the nominal's held-out RMS with the level under which what is left
+/// counts as explained. Never `none` over a gap: a residual above the
+/// nominal's tolerance that no candidate takes away is something none of
+/// them is, and a gap the named effects leave mostly open is not theirs —
+/// they are the closest, and the verdict is `unexplained`. But where the
+/// nominal itself is within its tolerance there is no gap: candidates
+/// that hold without standing as its cause are the closest to a misfit
+/// the nominal is allowed, and the verdict is `none`.
+fn verdict_effect(
+    first: Option<&'static str>,
+    credible: bool,
+    (baseline_n, explained_below_n): (f64, f64),
+) -> &'static str {
+    match first {
+        Some(effect) if credible => effect,
+        _ if baseline_n <= explained_below_n => "none",
+        _ => UNEXPLAINED,
     }
 }
 
@@ -1308,5 +1325,26 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
             std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
         }
         None => needle_io::stdout::write(&text),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The verdict's word for each case: named where the effects stand;
+    /// where they do not, `none` over a nominal within its tolerance (23
+    /// mN here) and `unexplained` over one above it; with none named, the
+    /// same by the nominal alone.
+    #[test]
+    fn the_verdict_is_unexplained_only_over_a_gap() {
+        let below = 0.023;
+        let drift = Some("sensor_drift");
+        assert_eq!(verdict_effect(drift, true, (0.0077, below)), "sensor_drift");
+        assert_eq!(verdict_effect(drift, true, (0.030, below)), "sensor_drift");
+        assert_eq!(verdict_effect(drift, false, (0.0077, below)), "none");
+        assert_eq!(verdict_effect(drift, false, (0.030, below)), UNEXPLAINED);
+        assert_eq!(verdict_effect(None, false, (0.0077, below)), "none");
+        assert_eq!(verdict_effect(None, false, (0.030, below)), UNEXPLAINED);
     }
 }
