@@ -1,25 +1,27 @@
 #!/usr/bin/env bash
-# `needle diagnose` on the second generator written apart from the
-# analysis (`validation/second-apart/`, Python, its own physics and its
-# own choices: a different author from `host-tools/tests/integration/apart/`).
-# Fifteen datasets of ten trials: no effect on both protocols, one effect
-# each, and three phantoms with real recordings' traits. One line a
+# `needle diagnose` on a generator written apart from the analysis
+# (`validation/GENERATOR/`, Python, each its own author's physics and
+# choices, neither having read the analysis, this project's simulator or
+# `host-tools/tests/integration/apart/`): `second-apart` or `third-apart`.
+# Fifteen datasets of ten trials each: no effect on both protocols, one
+# effect each, and three phantoms with real recordings' traits. One line a
 # dataset: ok or BAD (the first effect named is one the data holds, or
 # `none` where it holds none), the dataset, what it holds, what is named
 # in turn, held-out RMS before and after, the noise floor (mN), and what
 # is left as a share of the mean puncture force.
 #
-#   scripts/second-apart.sh [SEED] [OUT]      (SEED defaults to 2;
-#                                             about a minute on two cores)
+#   scripts/written-apart.sh GENERATOR [SEED] [OUT]   (SEED defaults to 2;
+#                                                     about a minute on two cores)
 #
-# Needs python3 (the generator, and to read the JSON). Seed 1 was looked
-# at while the analysis changed (the book's *Sim-to-real gap diagnosis*
-# says what it led to); other seeds were not.
+# Needs python3 (the generator, and to read the JSON). Seed 1 of each was
+# looked at while the analysis changed (the book's *Sim-to-real gap
+# diagnosis* says what it led to); other seeds were not.
 set -euo pipefail
-seed=${1:-2}
-out=${2:-/dev/stdout}
+generator=${1:?usage: scripts/written-apart.sh second-apart|third-apart [SEED] [OUT]}
+seed=${2:-2}
+out=${3:-/dev/stdout}
 . "$(dirname "$0")/common.sh"
-python3 validation/second-apart/generate.py "$work/data" --seed "$seed" > /dev/null
+python3 "validation/$generator/generate.py" "$work/data" --seed "$seed" > /dev/null
 : > "$work/lines"
 for d in "$work"/data/*/; do
   name=$(basename "$d")
@@ -45,5 +47,5 @@ print("ok " if named[0] in held else "BAD", name, ",".join(held), ">".join(named
 done
 {
   cat "$work/lines"
-  echo "named right (first effect, or none): $(grep -c '^ok' "$work/lines") of $(wc -l < "$work/lines") (seed $seed)"
+  echo "named right (first effect, or none): $(grep -c '^ok' "$work/lines") of $(wc -l < "$work/lines") ($generator, seed $seed)"
 } > "$out"
