@@ -432,7 +432,7 @@ FRICTION_SETS = {
     # Okamura, Simone, O'Leary (conference): C ~ 0, b_p 904 / b_n 458 N s/m^2 averages,
     # static D_p 30.4, D_n -29.3 N/m; zero-velocity band: own choice.
     "conference": dict(Cp=0.0, Cn=0.0, bp=904.0, bn=458.0, Dp=30.4, Dn=-29.3, dvh=0.25e-3),
-    # journal refit (per DESIGN.md, "second, less certain"): C_p 10.57, C_n -11.96,
+    # journal refit (README, "Sources relied on"; less certain): C_p 10.57, C_n -11.96,
     # D_p 18.45, D_n -18.23 N/m, band 5 um/s; damping kept from the conference paper.
     "journal": dict(Cp=10.57, Cn=-11.96, bp=904.0, bn=458.0, Dp=18.45, Dn=-18.23, dvh=5e-6),
     # silicone/gel phantoms: own values chosen so that withdrawal pulls -0.8..-2.2 N
