@@ -75,8 +75,9 @@ fn set_off(
 /// and sliding from `e` on (the nominal's friction line, scaled, and a
 /// constant pull) are fitted by least squares for every `e`
 /// ([`best_split`]); the best `e` ends a stick where the tent follows its
-/// ramp ([`TENT_FIT_NOISE_SD`]) and there pulls by ten noise sd or more
-/// ([`PULLED_NOISE_SD`]), deeper than the sliding just after it by
+/// ramp ([`TENT_FIT_NOISE_SD`]) and there pulls as deep as a snap must
+/// start from ([`crate::fit::trial::SNAP_NOISE_SD`]), deeper than the
+/// sliding just after it by
 /// [`OVERSHOOT_NOISE_SD`]. A presliding transition (Dahl's, LuGre's)
 /// reaches the kinetic level without passing it and is no stick.
 fn gave_way(f: &[f64], x: &[f64], parts: &Parts, start: usize, noise_n: f64) -> Option<usize> {
@@ -92,7 +93,7 @@ fn gave_way(f: &[f64], x: &[f64], parts: &Parts, start: usize, noise_n: f64) -> 
     let sliding_n = value(split.slide, slide(e));
     let noise_n = noise_n.max(1e-4);
     let ramp = split.tent_rms_n <= TENT_FIT_NOISE_SD * noise_n;
-    let pulled = held_n <= -PULLED_NOISE_SD * noise_n;
+    let pulled = held_n <= -crate::fit::trial::SNAP_NOISE_SD * noise_n;
     (ramp && pulled && sliding_n - held_n >= OVERSHOOT_NOISE_SD * noise_n).then_some(e)
 }
 
@@ -169,11 +170,6 @@ fn explained(sums: &Lsq<2>) -> (f64, [f64; 2]) {
 /// or more have standard errors of 2/√10 of a noise sd or less, so this
 /// is six of them or more.
 const OVERSHOOT_NOISE_SD: f64 = 4.0;
-
-/// How deep a tent without a snap must pull where it gives way, in noise
-/// sd: as deep as [`crate::fit::trial::slipped`] asks of the pull before
-/// a snap.
-const PULLED_NOISE_SD: f64 = 10.0;
 
 /// Travel from the set-off past which a tent without a snap is read: the
 /// widest compliance the tip may let its load go over (0.41 mm,

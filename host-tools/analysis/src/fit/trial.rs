@@ -1158,7 +1158,7 @@ pub fn slipped(
     (puncture_x_m, free_n): (f64, f64),
 ) -> Option<usize> {
     let noise_n = noise_n.max(1e-4);
-    let least_n = 10.0 * noise_n;
+    let least_n = SNAP_NOISE_SD * noise_n;
     let mut best: Option<(usize, f64)> = None;
     let end = f.len().min(x.len());
     // The samples of the first snap (a rise of `least_n` from a pull, the
@@ -1205,6 +1205,11 @@ pub fn slipped(
     }
     best.map(|b| b.0)
 }
+
+/// A withdrawal's snap back on single samples, and the pull it snaps back
+/// from, in noise sd ([`slipped`]): ten, clear of the noise's own
+/// excursions over a withdrawal's thousands of samples.
+pub const SNAP_NOISE_SD: f64 = 10.0;
 
 /// A snap read as the step between the means of the three samples either
 /// side of it, in noise sd (the step's own sd is 0.82 of one): a tent
