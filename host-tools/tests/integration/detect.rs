@@ -272,17 +272,25 @@ fn detect_writes_the_devices_samples_per_trial_beside_no_trial() {
     );
 }
 
-/// On insert–dwell–withdraw trials whose tissue relaxes at rest
-/// (each of the simulator's forms, trial-to-trial spread, jitter, the
-/// tissue dragged on withdrawal), the tissue `needle fit --toml` writes
-/// carries the relaxation, and with it the device's residual over every
-/// dwell stays within two noise floors; without the relaxation keys it
-/// does not.
+/// On insert–dwell–withdraw trials whose tissue relaxes at rest (the
+/// simulator's standard and alternate forms, relaxing branches the
+/// needle's motion loads; trial-to-trial spread, jitter, the tissue
+/// dragged on withdrawal), the tissue `needle fit --toml` writes carries
+/// the relaxation, and with it the device's residual over every dwell
+/// stays within two noise floors; without the relaxation keys it does
+/// not. The literature form (Fung's QLV on every tissue force, over its
+/// whole history) holds a force that rises at rest where the static band
+/// holds less than the needle slid with: the device's relaxation at rest
+/// cannot follow that, and `needle fit` writes none.
 #[test]
 fn the_device_predicts_the_dwell_with_the_fitted_relaxation() {
     use common::needle;
     let noise_n = 0.012;
-    for form in ["standard", "alternate", "literature"] {
+    for (form, effect) in [
+        ("standard", "viscoelasticity"),
+        ("alternate", "viscoelasticity"),
+        ("literature", "viscoelasticity=5"),
+    ] {
         let dir = tempfile::tempdir().unwrap();
         let path = |p: &str| dir.path().join(p).to_str().unwrap().to_owned();
         needle(&[
@@ -296,7 +304,7 @@ fn the_device_predicts_the_dwell_with_the_fitted_relaxation() {
             "--protocol",
             "insert-dwell-withdraw",
             "--effects",
-            "viscoelasticity",
+            effect,
             "--effect-form",
             form,
             "--rate-hz",
@@ -309,6 +317,13 @@ fn the_device_predicts_the_dwell_with_the_fitted_relaxation() {
         ]);
         needle(&["fit", &path("trials"), "--toml", &path("fitted.toml")]);
         let toml = std::fs::read_to_string(path("fitted.toml")).unwrap();
+        if form == "literature" {
+            assert!(
+                !toml.contains("relax_gain_1 = ") && toml.contains("at rest the force fell -"),
+                "{form}: {toml}"
+            );
+            continue;
+        }
         assert!(
             toml.contains("relax_gain_1 = ") && toml.contains("relax_tau_1_s = "),
             "{form}: {toml}"

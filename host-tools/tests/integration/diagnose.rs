@@ -708,15 +708,16 @@ fn a_snap_deep_in_the_tissue_is_a_slip_not_a_let_go() {
     );
 }
 
-/// Fung's box spectrum (five branches over 0.05–20 s) on
+/// Fung's QLV over every tissue force (a box spectrum of five branches
+/// over 0.05–20 s, five times the standard size) on
 /// insert–dwell–withdraw: its slowest branches still hold part of the
-/// insertion's push when the withdrawal's tent slips, so the slip lands
-/// above the free needle's level by 2–16 % of its snap. It must still be
-/// read as a slip, or the tent's pull goes into the withdrawal's friction
-/// and hides the relaxation.
+/// insertion's force when the withdrawal's tent slips, so the slip lands
+/// away from the free needle's level. It must still be read as a slip,
+/// or the tent's pull goes into the withdrawal's friction and hides the
+/// relaxation.
 #[test]
 fn a_slip_onto_a_slow_relaxations_hold_is_a_slip() {
-    let out = diagnosis_as_rigs_record(("viscoelasticity", Form::Literature, 1));
+    let out = diagnosis_as_rigs_record(("viscoelasticity=5", Form::Literature, 1));
     let v = &out["verdict"];
     assert_eq!(v["effect"], "viscoelasticity", "{v}");
     let left = num(&v["heldout_rms_after_n"]);

@@ -101,6 +101,7 @@ fn heldout_residual(data: &[Prepared], baseline: &Scored, j: usize) -> Vec<f64> 
     let per = PerTrial {
         own: &SPREAD,
         ridged: NOMINAL_CORRECTIONS.len(),
+        non_negative: &[],
     };
     let shared = &baseline.fold_theta[j % folds(data.len())];
     let theta = per.for_trial(&sums, shared);

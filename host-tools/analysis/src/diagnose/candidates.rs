@@ -46,6 +46,11 @@ pub struct Candidate {
     /// How its fit is taken out of the data before the nominal is fitted
     /// again.
     pub backfit: Backfit,
+    /// Its linear parameters are amounts the physics signs (a fraction of
+    /// the force that relaxes away, a relaxing branch's stiffness): a fit
+    /// that wants one negative is no fit of that physics, and leaves its
+    /// column out (`PerTrial::non_negative`).
+    pub non_negative: bool,
 }
 
 impl Candidate {
@@ -89,13 +94,15 @@ pub const CANDIDATES: [Candidate; 8] = [
         grid: &[
             0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
             16.0, 17.0, 18.0, 19.0, 20.0, 21.0, 22.0, 23.0, 24.0, 25.0, 26.0, 27.0, 28.0, 29.0,
-            30.0, 31.0, 32.0, 33.0, 34.0, 35.0, 36.0, 37.0, 38.0, 39.0,
+            30.0, 31.0, 32.0, 33.0, 34.0, 35.0, 36.0, 37.0, 38.0, 39.0, 40.0, 41.0, 42.0, 43.0,
+            44.0,
         ],
         linear: &["capsule_gain", "gain"],
         columns: relaxation,
         on_grid: Some(relaxation_on_grid),
         grid_params: spectrum_params,
         backfit: Backfit::Force,
+        non_negative: true,
     },
     Candidate {
         effect: "rate_dependent_friction",
@@ -106,6 +113,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         on_grid: None,
         grid_params: rate_law_params,
         backfit: Backfit::Force,
+        non_negative: false,
     },
     Candidate {
         effect: "presliding_hysteresis",
@@ -116,6 +124,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
+        non_negative: false,
     },
     Candidate {
         effect: "internal_structures",
@@ -126,6 +135,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
+        non_negative: false,
     },
     Candidate {
         effect: "depth_dependent_cutting",
@@ -140,6 +150,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
+        non_negative: false,
     },
     Candidate {
         effect: "holder_inertia",
@@ -150,6 +161,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         on_grid: Some(inertia_on_grid),
         grid_params: mount_params,
         backfit: Backfit::Force,
+        non_negative: false,
     },
     Candidate {
         effect: "sensor_drift",
@@ -160,6 +172,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         on_grid: None,
         grid_params: grid_as_named,
         backfit: Backfit::Force,
+        non_negative: false,
     },
     Candidate {
         effect: "tissue_motion",
@@ -178,6 +191,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         on_grid: Some(tissue_motion_on_grid),
         grid_params: motion_params,
         backfit: Backfit::TissueFrame,
+        non_negative: false,
     },
 ];
 
@@ -204,14 +218,40 @@ fn spectrum_at(g: f64) -> (f64, f64) {
 /// ([`qlv_branch`]); below, a relaxing branch driven by the needle's motion
 /// ([`maxwell_branch`]).
 const QLV_FROM: f64 = 20.0;
+/// Grid values from here on are relaxation of the tissue's force over its
+/// whole history, sliding as well as held ([`Branch::QlvWhole`]), with
+/// Fung's wide box alone (three decades, as in soft tissue): narrower, a force
+/// steadily renewed and relaxing over its whole history is the branch the
+/// motion loads over again (a friction linear in depth, relaxed so, is a
+/// Maxwell branch on the velocity) but at a turn, and the search's time
+/// goes with its grid.
+const QLV_WHOLE_FROM: f64 = 40.0;
+/// The first spectrum of [`QLV_WHOLE_FROM`]'s family: three decades wide.
+const QLV_WHOLE_SPECTRA_FROM: f64 = 3.0 * SPECTRUM_TAU_S.len() as f64;
+
+/// The relaxing family at grid value `g` and the spectrum's index in it.
+fn family_of(g: f64) -> (Branch, f64) {
+    if g >= QLV_WHOLE_FROM {
+        (
+            Branch::QlvWhole,
+            g - QLV_WHOLE_FROM + QLV_WHOLE_SPECTRA_FROM,
+        )
+    } else if g >= QLV_FROM {
+        (Branch::Qlv, g - QLV_FROM)
+    } else {
+        (Branch::Maxwell, g)
+    }
+}
 
 fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
-    let qlv = g >= QLV_FROM;
-    let (tau_s, decades) = spectrum_at(if qlv { g - QLV_FROM } else { g });
+    let (family, g) = family_of(g);
+    let (tau_s, decades) = spectrum_at(g);
+    let flag = |on: bool| if on { 1.0 } else { 0.0 };
     vec![
         ("tau_s", tau_s),
         ("spectrum_decades", decades),
-        ("of_tissue_force", if qlv { 1.0 } else { 0.0 }),
+        ("of_tissue_force", flag(family != Branch::Maxwell)),
+        ("relaxes_sliding", flag(family == Branch::QlvWhole)),
     ]
 }
 
@@ -237,13 +277,6 @@ fn relaxation(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
 /// centre's branches are kept (a trial of 70 000 samples would hold
 /// 39 MB of branches otherwise).
 fn relaxation_on_grid(p: &Prepared, grid: &[f64], each: &mut Each<'_>) {
-    let family_of = |g: f64| {
-        if g >= QLV_FROM {
-            (Branch::Qlv, g - QLV_FROM)
-        } else {
-            (Branch::Maxwell, g)
-        }
-    };
     let centre = |gi: &usize| {
         let (family, g) = family_of(grid[*gi]);
         (family, spectrum_at(g).0.to_bits())
@@ -290,7 +323,13 @@ fn capsule_and_shaft(p: &Prepared, col: &[f64]) -> Vec<Vec<f64>> {
 /// from its whole history — a steady insertion's force would be relaxed
 /// already when the needle stops, and the force held at rest would rise
 /// back, where tissue is seen to fall 34–41 % in 5 s.
-fn qlv_branch(steps: &[QlvStep], tau: f64) -> Vec<f64> {
+///
+/// Fung's own form lets every force relax over its whole history
+/// (`relaxes_sliding`): a sliding force, steadily renewed, then lags its
+/// elastic value by what relaxed while it grew, and what it holds at a
+/// stop is mostly relaxed already; the capsule's relaxed part carries past
+/// the puncture and the held force's past a turn.
+fn qlv_branch(steps: &[QlvStep], tau: f64, relaxes_sliding: bool) -> Vec<f64> {
     let mut decay = Decay::new(tau);
     let mut h = 0.0;
     steps
@@ -302,14 +341,15 @@ fn qlv_branch(steps: &[QlvStep], tau: f64) -> Vec<f64> {
                 h = 0.0;
                 0.0
             }
-            QlvStep::Sliding { f_n } => {
+            QlvStep::In { f_n, sliding, .. } if sliding && !relaxes_sliding => {
                 h = f_n;
                 0.0
             }
-            QlvStep::Held {
+            QlvStep::In {
                 f_n,
                 dt_s,
                 rate_n_per_s,
+                ..
             } => {
                 if dt_s > 0.0 {
                     let decay = decay.over(dt_s);
@@ -326,8 +366,10 @@ fn qlv_branch(steps: &[QlvStep], tau: f64) -> Vec<f64> {
 enum Branch {
     /// [`maxwell_branch`]: driven by the needle's motion.
     Maxwell,
-    /// [`qlv_branch`]: the tissue's force relaxing.
+    /// [`qlv_branch`]: the tissue's force relaxing where it is held.
     Qlv,
+    /// [`qlv_branch`]: the tissue's force relaxing sliding as well.
+    QlvWhole,
 }
 
 /// A trial's relaxing branches about one spectrum centre, each computed
@@ -365,7 +407,7 @@ impl<'p> Branches<'p> {
             for (c, m) in col.iter_mut().zip(branch) {
                 match family {
                     Branch::Maxwell => *c += m / f64::from(branches + 1),
-                    Branch::Qlv => *c -= m / f64::from(branches + 1),
+                    Branch::Qlv | Branch::QlvWhole => *c -= m / f64::from(branches + 1),
                 }
             }
         }
@@ -386,7 +428,11 @@ impl<'p> Branches<'p> {
                     maxwell_steps.get_or_insert_with(|| maxwell_steps_of(p)),
                     tau,
                 ),
-                Branch::Qlv => qlv_branch(qlv_steps.get_or_insert_with(|| qlv_steps_of(p)), tau),
+                Branch::Qlv | Branch::QlvWhole => qlv_branch(
+                    qlv_steps.get_or_insert_with(|| qlv_steps_of(p)),
+                    tau,
+                    family == Branch::QlvWhole,
+                ),
             }
         })
     }
@@ -397,16 +443,15 @@ impl<'p> Branches<'p> {
 #[derive(Clone, Copy)]
 enum QlvStep {
     Out,
-    /// Sliding through fresh tissue: nothing of the force has relaxed.
-    Sliding {
-        f_n: f64,
-    },
-    /// Loading the capsule, held, or dragging the tissue: the force, the
-    /// step since the sample before (0 for the first) and its rate.
-    Held {
+    /// In the tissue: the force, the step since the sample before (0 for
+    /// the first) and its rate, and whether the needle slides through
+    /// fresh tissue (rather than loading the capsule, held, or dragging
+    /// the tissue).
+    In {
         f_n: f64,
         dt_s: f64,
         rate_n_per_s: f64,
+        sliding: bool,
     },
 }
 
@@ -421,22 +466,23 @@ fn qlv_steps_of(p: &Prepared) -> Vec<QlvStep> {
     (0..p.trial.len())
         .map(|i| {
             if !p.in_tissue(i) {
-                QlvStep::Out
-            } else if sliding(i) {
-                QlvStep::Sliding { f_n: f(i) }
-            } else if i == 0 {
-                QlvStep::Held {
-                    f_n: f(i),
-                    dt_s: 0.0,
-                    rate_n_per_s: 0.0,
-                }
+                return QlvStep::Out;
+            }
+            let dt_s = if i == 0 {
+                0.0
             } else {
-                let dt_s = (t[i] - t[i - 1]).max(1e-9);
-                QlvStep::Held {
-                    f_n: f(i),
-                    dt_s,
-                    rate_n_per_s: (f(i) - f(i - 1)) / dt_s,
-                }
+                (t[i] - t[i - 1]).max(1e-9)
+            };
+            let rate_n_per_s = if i == 0 {
+                0.0
+            } else {
+                (f(i) - f(i - 1)) / dt_s
+            };
+            QlvStep::In {
+                f_n: f(i),
+                dt_s,
+                rate_n_per_s,
+                sliding: sliding(i),
             }
         })
         .collect()
@@ -1634,6 +1680,52 @@ mod tests {
         assert_eq!(stribeck_speed_mps(0.5), None);
         assert_eq!(stribeck_speed_mps(1.0), Some(0.00025));
         assert_eq!(stribeck_speed_mps(4.0), Some(0.002));
+        let spectrum = |g: f64| {
+            let p = spectrum_params("spectrum", g);
+            p.iter().map(|&(_, v)| v).collect::<Vec<_>>()
+        };
+        // τ, decades, of the tissue's force, relaxing while it slides.
+        assert_eq!(spectrum(0.0), [0.25, 0.0, 0.0, 0.0]);
+        assert_eq!(spectrum(19.0), [4.0, 3.0, 0.0, 0.0]);
+        assert_eq!(spectrum(20.0), [0.25, 0.0, 1.0, 0.0]);
+        assert_eq!(spectrum(40.0), [0.25, 3.0, 1.0, 1.0]);
+        let last = CANDIDATES[0].grid.last().copied().unwrap_or(0.0);
+        assert_eq!(spectrum(last), [4.0, 3.0, 1.0, 1.0]);
+    }
+
+    /// A force sliding up at 0.1 N/s for 10 s, then held 5 s (the column
+    /// is the part relaxed, F − h). Relaxing where it is held alone,
+    /// nothing of it has relaxed at the stop and all of it relaxes from
+    /// there; over its whole history only rate·τ of it is still unrelaxed
+    /// at the stop, and only that relaxes at rest.
+    #[test]
+    fn the_tissue_force_relaxes_from_the_stop_or_over_its_whole_history() {
+        let (dt_s, rate, tau) = (0.01, 0.1, 1.0);
+        let top_n = rate * dt_s * 999.0;
+        let steps: Vec<QlvStep> = (0..1500)
+            .map(|i| {
+                let sliding = i < 1000;
+                QlvStep::In {
+                    f_n: rate * dt_s * f64::from(i.min(999)),
+                    dt_s,
+                    rate_n_per_s: if sliding && i > 0 { rate } else { 0.0 },
+                    sliding,
+                }
+            })
+            .collect();
+        let held = qlv_branch(&steps, tau, false);
+        let whole = qlv_branch(&steps, tau, true);
+        assert!(held[..1000].iter().all(|&c| c == 0.0));
+        let unrelaxed_n = rate * tau * (1.0 - (-9.99f64 / tau).exp());
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        assert!(close(whole[999], top_n - unrelaxed_n), "{}", whole[999]);
+        let left = (-5.0f64 / tau).exp();
+        assert!(close(held[1499], top_n * (1.0 - left)), "{}", held[1499]);
+        assert!(
+            close(whole[1499], top_n - unrelaxed_n * left),
+            "{}",
+            whole[1499]
+        );
     }
 
     /// A mount passes a held acceleration at unit gain; lightly damped, a

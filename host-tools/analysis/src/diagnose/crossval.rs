@@ -159,6 +159,11 @@ pub struct PerTrial<'a> {
     /// The first this many columns (the nominal's corrections) get the
     /// ridge; a candidate's own columns never do.
     pub ridged: usize,
+    /// Shared columns whose θ the physics signs: one fitted negative is
+    /// left out and the rest fitted again, until none is (an active set,
+    /// least squares under θ ≥ 0 for the one or two such columns a
+    /// candidate has).
+    pub non_negative: &'a [usize],
 }
 
 impl PerTrial<'_> {
@@ -208,7 +213,16 @@ impl PerTrial<'_> {
                 ridged.ata[i * s + i] *= 1.0 + RIDGE;
             }
         }
-        let th = ridged.solve();
+        let mut th = ridged.solve();
+        while let Some(k) = (0..s).find(|&k| th[k] < 0.0 && self.non_negative.contains(&shared[k]))
+        {
+            for j in 0..s {
+                ridged.ata[k * s + j] = 0.0;
+                ridged.ata[j * s + k] = 0.0;
+            }
+            ridged.aty[k] = 0.0;
+            th = ridged.solve();
+        }
         let sse = reduced.sse(&th);
         let mut full = vec![0.0; n];
         for (k, &i) in shared.iter().enumerate() {
@@ -366,6 +380,7 @@ mod tests {
         let per = PerTrial {
             own: &[1],
             ridged: 0,
+            non_negative: &[],
         };
         let refs: Vec<&Gram> = grams.iter().collect();
         let shared = per.solve_shared(&refs);
@@ -380,6 +395,48 @@ mod tests {
         grams.iter().for_each(|g| all.merge(g));
         let pooled = all.solve();
         assert!(grams.iter().map(|g| g.sse(&pooled)).sum::<f64>() > 1.0);
+    }
+
+    /// A signed column the data want negative is left out and the others
+    /// fitted without it: y = 1 + 2x − 0.5z has z's θ 0 and the line
+    /// refitted to what z's part leaves; unsigned, z's θ is −0.5.
+    #[test]
+    fn a_signed_column_fitted_negative_is_left_out() {
+        let trials: Vec<Gram> = (0..3)
+            .map(|t| {
+                let mut g = Gram::new(3);
+                for i in 0..50 {
+                    let (x, z) = (f64::from(i) * 0.1, f64::from((i * 7 + t) % 11));
+                    g.add(&[1.0, x, z], 1.0 + 2.0 * x - 0.5 * z);
+                }
+                g
+            })
+            .collect();
+        let refs: Vec<&Gram> = trials.iter().collect();
+        let fit = |signed: &[usize]| {
+            let per = PerTrial {
+                own: &[],
+                ridged: 0,
+                non_negative: signed,
+            };
+            per.solve_shared(&refs)
+        };
+        assert!((fit(&[])[2] + 0.5).abs() < 1e-6);
+        let signed = fit(&[2]);
+        assert_eq!(signed[2], 0.0);
+        let mut without_z = Gram::new(2);
+        for g in &trials {
+            for i in 0..2 {
+                for j in 0..2 {
+                    without_z.ata[i * 2 + j] += g.ata[i * 3 + j];
+                }
+                without_z.aty[i] += g.aty[i];
+            }
+        }
+        let line = without_z.solve();
+        assert!((signed[0] - line[0]).abs() < 1e-6 && (signed[1] - line[1]).abs() < 1e-6);
+        // A signed column fitted positive stays.
+        assert!((fit(&[1])[1] - 2.0).abs() < 1e-6);
     }
 
     /// The trials reduced once and summed give the shared θ of
@@ -406,6 +463,7 @@ mod tests {
         let per = PerTrial {
             own: &[0],
             ridged: 2,
+            non_negative: &[],
         };
         let refs: Vec<&Gram> = grams.iter().collect();
         let shared = per.solve_shared(&refs);

@@ -542,6 +542,21 @@ fn total(gs: &[Gram; PHASES.len()]) -> Gram {
     t
 }
 
+/// The columns of `set`'s candidates whose θ the physics signs, where
+/// [`columns`] puts them (after the nominal's corrections, candidate by
+/// candidate).
+fn non_negative_columns<'c>(set: impl IntoIterator<Item = &'c Candidate>) -> Vec<usize> {
+    let mut at = NOMINAL_CORRECTIONS.len();
+    let mut signed = Vec::new();
+    for c in set {
+        if c.non_negative {
+            signed.extend(at..at + c.linear.len());
+        }
+        at += c.linear.len();
+    }
+    signed
+}
+
 /// Held-out result of one model (a set of candidate terms).
 #[derive(Clone, Debug)]
 pub struct Scored {
@@ -610,9 +625,11 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         }
     };
     let k = folds(data.len());
+    let signed = non_negative_columns(fixed.iter().map(|(c, _)| *c).chain(cand));
     let per = PerTrial {
         own: &SPREAD,
         ridged: NOMINAL_CORRECTIONS.len(),
+        non_negative: &signed,
     };
     let totals: Vec<Vec<Gram>> = per_grid
         .iter()
@@ -1056,11 +1073,13 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> Withheld {
             Some((c, grid))
         })
         .collect();
-    let per = PerTrial {
-        own: &SPREAD,
-        ridged: NOMINAL_CORRECTIONS.len(),
-    };
     let model = |set: &[(&Candidate, f64)]| {
+        let signed = non_negative_columns(set.iter().map(|(c, _)| *c));
+        let per = PerTrial {
+            own: &SPREAD,
+            ridged: NOMINAL_CORRECTIONS.len(),
+            non_negative: &signed,
+        };
         let all_cols: Vec<_> = data.iter().map(|p| columns(p, set)).collect();
         let totals: Vec<Gram> = grams(data, &all_cols, &Supports::all(data, &all_cols))
             .iter()

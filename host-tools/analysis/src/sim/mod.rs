@@ -39,7 +39,8 @@ pub enum Form {
     Alternate,
     /// Forms from the literature, kept out of the diagnosis's tuning
     /// (written after it, and only measured): Fung's quasi-linear
-    /// viscoelasticity with a box spectrum (five branches, 0.05–20 s),
+    /// viscoelasticity acting on every force the tissue exerts, in motion
+    /// as at rest, with a box spectrum (five branches, 0.05–20 s),
     /// Stribeck friction (a low-speed boost falling off by 0.5 mm/s), Dahl
     /// presliding with his exponent 2, walls stiffening exponentially
     /// (Fung's collagen), cutting growing with the square root of depth
