@@ -220,21 +220,22 @@ fn spectrum_at(g: f64) -> (f64, f64) {
 const QLV_FROM: f64 = 20.0;
 /// Grid values from here on are relaxation of the tissue's force over its
 /// whole history, sliding as well as held ([`Branch::QlvWhole`]), with
-/// Fung's wide box alone (three decades, as in soft tissue): narrower, a force
-/// steadily renewed and relaxing over its whole history is the branch the
-/// motion loads over again (a friction linear in depth, relaxed so, is a
-/// Maxwell branch on the velocity) but at a turn, and the search's time
-/// goes with its grid.
+/// Fung's wide box alone (three decades, as in soft tissue). Narrower
+/// whole-history spectra are nearly collinear with the Maxwell branches
+/// (a friction linear in depth, relaxed so, is a branch the velocity
+/// loads) but at a turn, and each spectrum costs the search time.
 const QLV_WHOLE_FROM: f64 = 40.0;
-/// The first spectrum of [`QLV_WHOLE_FROM`]'s family: three decades wide.
-const QLV_WHOLE_SPECTRA_FROM: f64 = 3.0 * SPECTRUM_TAU_S.len() as f64;
+/// The index in [`spectrum_at`]'s table of the first three-decade
+/// spectrum, where [`QLV_WHOLE_FROM`]'s family starts.
+const THREE_DECADE_SPECTRUM_INDEX: f64 =
+    ((SPECTRUM_DECADES.len() - 1) * SPECTRUM_TAU_S.len()) as f64;
 
 /// The relaxing family at grid value `g` and the spectrum's index in it.
 fn family_of(g: f64) -> (Branch, f64) {
     if g >= QLV_WHOLE_FROM {
         (
             Branch::QlvWhole,
-            g - QLV_WHOLE_FROM + QLV_WHOLE_SPECTRA_FROM,
+            g - QLV_WHOLE_FROM + THREE_DECADE_SPECTRUM_INDEX,
         )
     } else if g >= QLV_FROM {
         (Branch::Qlv, g - QLV_FROM)
@@ -255,12 +256,13 @@ fn spectrum_params(_: &'static str, g: f64) -> Vec<(&'static str, f64)> {
     ]
 }
 
-/// Viscoelasticity in either of its two readings: a branch the needle's
+/// Viscoelasticity in any of its three readings: a branch the needle's
 /// motion loads (k·m, the Maxwell element beside the nominal's springs;
 /// gains in N/m), or relaxation of the force the tissue exerts (Fung's
 /// quasi-linear viscoelasticity on each trial's fitted force, [`qlv_branch`]:
 /// the capsule's as it loads, a held force from the stop, the dragged
-/// tissue's; gains the fraction that relaxes away). Either with one gain
+/// tissue's — or every force over its whole history, sliding too; gains
+/// the fraction that relaxes away, dimensionless). Each with one gain
 /// for the capsule and one for the rest ([`capsule_and_shaft`]). Real
 /// tissue relaxes 34–41 % of a held force in 5 s at rest, which no
 /// motion-driven branch can do: the needle stands still.
@@ -272,10 +274,10 @@ fn relaxation(p: &Prepared, g: f64) -> Vec<Vec<f64>> {
 
 /// [`relaxation`] at each of `grid`'s values, every relaxing branch
 /// computed once: the spectra about one centre share their branches
-/// (half a decade apart about it), so the grid's 40 spectra need 70
-/// branches, not 160. They are made centre by centre, and only one
+/// (half a decade apart about it), so the grid's 45 spectra need 105
+/// branches, not 195. They are made centre by centre, and only one
 /// centre's branches are kept (a trial of 70 000 samples would hold
-/// 39 MB of branches otherwise).
+/// 59 MB of branches otherwise).
 fn relaxation_on_grid(p: &Prepared, grid: &[f64], each: &mut Each<'_>) {
     let centre = |gi: &usize| {
         let (family, g) = family_of(grid[*gi]);
@@ -314,15 +316,13 @@ fn capsule_and_shaft(p: &Prepared, col: &[f64]) -> Vec<Vec<f64>> {
 /// the spectrum by [`Branches::spectrum`]. Exact over each step for F
 /// linear in it, so jittered clocks and gaps cost nothing.
 ///
-/// A needle sliding through tissue meets fresh tissue at its tip and
-/// along its shaft all the time: what it shears has had no time to relax,
-/// so nothing of a sliding force has relaxed (h = F), and the force it
-/// holds once it stops relaxes from there. The capsule, stretched without
-/// sliding, relaxes as it loads; so does a tissue dragged along on
-/// withdrawal (the stick). Read the other way — every force relaxing
-/// from its whole history — a steady insertion's force would be relaxed
-/// already when the needle stops, and the force held at rest would rise
-/// back, where tissue is seen to fall 34–41 % in 5 s.
+/// Held where it is held (`relaxes_sliding` false): a needle sliding
+/// through tissue meets fresh tissue at its tip and along its shaft all
+/// the time, what it shears has had no time to relax, so nothing of a
+/// sliding force has relaxed (h = F), and the force it holds once it
+/// stops relaxes from there — the whole held force, as real tissue falls
+/// 34–41 % in 5 s. The capsule, stretched without sliding, relaxes as it
+/// loads; so does a tissue dragged along on withdrawal (the stick).
 ///
 /// Fung's own form lets every force relax over its whole history
 /// (`relaxes_sliding`): a sliding force, steadily renewed, then lags its
@@ -361,7 +361,7 @@ fn qlv_branch(steps: &[QlvStep], tau: f64, relaxes_sliding: bool) -> Vec<f64> {
         .collect()
 }
 
-/// The two relaxing families of [`relaxation`].
+/// The three relaxing families of [`relaxation`].
 #[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 enum Branch {
     /// [`maxwell_branch`]: driven by the needle's motion.

@@ -64,6 +64,15 @@ impl Gram {
         self.count += other.count;
     }
 
+    /// Column `k` taken out of the sums: [`Self::solve`] gives it θ 0.
+    pub fn leave_out(&mut self, k: usize) {
+        for j in 0..self.n {
+            self.ata[k * self.n + j] = 0.0;
+            self.ata[j * self.n + k] = 0.0;
+        }
+        self.aty[k] = 0.0;
+    }
+
     /// Squared error of r − Φθ.
     pub fn sse(&self, theta: &[f64]) -> f64 {
         let n = self.n;
@@ -159,10 +168,8 @@ pub struct PerTrial<'a> {
     /// The first this many columns (the nominal's corrections) get the
     /// ridge; a candidate's own columns never do.
     pub ridged: usize,
-    /// Shared columns whose θ the physics signs: one fitted negative is
-    /// left out and the rest fitted again, until none is (an active set,
-    /// least squares under θ ≥ 0 for the one or two such columns a
-    /// candidate has).
+    /// Shared columns whose θ the physics signs: fitted under θ ≥ 0,
+    /// exactly (the best of the fits leaving out each set of them).
     pub non_negative: &'a [usize],
 }
 
@@ -213,16 +220,10 @@ impl PerTrial<'_> {
                 ridged.ata[i * s + i] *= 1.0 + RIDGE;
             }
         }
-        let mut th = ridged.solve();
-        while let Some(k) = (0..s).find(|&k| th[k] < 0.0 && self.non_negative.contains(&shared[k]))
-        {
-            for j in 0..s {
-                ridged.ata[k * s + j] = 0.0;
-                ridged.ata[j * s + k] = 0.0;
-            }
-            ridged.aty[k] = 0.0;
-            th = ridged.solve();
-        }
+        let signed: Vec<usize> = (0..s)
+            .filter(|&k| self.non_negative.contains(&shared[k]))
+            .collect();
+        let th = non_negative_solve(&ridged, &signed);
         let sse = reduced.sse(&th);
         let mut full = vec![0.0; n];
         for (k, &i) in shared.iter().enumerate() {
@@ -306,6 +307,32 @@ impl PerTrial<'_> {
         r.count = g.count;
         r
     }
+}
+
+/// Least squares with the θ of the `signed` columns held ≥ 0: the plain
+/// solve where it keeps them so, else the best of the solves with each
+/// subset of them left out (θ 0) that keeps the rest ≥ 0 — exact, and
+/// cheap for the one or two such columns a candidate has (a
+/// Lawson–Hanson active set would do for many).
+fn non_negative_solve(g: &Gram, signed: &[usize]) -> Vec<f64> {
+    let th = g.solve();
+    if signed.iter().all(|&k| th[k] >= 0.0) {
+        return th;
+    }
+    let feasible = |th: &Vec<f64>| signed.iter().all(|&k| th[k] >= 0.0);
+    (1..1usize << signed.len())
+        .map(|left_out| {
+            let mut sub = g.clone();
+            for (bit, &k) in signed.iter().enumerate() {
+                if left_out & (1 << bit) != 0 {
+                    sub.leave_out(k);
+                }
+            }
+            sub.solve()
+        })
+        .filter(feasible)
+        .min_by(|a, b| g.sse(a).total_cmp(&g.sse(b)))
+        .unwrap_or_else(|| vec![0.0; g.n])
 }
 
 /// Folds: trial `j` is withheld in fold `j % k`.
@@ -437,6 +464,30 @@ mod tests {
         assert!((signed[0] - line[0]).abs() < 1e-6 && (signed[1] - line[1]).abs() < 1e-6);
         // A signed column fitted positive stays.
         assert!((fit(&[1])[1] - 2.0).abs() < 1e-6);
+        // Both signed and the data wanting both negative: neither alone
+        // left out keeps the other ≥ 0, so both go, and the constant
+        // is the mean.
+        let falling: Vec<Gram> = (0..3)
+            .map(|t| {
+                let mut g = Gram::new(3);
+                for i in 0..50 {
+                    let (x, z) = (f64::from(i) * 0.1, f64::from((i * 7 + t) % 11));
+                    g.add(&[1.0, x, z], 1.0 - 2.0 * x - 0.5 * z);
+                }
+                g
+            })
+            .collect();
+        let per = PerTrial {
+            own: &[],
+            ridged: 0,
+            non_negative: &[1, 2],
+        };
+        let both = per.solve_shared(&falling.iter().collect::<Vec<_>>());
+        let (sum_y, count) = falling
+            .iter()
+            .fold((0.0, 0.0), |(s, c), g| (s + g.aty[0], c + g.ata[0]));
+        assert_eq!((both[1], both[2]), (0.0, 0.0), "{both:?}");
+        assert!((both[0] - sum_y / count).abs() < 1e-6, "{both:?}");
     }
 
     /// The trials reduced once and summed give the shared θ of

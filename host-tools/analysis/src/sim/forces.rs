@@ -352,11 +352,16 @@ struct Relaxing {
     tissue_before_n: f64,
 }
 
-/// The literature form's fraction of a held force that relaxes away in
-/// the end, per N/m of the effect's stiffness: 0.08 at the standard size
-/// (20 N/m), 0.4 at five times it, as much as real skin loses in 5 s at
-/// rest (34–41 %).
+/// The literature form's fraction of a force that relaxes away in the end
+/// (γ, dimensionless), per N/m of the effect's stiffness, so that one
+/// strength scales every form: 0.08 at the standard size (20 N/m), 0.4
+/// at five times it (the box relaxes about 78 % of γ in 5 s: 31 % of a
+/// force held from rest, near real skin's 34–41 %; a force renewed while
+/// sliding has relaxed most of its part already when it stops).
 const QLV_FRACTION_PER_N_PER_M: f64 = 0.004;
+/// Most of a force that may relax away: G(∞) = 1 − γ stays positive, a
+/// tissue that holds some force for good.
+const QLV_MOST_FRACTION: f64 = 0.9;
 
 impl Relaxing {
     fn add(
@@ -421,7 +426,7 @@ impl Relaxing {
             relaxed_n += (*f_n - *h) / 5.0;
         }
         self.tissue_before_n = *f_n;
-        *f_n -= gamma.min(0.9) * relaxed_n;
+        *f_n -= gamma.clamp(0.0, QLV_MOST_FRACTION) * relaxed_n;
     }
 }
 
