@@ -468,15 +468,11 @@ fn qlv_steps_of(p: &Prepared) -> Vec<QlvStep> {
             if !p.in_tissue(i) {
                 return QlvStep::Out;
             }
-            let dt_s = if i == 0 {
-                0.0
+            let (dt_s, rate_n_per_s) = if i == 0 {
+                (0.0, 0.0)
             } else {
-                (t[i] - t[i - 1]).max(1e-9)
-            };
-            let rate_n_per_s = if i == 0 {
-                0.0
-            } else {
-                (f(i) - f(i - 1)) / dt_s
+                let dt_s = (t[i] - t[i - 1]).max(1e-9);
+                (dt_s, (f(i) - f(i - 1)) / dt_s)
             };
             QlvStep::In {
                 f_n: f(i),

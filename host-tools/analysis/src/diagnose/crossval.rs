@@ -315,11 +315,11 @@ impl PerTrial<'_> {
 /// cheap for the one or two such columns a candidate has (a
 /// Lawson–Hanson active set would do for many).
 fn non_negative_solve(g: &Gram, signed: &[usize]) -> Vec<f64> {
+    let feasible = |th: &Vec<f64>| signed.iter().all(|&k| th[k] >= 0.0);
     let th = g.solve();
-    if signed.iter().all(|&k| th[k] >= 0.0) {
+    if feasible(&th) {
         return th;
     }
-    let feasible = |th: &Vec<f64>| signed.iter().all(|&k| th[k] >= 0.0);
     (1..1usize << signed.len())
         .map(|left_out| {
             let mut sub = g.clone();

@@ -39,10 +39,11 @@ pub enum Form {
     Alternate,
     /// Forms from the literature, kept out of the diagnosis's tuning
     /// (written after it, and only measured) but for three written with
-    /// the candidate column that looks for them (*Simulate and fit* in
-    /// the book): relaxation, cutting's reload and the mount. Fung's quasi-linear
-    /// viscoelasticity acting on every force the tissue exerts, in motion
-    /// as at rest, with a box spectrum (five branches, 0.05–20 s),
+    /// the candidate column that looks for them (*Simulating and fitting* in
+    /// the book): relaxation, cutting's reload and the mount. Fung's
+    /// quasi-linear viscoelasticity acting on every force the tissue
+    /// exerts, in motion as at rest, with a box spectrum (five branches,
+    /// 0.05–20 s),
     /// Stribeck friction (a low-speed boost falling off by 0.5 mm/s), Dahl
     /// presliding with his exponent 2, walls stiffening exponentially
     /// (Fung's collagen), cutting growing with the square root of depth
