@@ -336,7 +336,7 @@ fn the_fit_and_the_diagnosis_draw_their_pages_in_the_live_views_look() {
                 "nominal, the trial's own levels",
                 "+ depth_dependent_cutting",
                 "measured − nominal",
-                "measured − + depth_dependent_cutting"
+                "measured − (nominal + depth_dependent_cutting)"
             ]
         );
         let verdict = browser

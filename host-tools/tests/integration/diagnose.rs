@@ -1339,6 +1339,8 @@ fn a_report_is_written_with_its_figure() {
         "+ depth_dependent_cutting",
         "insertion",
         "reversal",
+        "measured − nominal",
+        "measured − (nominal + depth_dependent_cutting)",
     ] {
         assert!(svg.contains(label), "figure lacks {label}");
     }

@@ -41,10 +41,21 @@ impl Withheld {
         [&self.baseline_n, &self.augmented_n]
             .map(|model| f_n.iter().zip(model).map(|(f, m)| f - m).collect())
     }
+
+    /// The legends of [`Self::residuals`]' two lines.
+    pub fn residual_labels(&self) -> [String; 2] {
+        let augmented = match self.label.strip_prefix("+ ") {
+            Some(named) => format!("measured − (nominal + {named})"),
+            None => format!("measured − {}", self.label),
+        };
+        [format!("measured − {NOMINAL_LABEL}"), augmented]
+    }
 }
 
 /// The legend of [`Withheld::baseline_n`].
 pub const BASELINE_LABEL: &str = "nominal, the trial's own levels";
+/// [`BASELINE_LABEL`] in the residual's legend.
+const NOMINAL_LABEL: &str = "nominal";
 
 /// Draw `p` with its models (same samples) to `path`.
 pub fn draw(path: &Path, p: &Prepared, withheld: &Withheld) -> Result<()> {
@@ -110,7 +121,9 @@ pub fn draw(path: &Path, p: &Prepared, withheld: &Withheld) -> Result<()> {
         .map_err(err)?;
 
     let [nominal_residual, augmented_residual] = &withheld.residuals(&p.trial.f_n);
+    // Headroom for the legend above the residuals.
     let y = range(&[nominal_residual, augmented_residual]);
+    let y = y.start..y.end + 0.3 * (y.end - y.start);
     let mut chart = ChartBuilder::on(&bottom)
         .caption(
             "residual (measured − model), phases shaded",
@@ -127,37 +140,35 @@ pub fn draw(path: &Path, p: &Prepared, withheld: &Withheld) -> Result<()> {
         .y_desc("residual, N")
         .draw()
         .map_err(err)?;
-    // Shade each run of one phase, labelled once.
+    // Shade each run of one phase, named at its top left where it is
+    // wide enough for the name.
     let mut start = 0;
-    let mut labelled = [false; PHASES.len()];
     for i in 1..=t.len() {
         if i < t.len() && p.phase[i] == p.phase[start] {
             continue;
         }
         let ph = p.phase[start];
-        let band = Rectangle::new([(t[start], y.start), (t[i - 1], y.end)], BANDS[ph].filled());
-        let drawn = chart.draw_series([band]).map_err(err)?;
-        if !labelled[ph] {
-            labelled[ph] = true;
-            let color = BANDS[ph];
-            drawn.label(PHASES[ph]).legend(move |(x, y)| {
-                Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled())
-            });
+        let (from, to) = (t[start], t[i - 1]);
+        let band = Rectangle::new([(from, y.start), (to, y.end)], BANDS[ph].filled());
+        chart.draw_series([band]).map_err(err)?;
+        if (to - from) >= 0.06 * (t1 - t0) {
+            let name = Text::new(PHASES[ph], (from, y.end), ("sans-serif", 12).into_font());
+            chart.draw_series([name]).map_err(err)?;
         }
         start = i;
     }
-    chart
-        .draw_series(LineSeries::new(
-            line(nominal_residual),
-            RGBColor(200, 30, 30),
-        ))
-        .map_err(err)?;
-    chart
-        .draw_series(LineSeries::new(
-            line(augmented_residual),
-            RGBColor(20, 110, 200),
-        ))
-        .map_err(err)?;
+    let labels = withheld.residual_labels();
+    for ((ys, colour), label) in [nominal_residual, augmented_residual]
+        .into_iter()
+        .zip([RGBColor(200, 30, 30), RGBColor(20, 110, 200)])
+        .zip(labels)
+    {
+        chart
+            .draw_series(LineSeries::new(line(ys), colour))
+            .map_err(err)?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 14, y)], colour));
+    }
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)

@@ -211,19 +211,15 @@ fn withheld_charts(p: &Prepared, withheld: &Withheld) -> [Chart; 2] {
         bands: bands.clone(),
         height: 340,
     };
+    let [nominal_label, augmented_label] = withheld.residual_labels();
     let residual = Chart {
         caption: "residual (measured − model), phases shaded".into(),
         x_label: "time (s)".into(),
         y_label: "residual (N)".into(),
         lines: vec![
+            line(&nominal_label, colour::MODEL, false, &baseline_residual),
             line(
-                "measured − nominal",
-                colour::MODEL,
-                false,
-                &baseline_residual,
-            ),
-            line(
-                &format!("measured − {label}"),
+                &augmented_label,
                 colour::AUGMENTED,
                 false,
                 &augmented_residual,
@@ -272,10 +268,11 @@ fn waterfall_svg(out: &Diagnosis) -> String {
     let noise = out.noise_floor_n;
     let explained = out.explained_below_n;
     let top = bars.iter().map(|b| b.1).fold(explained, f64::max).max(1e-9) * 1.15;
-    // Wide enough that the noise floor's label, at the right, clears the
-    // bars and the explained level's, at the left.
-    let w = (140.0 * bars.len() as f64 + 300.0).max(560.0);
+    // The two levels' labels right of the bars, clear of their values;
+    // room for the longer of them.
     let (h, left, bottom, bar_w) = (316.0, 70.0, 250.0, 90.0);
+    let labels_x = left + 20.0 + 140.0 * bars.len() as f64;
+    let w = labels_x + 340.0;
     let y = |v: f64| bottom - (v / top) * (bottom - 20.0);
     let mut svg = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\
@@ -298,38 +295,31 @@ fn waterfall_svg(out: &Diagnosis) -> String {
             bottom + 16.0 + 16.0 * (k % 2) as f64,
         );
     }
-    // The two labels at either end: the lines can lie a few pixels apart.
-    for (level, colour, label, label_x) in [
-        (
-            noise,
-            "#c33",
-            format!("noise floor {noise:.4} N"),
-            w - 180.0,
-        ),
-        (
-            explained,
-            "#36c",
-            if explained > super::EXPLAINED_FACTOR * noise {
-                format!(
-                    "explained below {explained:.4} N ({} % of the puncture force)",
-                    100.0 * super::MODEL_TOLERANCE
-                )
-            } else {
-                format!(
-                    "explained below {explained:.4} N ({} noise floors)",
-                    super::EXPLAINED_FACTOR
-                )
-            },
-            left + 4.0,
-        ),
+    let explained_label = if explained > super::EXPLAINED_FACTOR * noise {
+        format!(
+            "explained below {explained:.4} N ({} % of the puncture force)",
+            100.0 * super::MODEL_TOLERANCE
+        )
+    } else {
+        format!(
+            "explained below {explained:.4} N ({} noise floors)",
+            super::EXPLAINED_FACTOR
+        )
+    };
+    // Each label above its line, but the lower one's below it where the
+    // two lines lie closer than a line of text.
+    let close = (y(noise) - y(explained)).abs() < 16.0;
+    for (level, colour, label) in [
+        (noise, "#c33", format!("noise floor {noise:.4} N")),
+        (explained, "#36c", explained_label),
     ] {
+        let below = close && level <= noise.min(explained);
         svg += &format!(
             "<line x1=\"{left}\" y1=\"{0:.1}\" x2=\"{1}\" y2=\"{0:.1}\" stroke=\"{colour}\" stroke-dasharray=\"4 3\"/>\
-             <text x=\"{2}\" y=\"{3:.1}\" fill=\"{colour}\">{label}</text>",
+             <text x=\"{labels_x}\" y=\"{2:.1}\" fill=\"{colour}\">{label}</text>",
             y(level),
             w - 10.0,
-            label_x,
-            y(level) - 4.0,
+            if below { y(level) + 14.0 } else { y(level) - 4.0 },
         );
     }
     svg += "</svg>";
