@@ -861,9 +861,11 @@ pub fn diagnose_with_progress(
         .collect();
     ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
     let noise = noise_floor(data);
+    let explained_below_n = explained_below_n(data, noise);
     let bar = Bar {
         noise_n: noise,
         baseline_n: baseline.rms(),
+        explained_below_n,
     };
     let significant = |shrink: f64, c: Consistency| {
         bar.worthy(baseline.rms(), baseline.rms() * (1.0 - shrink), c)
@@ -918,7 +920,6 @@ pub fn diagnose_with_progress(
     }
     let after = steps.last().map(|(_, s)| s.clone());
     let left = after.as_ref().unwrap_or(&baseline);
-    let explained_below_n = explained_below_n(data, noise);
     let gap_open = left.rms() > explained_below_n;
     let closest: Vec<&str> = steps.iter().map(|(ci, _)| CANDIDATES[*ci].effect).collect();
     let credible = bar.stand(&baseline, &steps);

@@ -114,6 +114,9 @@ pub(super) struct Bar {
     pub(super) noise_n: f64,
     /// The baseline's held-out RMS: the gap is its excess over the noise.
     pub(super) baseline_n: f64,
+    /// The held-out RMS under which what is left counts as explained
+    /// ([`super::Diagnosis::explained_below_n`]).
+    pub(super) explained_below_n: f64,
 }
 
 impl Bar {
@@ -146,13 +149,17 @@ impl Bar {
     }
 
     /// Whether the effects of `steps` stand as the gap's cause: they
-    /// leave it within [`EXPLAINED_FACTOR`] noise floors, or it open but
-    /// named ([`Bar::names_the_gap`]); otherwise they are only the
-    /// closest candidates.
+    /// leave it within [`EXPLAINED_FACTOR`] noise floors, or a gap past
+    /// the level that counts as explained within it (what the verdict
+    /// then calls explained, they caused), or it open but named
+    /// ([`Bar::names_the_gap`]); otherwise they are only the closest
+    /// candidates.
     pub(super) fn stand(self, baseline: &Scored, steps: &[(usize, Scored)]) -> bool {
-        steps
-            .last()
-            .is_some_and(|(_, last)| last.rms() <= EXPLAINED_FACTOR * self.noise_n)
+        let explains = |left_n: f64| {
+            left_n <= EXPLAINED_FACTOR * self.noise_n
+                || (baseline.rms() > self.explained_below_n && left_n <= self.explained_below_n)
+        };
+        steps.last().is_some_and(|(_, last)| explains(last.rms()))
             || self.names_the_gap(baseline, steps)
     }
 
@@ -260,6 +267,32 @@ mod tests {
         }
     }
 
+    /// What the verdict calls explained, the effects that left it stand
+    /// as the cause of: a gap of 27.4 mN on a 12.2 mN load cell, the
+    /// tolerance 22.8 mN (1 % of the puncture force), an effect that
+    /// leaves 21.6 mN evenly over the phases — under half the gap taken,
+    /// no phase left at the noise. Where the nominal was within the
+    /// tolerance already there was no gap for it to cause.
+    #[test]
+    fn effects_that_leave_the_gap_within_the_tolerance_stand() {
+        let noise = 0.0122_f64;
+        let even = |rms: f64| scored_by_phase([rms * rms; 3]);
+        let (baseline, after) = (even(0.0274), even(0.0216));
+        let bar = Bar {
+            noise_n: noise,
+            baseline_n: baseline.rms(),
+            explained_below_n: 0.0228,
+        };
+        assert!(gap_taken(baseline.rms(), after.rms(), noise) < MOST_OF_GAP);
+        assert!(!bar.names_the_gap(&baseline, &[(0, after.clone())]));
+        assert!(bar.stand(&baseline, &[(0, after.clone())]));
+        let no_gap = Bar {
+            explained_below_n: 0.0280,
+            ..bar
+        };
+        assert!(!no_gap.stand(&baseline, &[(0, after)]));
+    }
+
     /// A step that leaves one phase at the noise is a cause at half the
     /// share of the gap a step must otherwise take; one that takes more
     /// but leaves 40 % and 60 % of the two phases it acts on is not; nor
@@ -280,6 +313,7 @@ mod tests {
         let bar = Bar {
             noise_n: noise,
             baseline_n: (0.0116 + n2).sqrt(),
+            explained_below_n: 1.5 * noise,
         };
         let left = scored_by_phase([n2, 0.0035 + n2, 0.0065 + n2]);
         // Takes phase 1's excess whole: a tenth of the gap.
@@ -343,6 +377,7 @@ mod tests {
         let bar = Bar {
             noise_n: noise,
             baseline_n: baseline.rms(),
+            explained_below_n: 1.5 * noise,
         };
         let explains = scored_by_phase([n2, n2 + 0.00002, 0.0040 + n2]);
         assert!(gap_taken(baseline.rms(), explains.rms(), noise) < MOST_OF_GAP);
