@@ -1043,6 +1043,41 @@ fn cutting_that_wanders_along_each_path_is_named() {
     }
 }
 
+/// Cutting that wanders six times as far along each path (a tissue of
+/// layers as real skin recordings show: the force after the puncture
+/// climbs and eases along depth, each insertion its own way) beside
+/// relaxation at five times its standard size, on the skin phantom as
+/// real rigs record it: no shared law takes the wander, the profile free
+/// along depth does, and the dwell's relaxation it leaves is named after
+/// it, with little of the gap left.
+#[test]
+fn relaxation_is_named_beside_cutting_that_wanders_along_each_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let status = Command::new(env!("CARGO_BIN_EXE_needle"))
+        .args(["simulate", "--out", dir.path().to_str().unwrap()])
+        .args([
+            "--tissue",
+            "skin_phantom",
+            "--protocol",
+            "insert-dwell-withdraw",
+        ])
+        .args(["--jitter", "--rate-hz", "100", "--noise-n", "0.012"])
+        .args(["--tare-n", "0.004", "--spread", "0.15", "--trials", "10"])
+        .args(["--seed", "2", "--effect-form", "alternate"])
+        .args(["--effects", "depth_dependent_cutting=6,viscoelasticity=5"])
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "{status:?}");
+    let out = diagnosis_of(dir.path());
+    assert_named_along_depth(&out);
+    let v = &out["verdict"];
+    assert_eq!(v["effects"][1]["effect"], "viscoelasticity", "{v}");
+    assert_eq!(v["effects"][1]["law"], "shared", "{v}");
+    let (before, after) = heldout_before_after(&out);
+    let noise = num(&out["noise_floor_n"]);
+    assert!(after <= 1.5 * noise && after < 0.1 * before, "{v}");
+}
+
 /// Cutting loaded again after the puncture (the simulator's literature
 /// form: the layer beneath a ruptured capsule cuts at 40 % of its level
 /// at first, back within 5 % by 2.4 mm, and more with depth), recorded as

@@ -21,9 +21,13 @@
 //! Written here: a running mean over sorted depths is a few lines, no
 //! smoothing crate fits the leave-one-out form.
 
+use super::candidates::Candidate;
 use super::crossval::{folds, PerTrial};
 use super::prepare::{Prepared, PHASES};
-use super::{add_terms, columns, grams, total, Scored, Supports, NOMINAL_CORRECTIONS, SPREAD};
+use super::{
+    add_terms, columns, grams, non_negative_columns, total, Scored, Supports, NOMINAL_CORRECTIONS,
+    SPREAD,
+};
 
 /// Half-widths of the depth window tried, m: from a fraction of a
 /// bevel's length to a few millimetres (a tissue's layers).
@@ -40,18 +44,7 @@ pub const MOST_OF_GAP_ALONG_DEPTH: f64 = 0.75;
 /// predicted from its other cutting samples nearby in depth; the grid
 /// value is the window's half-width, m.
 pub fn cutting_along_depth(data: &[Prepared], baseline: &Scored) -> Scored {
-    let trials: Vec<Cut> = data
-        .iter()
-        .enumerate()
-        .map(|(j, p)| {
-            let residual_n = heldout_residual(data, baseline, j);
-            debug_assert!({
-                let sse: f64 = residual_n.iter().map(|r| r * r).sum();
-                (sse - baseline.per_trial[j].0).abs() <= 1e-6 * sse.max(1e-12)
-            });
-            Cut::of(p, residual_n)
-        })
-        .collect();
+    let trials = cuts(data, baseline, &[]);
     let best = HALF_WINDOWS_M
         .iter()
         .copied()
@@ -60,10 +53,49 @@ pub fn cutting_along_depth(data: &[Prepared], baseline: &Scored) -> Scored {
             sse(a).total_cmp(&sse(b))
         })
         .unwrap_or(HALF_WINDOWS_M[0]);
+    Scored {
+        grid_value: best,
+        ..left_along_depth(data, &trials, best, baseline)
+    }
+}
+
+/// `scored` (the held-out score of the nominal with `set`) with each
+/// trial's cutting samples then predicted from its other cutting samples
+/// within `half_m` in depth, as [`cutting_along_depth`] does the
+/// baseline's: an effect beside a profile free along depth, which
+/// takes what lies along the insertion as a function of depth and
+/// leaves the effect what it adds elsewhere (a dwell's relaxation).
+pub fn beside_profile(
+    data: &[Prepared],
+    scored: &Scored,
+    set: &[(&Candidate, f64)],
+    half_m: f64,
+) -> Scored {
+    left_along_depth(data, &cuts(data, scored, set), half_m, scored)
+}
+
+/// Each trial's held-out residual under `set`, as `scored` fitted it,
+/// with its cutting samples by depth.
+fn cuts(data: &[Prepared], scored: &Scored, set: &[(&Candidate, f64)]) -> Vec<Cut> {
+    data.iter()
+        .enumerate()
+        .map(|(j, p)| {
+            let residual_n = heldout_residual(data, scored, j, set);
+            debug_assert!({
+                let sse: f64 = residual_n.iter().map(|r| r * r).sum();
+                (sse - scored.per_trial[j].0).abs() <= 1e-6 * sse.max(1e-12)
+            });
+            Cut::of(p, residual_n)
+        })
+        .collect()
+}
+
+/// `scored` with the trials' residuals those `trials` leave at `half_m`.
+fn left_along_depth(data: &[Prepared], trials: &[Cut], half_m: f64, scored: &Scored) -> Scored {
     let mut per_trial = Vec::with_capacity(data.len());
     let mut by_phase = [(0.0, 0); PHASES.len()];
-    for (p, cut) in data.iter().zip(&trials) {
-        let left = cut.left(best);
+    for (p, cut) in data.iter().zip(trials) {
+        let left = cut.left(half_m);
         for (i, e) in left.iter().enumerate() {
             by_phase[p.phase[i]].0 += e * e;
             by_phase[p.phase[i]].1 += 1;
@@ -73,8 +105,7 @@ pub fn cutting_along_depth(data: &[Prepared], baseline: &Scored) -> Scored {
     Scored {
         per_trial,
         by_phase,
-        grid_value: best,
-        ..baseline.clone()
+        ..scored.clone()
     }
 }
 
@@ -91,19 +122,25 @@ pub fn profile(p: &Prepared, residual_n: Vec<f64>, half_m: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Trial `j`'s residual as the baseline scored it withheld: the shared
-/// corrections from the other trials (its fold's), its own spread fitted
-/// on it.
-fn heldout_residual(data: &[Prepared], baseline: &Scored, j: usize) -> Vec<f64> {
+/// Trial `j`'s residual as `scored` (the nominal with `set`) scored it
+/// withheld: the shared terms from the other trials (its fold's), its
+/// own spread fitted on it.
+fn heldout_residual(
+    data: &[Prepared],
+    scored: &Scored,
+    j: usize,
+    set: &[(&Candidate, f64)],
+) -> Vec<f64> {
     let trial = std::slice::from_ref(&data[j]);
-    let cols = vec![columns(&data[j], &[])];
+    let cols = vec![columns(&data[j], set)];
     let sums = total(&grams(trial, &cols, &Supports::all(trial, &cols))[0]);
+    let signed = non_negative_columns(set.iter().map(|(c, _)| *c));
     let per = PerTrial {
         own: &SPREAD,
         ridged: NOMINAL_CORRECTIONS.len(),
-        non_negative: &[],
+        non_negative: &signed,
     };
-    let shared = &baseline.fold_theta[j % folds(data.len())];
+    let shared = &scored.fold_theta[j % folds(data.len())];
     let theta = per.for_trial(&sums, shared);
     let mut fitted = vec![0.0; data[j].trial.len()];
     add_terms(&mut fitted, &cols[0], &theta);

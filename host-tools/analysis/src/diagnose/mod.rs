@@ -905,7 +905,8 @@ pub fn diagnose_with_progress(
         Some(first) => waterfall(first, bar, nominal, progress),
         None => Vec::new(),
     };
-    let (mut law, mut half_window_m) = ("shared", None);
+    // The profile's half-window, where the first step is that profile.
+    let mut half_window_m = None;
     // A profile free in every trial is the last resort: it is not tried
     // over a shared law that holds on the withheld trials (its free
     // profile would take that effect's residual along the insertion,
@@ -913,9 +914,10 @@ pub fn diagnose_with_progress(
     if steps.is_empty() && baseline.rms() > EXPLAINED_FACTOR * noise {
         progress("trying a cutting force free along depth in each trial");
         if let Some(along) = cutting_along_depth(data, &baseline, bar) {
-            half_window_m = Some(along.1.grid_value);
-            steps = vec![along];
-            law = "along_depth_in_each_trial";
+            let half_m = along.1.grid_value;
+            half_window_m = Some(half_m);
+            let beside = beside_the_profile(data, &ranked, (&along.1, half_m), bar);
+            steps = std::iter::once(along).chain(beside).collect();
         }
     }
     let after = steps.last().map(|(_, s)| s.clone());
@@ -935,16 +937,22 @@ pub fn diagnose_with_progress(
     let mut before_rms = baseline.rms();
     let waterfall: Vec<Step> = steps
         .iter()
+        .enumerate()
         .filter(|_| credible)
-        .map(|(ci, s)| {
+        .map(|(k, (ci, s))| {
             let share = bar.share_of_gap(before_rms, s.rms());
             before_rms = s.rms();
+            let along = half_window_m.filter(|_| k == 0);
             Step {
                 effect: CANDIDATES[*ci].effect,
                 heldout_rms_after_n: s.rms(),
                 share_of_gap: share,
-                law,
-                half_window_m,
+                law: if along.is_some() {
+                    "along_depth_in_each_trial"
+                } else {
+                    "shared"
+                },
+                half_window_m: along,
             }
         })
         .collect();
@@ -1022,6 +1030,34 @@ fn cutting_along_depth(data: &[Prepared], baseline: &Scored, bar: Bar) -> Option
     named.then_some((ci, scored))
 }
 
+/// Beside a cutting profile free along depth (`along`, at its
+/// half-window), the candidate that takes most of what the profile
+/// leaves, if any is significant against it and a cause of the gap
+/// ([`Bar::a_cause`]) — each at the grid value it had alone, the profile
+/// taken on the residual it leaves: the profile takes what lies along
+/// the insertion as a function of depth, and what is left in the dwell
+/// or the withdrawal (a relaxation at rest) is still another effect's.
+/// Cutting itself is the profile.
+fn beside_the_profile(
+    data: &[Prepared],
+    ranked: &[(usize, Scored, f64, Consistency)],
+    (along, half_m): (&Scored, f64),
+    bar: Bar,
+) -> Option<(usize, Scored)> {
+    ranked
+        .iter()
+        .filter(|(ci, ..)| CANDIDATES[*ci].effect != "depth_dependent_cutting")
+        .map(|(ci, alone, ..)| {
+            let set = [(&CANDIDATES[*ci], alone.grid_value)];
+            (*ci, along_depth::beside_profile(data, alone, &set, half_m))
+        })
+        .filter(|(_, with)| {
+            let (_, consistency) = improvement(along, with);
+            bar.worthy(along.rms(), with.rms(), consistency) && bar.a_cause(along, with)
+        })
+        .min_by(|a, b| a.1.rms().total_cmp(&b.1.rms()))
+}
+
 /// Each candidate's report, in the order of its shrink alone.
 fn candidate_scores(
     ranked: &[(usize, Scored, f64, Consistency)],
@@ -1058,9 +1094,12 @@ fn candidate_scores(
 fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> Withheld {
     let v = &out.verdict;
     let along_depth = v.effects.first().and_then(|e| e.half_window_m);
+    // The profile along depth is added on what the others leave.
     let named: Vec<&str> = [v.effect, v.second]
         .into_iter()
-        .filter(|e| *e != "none" && along_depth.is_none())
+        .enumerate()
+        .filter(|&(k, e)| e != "none" && !(k == 0 && along_depth.is_some()))
+        .map(|(_, e)| e)
         .collect();
     let set: Vec<(&Candidate, f64)> = named
         .iter()
@@ -1094,7 +1133,7 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> Withheld {
     };
     let baseline_n = model(&[]);
     let mut augmented_n = model(&set);
-    if let (Some(half_m), Some(step)) = (along_depth, v.effects.first()) {
+    if let Some(half_m) = along_depth {
         let p = &data[0];
         let left: Vec<f64> = (0..p.trial.len())
             .map(|i| p.trial.f_n[i] - augmented_n[i])
@@ -1105,10 +1144,11 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> Withheld {
         {
             *a += d;
         }
+        let labels: Vec<String> = v.effects.iter().map(Step::label).collect();
         return Withheld {
             baseline_n,
             augmented_n,
-            label: format!("+ {}", step.label()),
+            label: format!("+ {}", labels.join(" + ")),
         };
     }
     let label = if named.is_empty() {

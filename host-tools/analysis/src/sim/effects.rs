@@ -64,6 +64,9 @@ pub enum Effect {
     },
 }
 
+/// `depth_dependent_cutting`'s standard growth of cutting with depth, /m.
+pub const DEPTH_CUTTING_G_PER_M: f64 = 15.0;
+
 impl Effect {
     /// The effect of this name at `strength` times its default size.
     pub fn named(name: &str, strength: f64) -> Result<Self> {
@@ -84,7 +87,9 @@ impl Effect {
                 rupture_min_n: 0.15 * s,
                 rupture_max_n: 0.4 * s,
             },
-            "depth_dependent_cutting" => Effect::DepthDependentCutting { g_per_m: 15.0 * s },
+            "depth_dependent_cutting" => Effect::DepthDependentCutting {
+                g_per_m: DEPTH_CUTTING_G_PER_M * s,
+            },
             "holder_inertia" => Effect::HolderInertia { mass_kg: 0.15 * s },
             "sensor_drift" => Effect::SensorDrift {
                 rate_n_per_s: 0.003 * s,

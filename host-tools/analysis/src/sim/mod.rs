@@ -21,7 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::Serialize;
 
-use self::effects::Effect;
+use self::effects::{Effect, DEPTH_CUTTING_G_PER_M};
 use self::forces::Kinematics;
 use self::motion::Segment;
 use self::needle::Needle;
@@ -125,10 +125,13 @@ impl Protocol {
 
 /// A cutting force's wander along `reach_m` of a path through a
 /// heterogeneous tissue: a random walk of its logarithm, 3 % per √mm
-/// (16 % over 30 mm), from 1 at the surface.
-fn cutting_wander(reach_m: f64, rng: &mut impl Rng) -> Vec<f64> {
+/// (16 % over 30 mm) times `size` (the effect's size, at least 1: `=2`
+/// on the command line doubles it, `=0` leaves the wander without the
+/// trend), from 1 at the surface.
+fn cutting_wander(reach_m: f64, size: f64, rng: &mut impl Rng) -> Vec<f64> {
     let steps = (reach_m.max(0.0) / WANDER_STEP_M).ceil() as usize + 4;
-    let step = Normal::new(0.0, 0.03 * (WANDER_STEP_M * 1e3).sqrt()).expect("constant sd");
+    let sd = 0.03 * size.max(0.0) * (WANDER_STEP_M * 1e3).sqrt();
+    let step = Normal::new(0.0, sd).expect("a finite, non-negative sd");
     let mut log_factor = 0.0;
     (0..=steps)
         .map(|k| {
@@ -1085,16 +1088,18 @@ impl Dataset<'_> {
             if rig.tare_sd_n > 0.0 {
                 protocol.tare_n = rng.sample(Normal::new(0.0, rig.tare_sd_n)?);
             }
-            let wanders = form == Form::Alternate
-                && effects
-                    .iter()
-                    .any(|e| matches!(e, Effect::DepthDependentCutting { .. }));
-            if wanders {
+            let wander_size = effects.iter().find_map(|e| match e {
+                Effect::DepthDependentCutting { g_per_m } if form == Form::Alternate => {
+                    Some((g_per_m / DEPTH_CUTTING_G_PER_M).max(1.0))
+                }
+                _ => None,
+            });
+            if let Some(size) = wander_size {
                 let mut wander_rng = ChaCha8Rng::seed_from_u64(
                     seed.wrapping_mul(104_729).wrapping_add(k as u64) ^ 0x3A4D_3A4D,
                 );
                 let reach_m = deepest_x_m(&protocol) - protocol.surface_x_m;
-                protocol.cutting_wander = cutting_wander(reach_m, &mut wander_rng);
+                protocol.cutting_wander = cutting_wander(reach_m, size, &mut wander_rng);
             }
             if rig.jitter {
                 let duration_s = motion::duration_s(&protocol.segments, 0.0);
