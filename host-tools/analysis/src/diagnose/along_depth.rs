@@ -14,10 +14,12 @@
 //!
 //! Free along depth in every trial, such a profile takes up part of any
 //! effect's residual along an insertion at steady speed (where depth and
-//! time go together), so it is tried only where no shared candidate is
-//! significant and a gap is left, and named only if it takes
-//! [`MOST_OF_GAP_ALONG_DEPTH`] of it (`super::diagnose`): an effect whose
-//! residual lies mostly where the tip cuts, as a function of depth there.
+//! time go together), so it is tried first only where no shared
+//! candidate is significant and a gap is left, or after the shared
+//! effects named on what they leave open, and named only if it takes
+//! [`MOST_OF_GAP_ALONG_DEPTH`] of what it is tried on
+//! (`super::diagnose`): an effect whose residual lies mostly where the
+//! tip cuts, as a function of depth there.
 //! Written here: a running mean over sorted depths is a few lines, no
 //! smoothing crate fits the leave-one-out form.
 
@@ -40,11 +42,16 @@ pub const HALF_WINDOWS_M: [f64; 6] = [0.000_05, 0.000_1, 0.000_2, 0.000_5, 0.001
 /// less what a stop misplaced by a sample of a jittered clock leaves.
 pub const MOST_OF_GAP_ALONG_DEPTH: f64 = 0.75;
 
-/// The baseline's held-out score with each trial's cutting samples
-/// predicted from its other cutting samples nearby in depth; the grid
-/// value is the window's half-width, m.
-pub fn cutting_along_depth(data: &[Prepared], baseline: &Scored) -> Scored {
-    let trials = cuts(data, baseline, &[]);
+/// `scored`'s held-out score (the nominal with `set`; the baseline with
+/// none) with each trial's cutting samples predicted from its other
+/// cutting samples nearby in depth; the grid value is the window's
+/// half-width, m.
+pub fn cutting_along_depth(
+    data: &[Prepared],
+    scored: &Scored,
+    set: &[(&Candidate, f64)],
+) -> Scored {
+    let trials = cuts(data, scored, set);
     let best = HALF_WINDOWS_M
         .iter()
         .copied()
@@ -55,7 +62,7 @@ pub fn cutting_along_depth(data: &[Prepared], baseline: &Scored) -> Scored {
         .unwrap_or(HALF_WINDOWS_M[0]);
     Scored {
         grid_value: best,
-        ..left_along_depth(data, &trials, best, baseline)
+        ..left_along_depth(data, &trials, best, scored)
     }
 }
 

@@ -58,7 +58,9 @@ pub use self::significance::{
     EXPLAINED_FACTOR, MIN_EFFECT_FLOORS, MIN_SHRINK, MIN_STEP_SHARE, MIN_T, MODEL_TOLERANCE,
     MOST_OF_GAP, NOTHING_LEFT_FACTOR,
 };
-use self::waterfall::{backfitted_first, best_backfitted, displaces, waterfall, Contender};
+use self::waterfall::{
+    backfitted_first, best_backfitted, displaces, waterfall, Contender, MOST_EFFECTS,
+};
 
 #[derive(Debug, clap::Args)]
 pub struct DiagnoseArgs {
@@ -901,21 +903,28 @@ pub fn diagnose_with_progress(
         }
         first => first,
     };
+    // The step that is cutting's profile along depth, and its half-window.
+    let mut along_at: Option<(usize, f64)> = None;
     let mut steps = match first {
-        Some(first) => waterfall(first, bar, nominal, progress),
+        Some(first) => {
+            let (mut steps, cur, fixed) = waterfall(first, bar, nominal, progress);
+            if let Some(profile) = profile_after(&steps, (&cur, &fixed), bar, progress) {
+                along_at = Some((steps.len(), profile.1.grid_value));
+                steps.push(profile);
+            }
+            steps
+        }
         None => Vec::new(),
     };
-    // The profile's half-window, where the first step is that profile.
-    let mut half_window_m = None;
     // A profile free in every trial is the last resort: it is not tried
     // over a shared law that holds on the withheld trials (its free
     // profile would take that effect's residual along the insertion,
     // where depth and time go together, and name cutting for it).
     if steps.is_empty() && baseline.rms() > EXPLAINED_FACTOR * noise {
         progress("trying a cutting force free along depth in each trial");
-        if let Some(along) = cutting_along_depth(data, &baseline, bar) {
+        if let Some(along) = cutting_along_depth((data, &baseline, &[]), bar) {
             let half_m = along.1.grid_value;
-            half_window_m = Some(half_m);
+            along_at = Some((0, half_m));
             let beside = beside_the_profile(data, &ranked, (&along.1, half_m), bar);
             steps = std::iter::once(along).chain(beside).collect();
         }
@@ -942,7 +951,9 @@ pub fn diagnose_with_progress(
         .map(|(k, (ci, s))| {
             let share = bar.share_of_gap(before_rms, s.rms());
             before_rms = s.rms();
-            let along = half_window_m.filter(|_| k == 0);
+            let along = along_at
+                .filter(|&(at, _)| at == k)
+                .map(|(_, half_m)| half_m);
             Step {
                 effect: CANDIDATES[*ci].effect,
                 heldout_rms_after_n: s.rms(),
@@ -1015,18 +1026,44 @@ fn verdict_effect(
     }
 }
 
-/// [`along_depth::cutting_along_depth`] as the one step of the verdict,
-/// if it is significant against the baseline and takes
-/// [`along_depth::MOST_OF_GAP_ALONG_DEPTH`] of the gap.
-fn cutting_along_depth(data: &[Prepared], baseline: &Scored, bar: Bar) -> Option<(usize, Scored)> {
-    let scored = along_depth::cutting_along_depth(data, baseline);
-    let (_, consistency) = improvement(baseline, &scored);
-    let taken = gap_taken(baseline.rms(), scored.rms(), bar.noise_n);
+/// Cutting's profile along depth after the waterfall's shared `steps`,
+/// on what they left (`cur`, with `fixed` still added as columns), where
+/// they leave the gap open and none of them is cutting: a tissue's layers
+/// beside a relaxation that, larger, was named first.
+fn profile_after(
+    steps: &[(usize, Scored)],
+    (cur, fixed): (&[Prepared], &[(&Candidate, f64)]),
+    bar: Bar,
+    progress: &mut dyn FnMut(&str),
+) -> Option<(usize, Scored)> {
+    let (_, left) = steps.last()?;
+    let cutting_named = steps
+        .iter()
+        .any(|(ci, _)| CANDIDATES[*ci].effect == "depth_dependent_cutting");
+    if cutting_named || left.rms() <= bar.explained_below_n || steps.len() >= MOST_EFFECTS {
+        return None;
+    }
+    progress("trying a cutting force free along depth beside the named effects");
+    cutting_along_depth((cur, left, fixed), bar).filter(|(_, with)| bar.a_cause(left, with))
+}
+
+/// [`along_depth::cutting_along_depth`] as a step of the verdict after
+/// `left` (the held-out score of the nominal with `set` on `data`: the
+/// baseline, or what the shared effects named before it left), if it is
+/// significant against it and takes
+/// [`along_depth::MOST_OF_GAP_ALONG_DEPTH`] of what was left.
+fn cutting_along_depth(
+    (data, left, set): (&[Prepared], &Scored, &[(&Candidate, f64)]),
+    bar: Bar,
+) -> Option<(usize, Scored)> {
+    let scored = along_depth::cutting_along_depth(data, left, set);
+    let (_, consistency) = improvement(left, &scored);
+    let taken = gap_taken(left.rms(), scored.rms(), bar.noise_n);
     let ci = CANDIDATES
         .iter()
         .position(|c| c.effect == "depth_dependent_cutting")?;
     let named = taken >= along_depth::MOST_OF_GAP_ALONG_DEPTH
-        && bar.worthy(baseline.rms(), scored.rms(), consistency);
+        && bar.worthy(left.rms(), scored.rms(), consistency);
     named.then_some((ci, scored))
 }
 
@@ -1093,13 +1130,13 @@ fn candidate_scores(
 /// verdict's effect(s).
 fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> Withheld {
     let v = &out.verdict;
-    let along_depth = v.effects.first().and_then(|e| e.half_window_m);
-    // The profile along depth is added on what the others leave.
-    let named: Vec<&str> = [v.effect, v.second]
-        .into_iter()
-        .enumerate()
-        .filter(|&(k, e)| e != "none" && !(k == 0 && along_depth.is_some()))
-        .map(|(_, e)| e)
+    let along_depth = v.effects.iter().find_map(|e| e.half_window_m);
+    // The profile along depth is added on what the shared ones leave.
+    let named: Vec<&str> = v
+        .effects
+        .iter()
+        .filter(|e| e.half_window_m.is_none())
+        .map(|e| e.effect)
         .collect();
     let set: Vec<(&Candidate, f64)> = named
         .iter()

@@ -14,13 +14,14 @@ use super::{score, Nominal, Scored};
 /// candidate of most shrink that is significant against what the effects
 /// before it left (with the nominal found again under them), until none
 /// is, a backfit undoes a step's gain, a step is not a cause of the gap
-/// ([`Bar::a_cause`]), or [`MOST_EFFECTS`] are named.
+/// ([`Bar::a_cause`]), or [`MOST_EFFECTS`] are named. With the steps,
+/// the data the last one left and the set still added as columns.
 pub(super) fn waterfall(
     (ci, (alone, cleaned, fixed)): (usize, Backfitted<'static>),
     bar: Bar,
     nominal: Nominal,
     progress: &mut dyn FnMut(&str),
-) -> Vec<(usize, Scored)> {
+) -> Waterfall {
     let mut steps = vec![(ci, alone)];
     let (mut cur, mut fixed) = (cleaned, fixed);
     while steps.len() < MOST_EFFECTS {
@@ -55,8 +56,16 @@ pub(super) fn waterfall(
         steps.push((cj, scored));
         (cur, fixed) = (cleaned, kept);
     }
-    steps
+    (steps, cur, fixed)
 }
+
+/// The waterfall's steps (each effect and what it left), the data the
+/// last one left and the set still added as columns.
+pub(super) type Waterfall = (
+    Vec<(usize, Scored)>,
+    Vec<Prepared>,
+    Vec<(&'static Candidate, f64)>,
+);
 
 /// A candidate significant for a step: which, its grid value, and the
 /// held-out RMS it leaves as columns.
@@ -166,7 +175,7 @@ pub(super) fn displaces(rival: &Scored, best: &Scored) -> bool {
 }
 
 /// Most effects the waterfall names.
-const MOST_EFFECTS: usize = 4;
+pub(super) const MOST_EFFECTS: usize = 4;
 
 /// Candidates tried with their backfit when none is significant without
 /// it: the three of most shrink.
