@@ -42,15 +42,21 @@ pub const HALF_WINDOWS_M: [f64; 6] = [0.000_05, 0.000_1, 0.000_2, 0.000_5, 0.001
 /// less what a stop misplaced by a sample of a jittered clock leaves.
 pub const MOST_OF_GAP_ALONG_DEPTH: f64 = 0.75;
 
-/// `scored`'s held-out score (the nominal with `set`; the baseline with
-/// none) with each trial's cutting samples predicted from its other
-/// cutting samples nearby in depth; the grid value is the window's
-/// half-width, m.
-pub fn cutting_along_depth(
+/// The held-out residuals of the nominal with `set` as `scored` fitted
+/// it (the baseline with none), scored as they are and with each trial's
+/// cutting samples predicted from its other cutting samples nearby in
+/// depth (the grid value the window's half-width, m). As they are, they
+/// are `scored` itself where `set` is empty; with candidates, each
+/// trial's residual refitted here (the shared terms of its fold, its own
+/// spread on it) need not be their score to the per cent (a candidate's
+/// columns made over its whole grid at once differ from the same made
+/// alone, and were seen to by 0.2–7 %), so the profile is judged against
+/// that.
+pub fn cutting_along_depth_from(
     data: &[Prepared],
     scored: &Scored,
     set: &[(&Candidate, f64)],
-) -> Scored {
+) -> (Scored, Scored) {
     let trials = cuts(data, scored, set);
     let best = HALF_WINDOWS_M
         .iter()
@@ -60,10 +66,31 @@ pub fn cutting_along_depth(
             sse(a).total_cmp(&sse(b))
         })
         .unwrap_or(HALF_WINDOWS_M[0]);
-    Scored {
+    let before = Scored {
+        per_trial: trials.iter().map(Cut::sse_as_is).collect(),
+        by_phase: by_phase(data, trials.iter().map(|c| &c.residual_n[..])),
+        ..scored.clone()
+    };
+    let after = Scored {
         grid_value: best,
         ..left_along_depth(data, &trials, best, scored)
+    };
+    (before, after)
+}
+
+/// Squared error and samples by phase of each trial's `residuals`.
+fn by_phase<'a>(
+    data: &[Prepared],
+    residuals: impl Iterator<Item = &'a [f64]>,
+) -> [(f64, usize); PHASES.len()] {
+    let mut by_phase = [(0.0, 0); PHASES.len()];
+    for (p, left) in data.iter().zip(residuals) {
+        for (i, e) in left.iter().enumerate() {
+            by_phase[p.phase[i]].0 += e * e;
+            by_phase[p.phase[i]].1 += 1;
+        }
     }
+    by_phase
 }
 
 /// `scored` (the held-out score of the nominal with `set`) with each
@@ -88,10 +115,14 @@ fn cuts(data: &[Prepared], scored: &Scored, set: &[(&Candidate, f64)]) -> Vec<Cu
         .enumerate()
         .map(|(j, p)| {
             let residual_n = heldout_residual(data, scored, j, set);
-            debug_assert!({
-                let sse: f64 = residual_n.iter().map(|r| r * r).sum();
-                (sse - scored.per_trial[j].0).abs() <= 1e-6 * sse.max(1e-12)
-            });
+            // The baseline's residual is the one it scored (with a
+            // candidate, see `cutting_along_depth_from`).
+            debug_assert!(
+                !set.is_empty() || {
+                    let sse: f64 = residual_n.iter().map(|r| r * r).sum();
+                    (sse - scored.per_trial[j].0).abs() <= 1e-6 * sse.max(1e-12)
+                }
+            );
             Cut::of(p, residual_n)
         })
         .collect()
@@ -99,19 +130,13 @@ fn cuts(data: &[Prepared], scored: &Scored, set: &[(&Candidate, f64)]) -> Vec<Cu
 
 /// `scored` with the trials' residuals those `trials` leave at `half_m`.
 fn left_along_depth(data: &[Prepared], trials: &[Cut], half_m: f64, scored: &Scored) -> Scored {
-    let mut per_trial = Vec::with_capacity(data.len());
-    let mut by_phase = [(0.0, 0); PHASES.len()];
-    for (p, cut) in data.iter().zip(trials) {
-        let left = cut.left(half_m);
-        for (i, e) in left.iter().enumerate() {
-            by_phase[p.phase[i]].0 += e * e;
-            by_phase[p.phase[i]].1 += 1;
-        }
-        per_trial.push((left.iter().map(|e| e * e).sum(), left.len()));
-    }
+    let left: Vec<Vec<f64>> = trials.iter().map(|c| c.left(half_m)).collect();
     Scored {
-        per_trial,
-        by_phase,
+        per_trial: left
+            .iter()
+            .map(|l| (l.iter().map(|e| e * e).sum(), l.len()))
+            .collect(),
+        by_phase: by_phase(data, left.iter().map(|l| &l[..])),
         ..scored.clone()
     }
 }
@@ -208,6 +233,12 @@ impl Cut {
             debug_assert!(lo <= k && k < hi);
         }
         left
+    }
+
+    /// Squared error and samples of the residual as it is.
+    fn sse_as_is(&self) -> (f64, usize) {
+        let sse = self.residual_n.iter().map(|e| e * e).sum();
+        (sse, self.residual_n.len())
     }
 
     /// Squared error of the cutting samples after [`Self::left`].

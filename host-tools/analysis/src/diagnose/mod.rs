@@ -1044,26 +1044,28 @@ fn profile_after(
         return None;
     }
     progress("trying a cutting force free along depth beside the named effects");
-    cutting_along_depth((cur, left, fixed), bar).filter(|(_, with)| bar.a_cause(left, with))
+    cutting_along_depth((cur, left, fixed), bar)
 }
 
-/// [`along_depth::cutting_along_depth`] as a step of the verdict after
-/// `left` (the held-out score of the nominal with `set` on `data`: the
-/// baseline, or what the shared effects named before it left), if it is
-/// significant against it and takes
-/// [`along_depth::MOST_OF_GAP_ALONG_DEPTH`] of what was left.
+/// [`along_depth::cutting_along_depth_from`] as a step of the verdict
+/// after `left` (the held-out score of the nominal with `set` on `data`:
+/// the baseline, or what the shared effects named before it left), if it
+/// is significant against the residual it smoothed, takes
+/// [`along_depth::MOST_OF_GAP_ALONG_DEPTH`] of it and, after shared
+/// effects, is a cause as a waterfall's step must be.
 fn cutting_along_depth(
     (data, left, set): (&[Prepared], &Scored, &[(&Candidate, f64)]),
     bar: Bar,
 ) -> Option<(usize, Scored)> {
-    let scored = along_depth::cutting_along_depth(data, left, set);
-    let (_, consistency) = improvement(left, &scored);
-    let taken = gap_taken(left.rms(), scored.rms(), bar.noise_n);
+    let (before, scored) = along_depth::cutting_along_depth_from(data, left, set);
+    let (_, consistency) = improvement(&before, &scored);
+    let taken = gap_taken(before.rms(), scored.rms(), bar.noise_n);
     let ci = CANDIDATES
         .iter()
         .position(|c| c.effect == "depth_dependent_cutting")?;
     let named = taken >= along_depth::MOST_OF_GAP_ALONG_DEPTH
-        && bar.worthy(left.rms(), scored.rms(), consistency);
+        && bar.worthy(before.rms(), scored.rms(), consistency)
+        && (set.is_empty() || bar.a_cause(&before, &scored));
     named.then_some((ci, scored))
 }
 
