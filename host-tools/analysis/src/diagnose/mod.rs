@@ -922,7 +922,7 @@ pub fn diagnose_with_progress(
     // where depth and time go together, and name cutting for it).
     if steps.is_empty() && baseline.rms() > EXPLAINED_FACTOR * noise {
         progress("trying a cutting force free along depth in each trial");
-        if let Some(along) = cutting_along_depth((data, &baseline, &[]), bar) {
+        if let Some(along) = cutting_along_depth((data, &baseline, &[]), bar, false) {
             let half_m = along.1.grid_value;
             along_at = Some((0, half_m));
             let beside = beside_the_profile(data, &ranked, (&along.1, half_m), bar);
@@ -1044,18 +1044,21 @@ fn profile_after(
         return None;
     }
     progress("trying a cutting force free along depth beside the named effects");
-    cutting_along_depth((cur, left, fixed), bar)
+    cutting_along_depth((cur, left, fixed), bar, true)
 }
 
 /// [`along_depth::cutting_along_depth_from`] as a step of the verdict
 /// after `left` (the held-out score of the nominal with `set` on `data`:
 /// the baseline, or what the shared effects named before it left), if it
 /// is significant against the residual it smoothed, takes
-/// [`along_depth::MOST_OF_GAP_ALONG_DEPTH`] of it and, after shared
-/// effects, is a cause as a waterfall's step must be.
+/// [`along_depth::MOST_OF_GAP_ALONG_DEPTH`] of it and, `after_steps`
+/// (shared effects named before it, whether their terms are columns in
+/// `set` or a motion already in `data`'s positions), is a cause as a
+/// waterfall's step must be.
 fn cutting_along_depth(
     (data, left, set): (&[Prepared], &Scored, &[(&Candidate, f64)]),
     bar: Bar,
+    after_steps: bool,
 ) -> Option<(usize, Scored)> {
     let (before, scored) = along_depth::cutting_along_depth_from(data, left, set);
     let (_, consistency) = improvement(&before, &scored);
@@ -1065,7 +1068,7 @@ fn cutting_along_depth(
         .position(|c| c.effect == "depth_dependent_cutting")?;
     let named = taken >= along_depth::MOST_OF_GAP_ALONG_DEPTH
         && bar.worthy(before.rms(), scored.rms(), consistency)
-        && (set.is_empty() || bar.a_cause(&before, &scored));
+        && (!after_steps || bar.a_cause(&before, &scored));
     named.then_some((ci, scored))
 }
 
