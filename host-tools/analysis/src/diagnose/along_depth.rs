@@ -66,11 +66,7 @@ pub fn cutting_along_depth_from(
             sse(a).total_cmp(&sse(b))
         })
         .unwrap_or(HALF_WINDOWS_M[0]);
-    let before = Scored {
-        per_trial: trials.iter().map(Cut::sse_as_is).collect(),
-        by_phase: by_phase(data, trials.iter().map(|c| &c.residual_n[..])),
-        ..scored.clone()
-    };
+    let before = rescored(data, trials.iter().map(|c| &c.residual_n[..]), scored);
     let after = Scored {
         grid_value: best,
         ..left_along_depth(data, &trials, best, scored)
@@ -78,25 +74,32 @@ pub fn cutting_along_depth_from(
     (before, after)
 }
 
-/// Squared error and samples by phase of each trial's `residuals`.
-fn by_phase<'a>(
+/// `scored` with its squared errors, by trial and by phase, those of
+/// each trial's `residuals`.
+fn rescored<'a>(
     data: &[Prepared],
     residuals: impl Iterator<Item = &'a [f64]>,
-) -> [(f64, usize); PHASES.len()] {
+    scored: &Scored,
+) -> Scored {
+    let mut per_trial = Vec::with_capacity(data.len());
     let mut by_phase = [(0.0, 0); PHASES.len()];
     for (p, left) in data.iter().zip(residuals) {
         for (i, e) in left.iter().enumerate() {
             by_phase[p.phase[i]].0 += e * e;
             by_phase[p.phase[i]].1 += 1;
         }
+        per_trial.push((left.iter().map(|e| e * e).sum(), left.len()));
     }
-    by_phase
+    Scored {
+        per_trial,
+        by_phase,
+        ..scored.clone()
+    }
 }
 
 /// `scored` (the held-out score of the nominal with `set`) with each
 /// trial's cutting samples then predicted from its other cutting samples
-/// within `half_m` in depth, as [`cutting_along_depth`] does the
-/// baseline's: an effect beside a profile free along depth, which
+/// within `half_m` in depth, as [`cutting_along_depth_from`] does: an effect beside a profile free along depth, which
 /// takes what lies along the insertion as a function of depth and
 /// leaves the effect what it adds elsewhere (a dwell's relaxation).
 pub fn beside_profile(
@@ -131,14 +134,7 @@ fn cuts(data: &[Prepared], scored: &Scored, set: &[(&Candidate, f64)]) -> Vec<Cu
 /// `scored` with the trials' residuals those `trials` leave at `half_m`.
 fn left_along_depth(data: &[Prepared], trials: &[Cut], half_m: f64, scored: &Scored) -> Scored {
     let left: Vec<Vec<f64>> = trials.iter().map(|c| c.left(half_m)).collect();
-    Scored {
-        per_trial: left
-            .iter()
-            .map(|l| (l.iter().map(|e| e * e).sum(), l.len()))
-            .collect(),
-        by_phase: by_phase(data, left.iter().map(|l| &l[..])),
-        ..scored.clone()
-    }
+    rescored(data, left.iter().map(|l| &l[..]), scored)
 }
 
 /// The profile along depth of one trial whose residual is `residual_n`:
@@ -233,12 +229,6 @@ impl Cut {
             debug_assert!(lo <= k && k < hi);
         }
         left
-    }
-
-    /// Squared error and samples of the residual as it is.
-    fn sse_as_is(&self) -> (f64, usize) {
-        let sse = self.residual_n.iter().map(|e| e * e).sum();
-        (sse, self.residual_n.len())
     }
 
     /// Squared error of the cutting samples after [`Self::left`].
