@@ -184,9 +184,11 @@ pub struct Rig {
     /// each trial's stiffness (so its puncture force), cutting force and
     /// friction are the tissue's times 1 + spread·z, its puncture depth
     /// times 1 + spread/2·z (independent normal z, factors within
-    /// 0.3–2). Real tissue is never the same twice: the paper's 19
-    /// insertions have a puncture force of 2.30 ± 0.83 N (36 %), cutting
-    /// 0.94 ± 0.36 N; phantoms 7–13 % on the peak, 9–20 % after it.
+    /// 0.3–2), and so are the tissue's effects ([`vary_effects`]). Real
+    /// tissue is never the same twice: the paper's 19 insertions have a
+    /// puncture force of 2.30 ± 0.83 N (36 %), cutting 0.94 ± 0.36 N;
+    /// phantoms 7–13 % on the peak, 9–20 % after it, their hold relaxing
+    /// 32–47 %.
     pub spread: f64,
 }
 
@@ -659,8 +661,8 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 0.0)]
     pub tare_n: f64,
     /// Trial-to-trial spread of the tissue (coefficient of variation of
-    /// its stiffness, cutting and friction; half of it on the puncture
-    /// depth), within 0..=0.5.
+    /// its stiffness, cutting and friction, and of its effects' sizes;
+    /// half of it on the puncture depth), within 0..=0.5.
     #[arg(long, default_value_t = 0.0)]
     pub spread: f64,
 }
@@ -685,6 +687,8 @@ struct TruthTrial<'a> {
     /// any more (a user's trial copied over it), and is never replaced.
     file_bytes: u64,
     replay_bytes: u64,
+    /// The effects as this trial met them ([`vary_effects`]).
+    effects: &'a [Effect],
     #[serde(flatten)]
     truth: &'a TrialTruth,
 }
@@ -908,6 +912,55 @@ pub fn vary(tissue: &TissueParams, spread: f64, rng: &mut impl Rng) -> TissuePar
     p
 }
 
+/// The tissue's effects as one insertion meets them, varied by `spread`
+/// ([`Rig::spread`]) as the tissue is: real skin's hold relaxes by 32–47 %
+/// from one insertion to the next, and a tissue's friction, cutting and
+/// motion differ as much as its stiffness. Relaxation's stiffness, the
+/// presliding length, cutting's growth with depth, the rate dependence's
+/// departure from linear and the motion's amplitude are each times
+/// 1 + spread·z (τ and the amplitude 1 + spread/2·z; factors within
+/// 0.3–2). The holder's mass and the load cell's drift are the rig's, the
+/// same in every trial; the walls are drawn per trial already.
+pub fn vary_effects(effects: &[Effect], spread: f64, rng: &mut impl Rng) -> Vec<Effect> {
+    if spread <= 0.0 {
+        return effects.to_vec();
+    }
+    let mut factor = |cv: f64| {
+        let z: f64 = rng.sample(rand_distr::StandardNormal);
+        (1.0 + cv * z).clamp(0.3, 2.0)
+    };
+    effects
+        .iter()
+        .map(|effect| match *effect {
+            Effect::Viscoelasticity { k_n_per_m, tau_s } => Effect::Viscoelasticity {
+                k_n_per_m: k_n_per_m * factor(spread),
+                tau_s: tau_s * factor(spread / 2.0),
+            },
+            Effect::RateDependentFriction {
+                exponent,
+                v_ref_mps,
+            } => Effect::RateDependentFriction {
+                exponent: 1.0 - (1.0 - exponent) * factor(spread),
+                v_ref_mps,
+            },
+            Effect::PreslidingHysteresis { x_c_m } => Effect::PreslidingHysteresis {
+                x_c_m: x_c_m * factor(spread),
+            },
+            Effect::DepthDependentCutting { g_per_m } => Effect::DepthDependentCutting {
+                g_per_m: g_per_m * factor(spread),
+            },
+            Effect::TissueMotion {
+                amplitude_m,
+                freq_hz,
+            } => Effect::TissueMotion {
+                amplitude_m: amplitude_m * factor(spread / 2.0),
+                freq_hz,
+            },
+            other => other,
+        })
+        .collect()
+}
+
 /// Run `needle simulate`.
 pub fn run(args: &SimulateArgs) -> Result<()> {
     check_rate_hz("--rate-hz", args.rate_hz)?;
@@ -1111,8 +1164,14 @@ impl Dataset<'_> {
                 seed.wrapping_mul(7_919).wrapping_add(k as u64) ^ 0x5EED_5EED,
             );
             let varied = vary(tissue, rig.spread, &mut spread_rng);
+            // The tissue's effects vary as the tissue does, from a stream
+            // of their own so that nothing else drawn moves with them.
+            let mut effects_rng = ChaCha8Rng::seed_from_u64(
+                seed.wrapping_mul(6_271).wrapping_add(k as u64) ^ 0xEFEC_7500,
+            );
+            let trial_effects = vary_effects(effects, rig.spread, &mut effects_rng);
             let (trial, truth) =
-                simulate_trial_in(&varied, &protocol, effects, form, sensor, &mut rng);
+                simulate_trial_in(&varied, &protocol, &trial_effects, form, sensor, &mut rng);
             let name = format!("trial_{k:03}");
             let csv = dir.join(format!("{name}.csv"));
             needle_io::trial::write(&csv, &trial)?;
@@ -1125,7 +1184,7 @@ impl Dataset<'_> {
             let bytes = [replay.len() as u64, std::fs::metadata(&csv)?.len()];
             std::fs::write(&path, replay)
                 .with_context(|| format!("{}: cannot write", path.display()))?;
-            truths.push((name, truth, bytes));
+            truths.push((name, truth, bytes, trial_effects));
         }
         let file = TruthFile {
             tissue: tissue_name,
@@ -1137,13 +1196,16 @@ impl Dataset<'_> {
             rig,
             trials: truths
                 .iter()
-                .map(|(name, truth, [replay_bytes, file_bytes])| TruthTrial {
-                    file: format!("{name}.csv"),
-                    replay: format!("{name}.replay"),
-                    file_bytes: *file_bytes,
-                    replay_bytes: *replay_bytes,
-                    truth,
-                })
+                .map(
+                    |(name, truth, [replay_bytes, file_bytes], effects)| TruthTrial {
+                        file: format!("{name}.csv"),
+                        replay: format!("{name}.replay"),
+                        file_bytes: *file_bytes,
+                        replay_bytes: *replay_bytes,
+                        effects,
+                        truth,
+                    },
+                )
                 .collect(),
         };
         let json = serde_json::to_string_pretty(&file)?;
@@ -1310,5 +1372,34 @@ mod tests {
         assert_eq!(all, run("sensor_drift,holder_inertia,viscoelasticity"));
         assert_eq!(all, run("holder_inertia,sensor_drift,viscoelasticity"));
         assert_ne!(all, run("viscoelasticity,sensor_drift"));
+    }
+
+    /// With spread, each trial meets its own relaxation (stiffness and τ)
+    /// and presliding length, around the tissue's, and the rig's holder
+    /// and drift as they are; without it, the effects as asked.
+    #[test]
+    fn each_trial_meets_its_own_effects_with_spread() {
+        use rand::SeedableRng;
+        let asked = effects::parse_list(
+            "viscoelasticity,presliding_hysteresis,holder_inertia,sensor_drift",
+        )
+        .unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        assert_eq!(vary_effects(&asked, 0.0, &mut rng), asked);
+        let trials: Vec<Vec<Effect>> = (0..20)
+            .map(|_| vary_effects(&asked, 0.2, &mut rng))
+            .collect();
+        let k_of = |e: &[Effect]| match e[0] {
+            Effect::Viscoelasticity { k_n_per_m, tau_s } => (k_n_per_m, tau_s),
+            _ => unreachable!("relaxation first, as asked"),
+        };
+        let ks: Vec<f64> = trials.iter().map(|t| k_of(t).0).collect();
+        let mean = ks.iter().sum::<f64>() / ks.len() as f64;
+        let sd = (ks.iter().map(|k| (k - mean).powi(2)).sum::<f64>() / ks.len() as f64).sqrt();
+        assert!((mean / 20.0 - 1.0).abs() < 0.15, "{mean}");
+        assert!((0.1..0.35).contains(&(sd / mean)), "{}", sd / mean);
+        assert!(trials.iter().any(|t| k_of(t).1 != 1.0));
+        assert!(trials.iter().any(|t| t[1] != asked[1]));
+        assert!(trials.iter().all(|t| t[2..] == asked[2..]), "the rig's own");
     }
 }
