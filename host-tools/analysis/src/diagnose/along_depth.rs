@@ -24,11 +24,10 @@
 //! smoothing crate fits the leave-one-out form.
 
 use super::candidates::Candidate;
-use super::crossval::{folds, PerTrial};
+use super::crossval::folds;
 use super::prepare::{Prepared, PHASES};
 use super::{
-    add_terms, columns, grams, non_negative_columns, total, Scored, Supports, NOMINAL_CORRECTIONS,
-    SPREAD,
+    add_terms, columns, grams, non_negative_columns, per_trial_fit, total, Scored, Supports,
 };
 
 /// Half-widths of the depth window tried, m: from a fraction of a
@@ -163,11 +162,7 @@ fn heldout_residual(
     let cols = vec![columns(&data[j], set)];
     let sums = total(&grams(trial, &cols, &Supports::all(trial, &cols))[0]);
     let signed = non_negative_columns(set.iter().map(|(c, _)| *c));
-    let per = PerTrial {
-        own: &SPREAD,
-        ridged: NOMINAL_CORRECTIONS.len(),
-        non_negative: &signed,
-    };
+    let per = per_trial_fit(&signed);
     let shared = &scored.fold_theta[j % folds(data.len())];
     let theta = per.for_trial(&sums, shared);
     let mut fitted = vec![0.0; data[j].trial.len()];

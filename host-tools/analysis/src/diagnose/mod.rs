@@ -559,6 +559,17 @@ fn non_negative_columns<'c>(set: impl IntoIterator<Item = &'c Candidate>) -> Vec
     signed
 }
 
+/// How every model is fitted across trials: the nominal's [`SPREAD`]
+/// each trial's own, its corrections ridged, the `signed` columns (from
+/// [`non_negative_columns`]) held ≥ 0.
+fn per_trial_fit(signed: &[usize]) -> PerTrial<'_> {
+    PerTrial {
+        own: &SPREAD,
+        ridged: NOMINAL_CORRECTIONS.len(),
+        non_negative: signed,
+    }
+}
+
 /// Held-out result of one model (a set of candidate terms).
 #[derive(Clone, Debug)]
 pub struct Scored {
@@ -628,11 +639,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     };
     let k = folds(data.len());
     let signed = non_negative_columns(fixed.iter().map(|(c, _)| *c).chain(cand));
-    let per = PerTrial {
-        own: &SPREAD,
-        ridged: NOMINAL_CORRECTIONS.len(),
-        non_negative: &signed,
-    };
+    let per = per_trial_fit(&signed);
     let totals: Vec<Vec<Gram>> = per_grid
         .iter()
         .map(|gs| gs.iter().map(total).collect())
@@ -1157,11 +1164,7 @@ fn withheld_overlay(data: &[Prepared], out: &Diagnosis) -> Withheld {
         .collect();
     let model = |set: &[(&Candidate, f64)]| {
         let signed = non_negative_columns(set.iter().map(|(c, _)| *c));
-        let per = PerTrial {
-            own: &SPREAD,
-            ridged: NOMINAL_CORRECTIONS.len(),
-            non_negative: &signed,
-        };
+        let per = per_trial_fit(&signed);
         let all_cols: Vec<_> = data.iter().map(|p| columns(p, set)).collect();
         let totals: Vec<Gram> = grams(data, &all_cols, &Supports::all(data, &all_cols))
             .iter()
