@@ -463,7 +463,9 @@ fn confusion_snapshot_on_insert_dwell_withdraw() {
 /// with the trials' own stiffness, cutting and friction scale refitted.
 const SNAPSHOT: [(&str, &str, &str); 9] = [
     ("none", "none", "none"),
-    ("viscoelasticity", "none", "viscoelasticity"),
+    // The standard branch (τ = 1 s) acts for about a second after each
+    // stop: it is sized where it acts, in the dwell it explains.
+    ("viscoelasticity", "viscoelasticity", "viscoelasticity"),
     ("rate_dependent_friction", "none", "none"),
     // On this protocol presliding acts where the needle starts back after
     // the dwell, which the withdrawal's stick (a tent of each trial's own

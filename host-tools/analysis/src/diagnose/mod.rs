@@ -876,15 +876,12 @@ pub fn diagnose_with_progress(
         baseline_n: baseline.rms(),
         explained_below_n,
     };
-    let significant = |shrink: f64, c: Consistency| {
-        bar.worthy(baseline.rms(), baseline.rms() * (1.0 - shrink), c)
-    };
     // Only the significant: a larger shrink that does not hold across the
     // withheld trials (another effect's residual beside it) does not hide
     // a smaller one that does.
     let contenders: Vec<Contender> = ranked
         .iter()
-        .filter(|r| significant(r.2, r.3))
+        .filter(|r| bar.worthy(&baseline, &r.1))
         .map(|(ci, s, ..)| Contender::of(*ci, s))
         .collect();
     let first = best_backfitted(data, (&[], baseline.rms()), &contenders, nominal, progress);
@@ -977,7 +974,7 @@ pub fn diagnose_with_progress(
     let verdict_shrink = after
         .as_ref()
         .map_or(0.0, |a| 1.0 - a.rms() / baseline.rms());
-    let candidates = candidate_scores(&ranked, &significant);
+    let candidates = candidate_scores(&ranked, &|s| bar.worthy(&baseline, s));
     Diagnosis {
         trials: data.len(),
         tare_n,
@@ -1068,13 +1065,12 @@ fn cutting_along_depth(
     after_steps: bool,
 ) -> Option<(usize, Scored)> {
     let (before, scored) = along_depth::cutting_along_depth_from(data, left, set);
-    let (_, consistency) = improvement(&before, &scored);
     let taken = gap_taken(before.rms(), scored.rms(), bar.noise_n);
     let ci = CANDIDATES
         .iter()
         .position(|c| c.effect == "depth_dependent_cutting")?;
     let named = taken >= along_depth::MOST_OF_GAP_ALONG_DEPTH
-        && bar.worthy(before.rms(), scored.rms(), consistency)
+        && bar.worthy(&before, &scored)
         && (!after_steps || bar.a_cause(&before, &scored));
     named.then_some((ci, scored))
 }
@@ -1100,17 +1096,14 @@ fn beside_the_profile(
             let set = [(&CANDIDATES[*ci], alone.grid_value)];
             (*ci, along_depth::beside_profile(data, alone, &set, half_m))
         })
-        .filter(|(_, with)| {
-            let (_, consistency) = improvement(along, with);
-            bar.worthy(along.rms(), with.rms(), consistency) && bar.a_cause(along, with)
-        })
+        .filter(|(_, with)| bar.worthy(along, with) && bar.a_cause(along, with))
         .min_by(|a, b| a.1.rms().total_cmp(&b.1.rms()))
 }
 
 /// Each candidate's report, in the order of its shrink alone.
 fn candidate_scores(
     ranked: &[(usize, Scored, f64, Consistency)],
-    significant: &dyn Fn(f64, Consistency) -> bool,
+    significant: &dyn Fn(&Scored) -> bool,
 ) -> Vec<CandidateScore> {
     ranked
         .iter()
@@ -1128,7 +1121,7 @@ fn candidate_scores(
                 heldout_rms_n: s.rms(),
                 shrink: *shrink,
                 paired_t: consistency.t,
-                significant: significant(*shrink, *consistency),
+                significant: significant(s),
                 by_phase: by_phase(s),
                 params,
             }

@@ -6,6 +6,7 @@
 //! ([`Bar::a_cause`], [`Bar::stand`]).
 
 use super::crossval::paired_t;
+use super::prepare::DWELL;
 use super::Scored;
 
 /// Least held-out shrink that can name an effect.
@@ -120,10 +121,29 @@ pub(super) struct Bar {
 }
 
 impl Bar {
-    pub(super) fn worthy(self, before: f64, after: f64, consistency: Consistency) -> bool {
-        let shrink = 1.0 - after / before.max(1e-12);
-        let taken = (before * before - after * after).max(0.0).sqrt();
-        shrink >= MIN_SHRINK && consistency.holds() && taken >= MIN_EFFECT_FLOORS * self.noise_n
+    /// Whether the step from `before` to `after` is significant. What it
+    /// takes is measured over the whole trials, or, where it explains
+    /// the phases it acts in ([`Bar::explains_where_it_acts`]) and those
+    /// are where the needle rests in the tissue, over them: a relaxing
+    /// branch of τ = 1 s after a 12 s insertion takes half a noise floor
+    /// in the dwell and a fifth of one over the whole trial, its size
+    /// diluted by the samples where it does not act. At rest the nominal
+    /// holds each trial's own level, so the trials' spread (the reason
+    /// for the bar) leaves no course in time there for a candidate to
+    /// take; in a phase of motion it does (a friction or cutting scale
+    /// per trial that the shared law misses along depth), and there the
+    /// whole trial is the measure.
+    pub(super) fn worthy(self, before: &Scored, after: &Scored) -> bool {
+        let (shrink, consistency) = improvement(before, after);
+        let least = MIN_EFFECT_FLOORS * self.noise_n;
+        let taken = (before.rms().powi(2) - after.rms().powi(2)).max(0.0).sqrt();
+        let taken_at_rest = || {
+            self.where_it_acts(before, after).is_some_and(|acts| {
+                acts.phases.iter().all(|&k| k == DWELL)
+                    && (acts.before_ms - acts.after_ms).max(0.0).sqrt() >= least
+            })
+        };
+        shrink >= MIN_SHRINK && consistency.holds() && (taken >= least || taken_at_rest())
     }
 
     /// The share of the gap (the baseline's mean square above the noise)
@@ -182,38 +202,67 @@ impl Bar {
     /// insertion is a small share of the whole gap, but it is the cause of
     /// the dwell and of the loading and withdrawal it also acts in, where
     /// a flexible candidate taking part of the first effect's structured
-    /// misfit leaves most of it in place. Each side's mean square is over
-    /// its own samples (a backfit places the phases again); a phase with
-    /// no excess before, or no samples on a side, has nothing explained.
+    /// misfit leaves most of it in place.
     fn explains_where_it_acts(self, left: &Scored, after: &Scored) -> bool {
+        self.where_it_acts(left, after).is_some()
+    }
+
+    /// The phases a step explains ([`Bar::explains_where_it_acts`]), if
+    /// it does, and the held-out mean squares before and after it there.
+    /// Each side's mean square is over its own samples (a backfit places
+    /// the phases again); a phase with no excess before, or no samples on
+    /// a side, has nothing explained.
+    fn where_it_acts(self, left: &Scored, after: &Scored) -> Option<Acts> {
         let noise_ms = self.noise_n * self.noise_n;
-        let excess = |(sse, n): (f64, usize)| (n > 0).then(|| sse / n as f64 - noise_ms);
-        let mut gains: Vec<(f64, bool)> = left
+        let ms = |(sse, n): (f64, usize)| (n > 0).then(|| sse / n as f64);
+        let mut gains: Vec<(f64, usize, bool)> = left
             .by_phase
             .iter()
             .zip(&after.by_phase)
-            .map(|(&before, &after)| {
-                let explained = match (excess(before), excess(after)) {
-                    (Some(b), Some(a)) => b > 0.0 && a.max(0.0) <= PHASE_LEFT * b,
+            .enumerate()
+            .map(|(k, (&before, &after))| {
+                let explained = match (ms(before), ms(after)) {
+                    (Some(b), Some(a)) => {
+                        let excess = b - noise_ms;
+                        excess > 0.0 && (a - noise_ms).max(0.0) <= PHASE_LEFT * excess
+                    }
                     _ => false,
                 };
-                ((before.0 - after.0).max(0.0), explained)
+                ((before.0 - after.0).max(0.0), k, explained)
             })
             .collect();
         let taken: f64 = gains.iter().map(|g| g.0).sum();
         gains.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let mut held = 0.0;
-        for (gain, explained) in gains {
+        let (mut held, mut b_sum, mut a_sum) = (0.0, (0.0, 0), (0.0, 0));
+        let mut phases = Vec::new();
+        for (gain, k, explained) in gains {
             if !explained {
-                return false;
+                return None;
             }
+            let (b, a) = (left.by_phase[k], after.by_phase[k]);
             held += gain;
+            phases.push(k);
+            b_sum = (b_sum.0 + b.0, b_sum.1 + b.1);
+            a_sum = (a_sum.0 + a.0, a_sum.1 + a.1);
             if held >= PHASE_TAKES * taken {
-                return taken > 0.0;
+                return (taken > 0.0).then(|| Acts {
+                    phases,
+                    before_ms: ms(b_sum).unwrap_or(0.0),
+                    after_ms: ms(a_sum).unwrap_or(0.0),
+                });
             }
         }
-        false
+        None
     }
+}
+
+/// Where a step acts ([`Bar::where_it_acts`]): the phases it explains
+/// (indices into `PHASES`) and the held-out mean squares before and after
+/// it over them (N²).
+struct Acts {
+    phases: Vec<usize>,
+    before_ms: f64,
+    after_ms: f64,
 }
 
 /// Least share of the gap (mean square above the noise) an effect after
@@ -394,6 +443,74 @@ mod tests {
         let most = scored_by_phase([n2, 0.0004 + n2, 0.0010 + n2]);
         assert!(bar.names_the_gap(&baseline, &[(0, spread), (1, most)]));
         assert!(!bar.names_the_gap(&baseline, &[]));
+    }
+
+    /// Ten trials alike, each with `counts` samples in the insertion,
+    /// the dwell and the withdrawal of mean squares `ms`.
+    fn trials_by_phase(ms: [f64; 3], counts: [usize; 3]) -> Scored {
+        let mut by_phase = [(0.0, 0); PHASES.len()];
+        let (mut sse, mut n) = (0.0, 0);
+        let at = |name| PHASES.iter().position(|p| *p == name).unwrap();
+        for (k, phase) in ["insertion", "dwell", "withdrawal"].into_iter().enumerate() {
+            by_phase[at(phase)] = (ms[k] * (10 * counts[k]) as f64, 10 * counts[k]);
+            (sse, n) = (sse + ms[k] * counts[k] as f64, n + counts[k]);
+        }
+        Scored {
+            per_trial: vec![(sse, n); 10],
+            by_phase,
+            ..scored_by_phase([0.0; 3])
+        }
+    }
+
+    /// A relaxation after the stop acts in the dwell, a sixth of each
+    /// trial: explaining it (0.8 noise floors taken there) is
+    /// significant, though over the whole trial it takes 0.3 floors;
+    /// the same gain spread over every phase is not, nor the same gain in
+    /// the insertion (where the trials' spread leaves a course along
+    /// depth), nor, on trials that are mostly dwell, a dwell explained of
+    /// 0.4 floors.
+    #[test]
+    fn an_effect_is_as_large_as_it_is_where_it_acts() {
+        let noise = 0.012_f64;
+        let n2 = noise * noise;
+        let bar = Bar {
+            noise_n: noise,
+            baseline_n: 0.0,
+            explained_below_n: 1.5 * noise,
+        };
+        let counts = [1250, 500, 1250];
+        let whole = |s: &Scored| s.rms();
+        let before = trials_by_phase([n2, n2 + 0.8e-4, n2], counts);
+        let after = trials_by_phase([n2, n2 + 0.05e-4, n2], counts);
+        let taken = (whole(&before).powi(2) - whole(&after).powi(2)).sqrt();
+        assert!(taken < 0.35 * noise, "{taken}");
+        assert!(bar.worthy(&before, &after));
+        let before_even = trials_by_phase([n2 + 0.2e-4 / 1.5; 3], counts);
+        let after_even = trials_by_phase([n2 + 0.0125e-4 / 1.5; 3], counts);
+        let taken_even = (whole(&before_even).powi(2) - whole(&after_even).powi(2)).sqrt();
+        assert!(
+            (taken_even - taken).abs() < 0.1 * taken,
+            "{taken_even} {taken}"
+        );
+        assert!(!bar.worthy(&before_even, &after_even));
+        let in_motion = |ms: [f64; 3]| trials_by_phase([ms[1], ms[0], ms[2]], [500, 1250, 1250]);
+        let (moving, moving_after) = (
+            in_motion([n2, n2 + 0.8e-4, n2]),
+            in_motion([n2, n2 + 0.05e-4, n2]),
+        );
+        assert!(
+            (moving.rms() - before.rms()).abs() < 1e-9
+                && (moving_after.rms() - after.rms()).abs() < 1e-9
+        );
+        assert!(bar.explains_where_it_acts(&moving, &moving_after));
+        assert!(!bar.worthy(&moving, &moving_after));
+        let mostly_dwell = [500, 1500, 500];
+        let small = trials_by_phase([n2, n2 + 0.27e-4, n2], mostly_dwell);
+        let small_after = trials_by_phase([n2, n2 + 0.02e-4, n2], mostly_dwell);
+        let (shrink, consistency) = improvement(&small, &small_after);
+        assert!(shrink >= MIN_SHRINK && consistency.holds(), "{shrink}");
+        assert!(bar.explains_where_it_acts(&small, &small_after));
+        assert!(!bar.worthy(&small, &small_after));
     }
 
     /// Gains on every withheld trial hold however unlike they are;

@@ -36,7 +36,7 @@ pub(super) fn waterfall(
             .enumerate()
             .filter(|(cj, _)| steps.iter().all(|(ci, _)| ci != cj))
             .map(|(cj, c)| (cj, score(&cur, &fixed, Some(c))))
-            .filter(|(_, with)| bar.worthy(left.rms(), with.rms(), improvement(left, with).1))
+            .filter(|(_, with)| bar.worthy(left, with))
             .collect();
         next.sort_by(|a, b| a.1.rms().total_cmp(&b.1.rms()));
         let contenders: Vec<Contender> = next
