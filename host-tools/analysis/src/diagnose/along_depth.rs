@@ -25,7 +25,7 @@
 
 use super::candidates::Candidate;
 use super::crossval::folds;
-use super::prepare::{Prepared, PHASES};
+use super::prepare::{Prepared, DWELL, PHASES};
 use super::{
     add_terms, columns, grams, non_negative_columns, per_trial_fit, total, Scored, Supports,
 };
@@ -81,17 +81,24 @@ fn rescored<'a>(
     scored: &Scored,
 ) -> Scored {
     let mut per_trial = Vec::with_capacity(data.len());
+    let mut per_trial_dwell = Vec::with_capacity(data.len());
     let mut by_phase = [(0.0, 0); PHASES.len()];
     for (p, left) in data.iter().zip(residuals) {
+        let mut dwell = (0.0, 0);
         for (i, e) in left.iter().enumerate() {
             by_phase[p.phase[i]].0 += e * e;
             by_phase[p.phase[i]].1 += 1;
+            if p.phase[i] == DWELL {
+                dwell = (dwell.0 + e * e, dwell.1 + 1);
+            }
         }
         per_trial.push((left.iter().map(|e| e * e).sum(), left.len()));
+        per_trial_dwell.push(dwell);
     }
     Scored {
         per_trial,
         by_phase,
+        per_trial_dwell,
         ..scored.clone()
     }
 }

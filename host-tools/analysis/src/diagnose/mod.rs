@@ -577,6 +577,8 @@ pub struct Scored {
     pub per_trial: Vec<(f64, usize)>,
     /// Per-phase held-out squared error and sample count.
     pub by_phase: [(f64, usize); PHASES.len()],
+    /// Per-trial held-out squared error and sample count in the dwell.
+    pub per_trial_dwell: Vec<(f64, usize)>,
     /// Grid value chosen on all data, and the linear parameters there.
     pub grid_value: f64,
     pub theta: Vec<f64>,
@@ -664,6 +666,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
             .unwrap_or((0, Vec::new()))
     };
     let mut per_trial = vec![(0.0, 0); data.len()];
+    let mut per_trial_dwell = vec![(0.0, 0); data.len()];
     let mut by_phase = [(0.0, 0); PHASES.len()];
     let mut fold_theta = Vec::with_capacity(k);
     for fold in 0..k {
@@ -682,6 +685,9 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
                 per_trial[j].1 += gp.count;
                 by_phase[ph].0 += e;
                 by_phase[ph].1 += gp.count;
+                if ph == prepare::DWELL {
+                    per_trial_dwell[j] = (e, gp.count);
+                }
             }
         }
         fold_theta.push(shared);
@@ -704,6 +710,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
     Scored {
         per_trial,
         by_phase,
+        per_trial_dwell,
         grid_value: grid[gi],
         theta,
         fold_theta,

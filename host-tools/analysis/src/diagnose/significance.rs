@@ -38,6 +38,23 @@ pub(super) fn improvement(base: &Scored, with: &Scored) -> (f64, Consistency) {
     (shrink, consistency)
 }
 
+/// How consistently the per-trial improvements in the dwell hold, as
+/// [`improvement`]'s, over the trials with a dwell (log ratios of its
+/// mean squares: a backfit may place a trial's stop again).
+fn rest_consistency(before: &Scored, after: &Scored) -> Consistency {
+    let ms = |(sse, n): (f64, usize)| (n > 0).then(|| sse / n as f64);
+    let d: Vec<f64> = before
+        .per_trial_dwell
+        .iter()
+        .zip(&after.per_trial_dwell)
+        .filter_map(|(&b, &w)| Some((ms(b)?.max(1e-300) / ms(w)?.max(1e-300)).ln()))
+        .collect();
+    Consistency {
+        t: paired_t(&d),
+        every_trial: d.len() >= SIGN_TRIALS && d.iter().all(|&g| g > 0.0),
+    }
+}
+
 /// How consistently a model gains on the withheld trials.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Consistency {
@@ -127,7 +144,11 @@ impl Bar {
     /// are where the needle rests in the tissue, over them: a relaxing
     /// branch of τ = 1 s after a 12 s insertion takes half a noise floor
     /// in the dwell and a fifth of one over the whole trial, its size
-    /// diluted by the samples where it does not act. At rest the nominal
+    /// diluted by the samples where it does not act. There its gains are
+    /// consistent where they are so on the trials' dwells
+    /// ([`rest_consistency`]): a trial driven at 1 mm/s holds a third of
+    /// the branch of one at 3 mm/s and gains little over its whole
+    /// length, but it gains where the branch relaxes. At rest the nominal
     /// holds each trial's own level, so the trials' spread (the reason
     /// for the bar) leaves no course in time there for a candidate to
     /// take; in a phase of motion it does (a friction or cutting scale
@@ -137,13 +158,14 @@ impl Bar {
         let (shrink, consistency) = improvement(before, after);
         let least = MIN_EFFECT_FLOORS * self.noise_n;
         let taken = (before.rms().powi(2) - after.rms().powi(2)).max(0.0).sqrt();
-        let taken_at_rest = || {
+        let at_rest = || {
             self.where_it_acts(before, after).is_some_and(|acts| {
                 acts.phases.iter().all(|&k| k == DWELL)
                     && (acts.before_ms - acts.after_ms).max(0.0).sqrt() >= least
+                    && (consistency.holds() || rest_consistency(before, after).holds())
             })
         };
-        shrink >= MIN_SHRINK && consistency.holds() && (taken >= least || taken_at_rest())
+        shrink >= MIN_SHRINK && ((consistency.holds() && taken >= least) || at_rest())
     }
 
     /// The share of the gap (the baseline's mean square above the noise)
@@ -309,6 +331,7 @@ mod tests {
         Scored {
             per_trial: vec![(ms.iter().sum::<f64>() * 1000.0, 3000)],
             by_phase,
+            per_trial_dwell: Vec::new(),
             grid_value: 0.0,
             theta: Vec::new(),
             fold_theta: Vec::new(),
@@ -448,16 +471,30 @@ mod tests {
     /// Ten trials alike, each with `counts` samples in the insertion,
     /// the dwell and the withdrawal of mean squares `ms`.
     fn trials_by_phase(ms: [f64; 3], counts: [usize; 3]) -> Scored {
+        trials(&[ms; 10], counts)
+    }
+
+    /// Trials each with `counts` samples in the insertion, the dwell and
+    /// the withdrawal, of mean squares `ms` (one row a trial).
+    fn trials(ms: &[[f64; 3]], counts: [usize; 3]) -> Scored {
         let mut by_phase = [(0.0, 0); PHASES.len()];
-        let (mut sse, mut n) = (0.0, 0);
         let at = |name| PHASES.iter().position(|p| *p == name).unwrap();
-        for (k, phase) in ["insertion", "dwell", "withdrawal"].into_iter().enumerate() {
-            by_phase[at(phase)] = (ms[k] * (10 * counts[k]) as f64, 10 * counts[k]);
-            (sse, n) = (sse + ms[k] * counts[k] as f64, n + counts[k]);
+        let phases = ["insertion", "dwell", "withdrawal"].map(at);
+        let mut per_trial = Vec::new();
+        let mut per_trial_dwell = Vec::new();
+        for row in ms {
+            let sse: Vec<f64> = (0..3).map(|k| row[k] * counts[k] as f64).collect();
+            for k in 0..3 {
+                by_phase[phases[k]].0 += sse[k];
+                by_phase[phases[k]].1 += counts[k];
+            }
+            per_trial.push((sse.iter().sum(), counts.iter().sum()));
+            per_trial_dwell.push((sse[1], counts[1]));
         }
         Scored {
-            per_trial: vec![(sse, n); 10],
+            per_trial,
             by_phase,
+            per_trial_dwell,
             ..scored_by_phase([0.0; 3])
         }
     }
@@ -511,6 +548,53 @@ mod tests {
         assert!(shrink >= MIN_SHRINK && consistency.holds(), "{shrink}");
         assert!(bar.explains_where_it_acts(&small, &small_after));
         assert!(!bar.worthy(&small, &small_after));
+    }
+
+    /// Relaxation on trials driven at 1, 2 and 3 mm/s: the slow trials'
+    /// branch is a third of the fast ones', and the insertion's samples
+    /// around it make their gains over the whole trial unlike (three of
+    /// them lose a little there), but every trial gains in the dwell: the
+    /// step is significant. Where their dwells lose as well, it is not.
+    #[test]
+    fn a_gain_at_rest_is_consistent_where_every_dwell_gains() {
+        let noise = 0.012_f64;
+        let n2 = noise * noise;
+        let bar = Bar {
+            noise_n: noise,
+            baseline_n: 0.0,
+            explained_below_n: 1.5 * noise,
+        };
+        let counts = [1250, 500, 1250];
+        let dwell_excess = [
+            0.3e-4, 0.3e-4, 0.3e-4, 0.6e-4, 0.6e-4, 0.6e-4, 0.6e-4, 3.0e-4, 3.0e-4, 3.0e-4,
+        ];
+        let rows = |left: f64, insertion: &dyn Fn(usize) -> f64| -> Vec<[f64; 3]> {
+            dwell_excess
+                .iter()
+                .enumerate()
+                .map(|(j, e)| [n2 + insertion(j), n2 + left * e, n2])
+                .collect()
+        };
+        let before = trials(&rows(1.0, &|_| 0.0), counts);
+        // The three slowest trials' insertions lose 0.15e-4 beside a
+        // dwell gain of 0.285e-4 each: over the whole trial they lose.
+        let worse_insertion = |j: usize| if j < 3 { 0.15e-4 } else { 0.0 };
+        let after = trials(&rows(0.05, &worse_insertion), counts);
+        let (shrink, consistency) = improvement(&before, &after);
+        assert!(
+            shrink >= MIN_SHRINK && !consistency.holds(),
+            "{shrink} {consistency:?}"
+        );
+        assert!(rest_consistency(&before, &after).holds());
+        assert!(bar.worthy(&before, &after));
+        // The three slow trials' dwells lose too: neither consistent.
+        let mut lost = rows(0.05, &worse_insertion);
+        for row in &mut lost[..3] {
+            row[1] = n2 + 0.6e-4;
+        }
+        let lost = trials(&lost, counts);
+        assert!(!rest_consistency(&before, &lost).holds());
+        assert!(!bar.worthy(&before, &lost));
     }
 
     /// Gains on every withheld trial hold however unlike they are;

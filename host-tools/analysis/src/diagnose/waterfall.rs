@@ -225,6 +225,7 @@ mod tests {
         Scored {
             per_trial: ms.iter().map(|m| (m * 1000.0, 1000)).collect(),
             by_phase: [(0.0, 0); PHASES.len()],
+            per_trial_dwell: Vec::new(),
             grid_value: 0.0,
             theta: Vec::new(),
             fold_theta: Vec::new(),
