@@ -86,6 +86,15 @@ fn grid_as_named(name: &'static str, g: f64) -> Vec<(&'static str, f64)> {
     }
 }
 
+/// Where depth-dependent cutting is in [`CANDIDATES`]: its profile free
+/// along depth in each trial is the diagnosis's last resort, tried apart
+/// from the shared candidates.
+pub const CUTTING: usize = 4;
+const _: () = assert!(matches!(
+    CANDIDATES[CUTTING].effect.as_bytes(),
+    b"depth_dependent_cutting"
+));
+
 /// All candidates, in the order of the book, *Names*.
 pub const CANDIDATES: [Candidate; 8] = [
     Candidate {

@@ -45,7 +45,7 @@ use anyhow::{bail, Context, Result};
 use needle_holder::model::params::TissueParams;
 use needle_io::trial::{Skipped, Unreadable};
 
-use self::candidates::{Candidate, CANDIDATES};
+use self::candidates::{Candidate, CANDIDATES, CUTTING};
 use self::crossval::{folds, Gram, PerTrial};
 use self::figure::Withheld;
 use self::prepare::{prepare, Prepared, LOADING, PHASES, WITHDRAWAL};
@@ -1048,9 +1048,7 @@ fn profile_after(
     progress: &mut dyn FnMut(&str),
 ) -> Option<(usize, Scored)> {
     let (_, left) = steps.last()?;
-    let cutting_named = steps
-        .iter()
-        .any(|(ci, _)| CANDIDATES[*ci].effect == "depth_dependent_cutting");
+    let cutting_named = steps.iter().any(|(ci, _)| *ci == CUTTING);
     if cutting_named || left.rms() <= bar.explained_below_n || steps.len() >= MOST_EFFECTS {
         return None;
     }
@@ -1073,13 +1071,10 @@ fn cutting_along_depth(
 ) -> Option<(usize, Scored)> {
     let (before, scored) = along_depth::cutting_along_depth_from(data, left, set);
     let taken = gap_taken(before.rms(), scored.rms(), bar.noise_n);
-    let ci = CANDIDATES
-        .iter()
-        .position(|c| c.effect == "depth_dependent_cutting")?;
     let named = taken >= along_depth::MOST_OF_GAP_ALONG_DEPTH
         && bar.worthy(&before, &scored)
         && (!after_steps || bar.a_cause(&before, &scored));
-    named.then_some((ci, scored))
+    named.then_some((CUTTING, scored))
 }
 
 /// Beside a cutting profile free along depth (`along`, at its
@@ -1098,7 +1093,7 @@ fn beside_the_profile(
 ) -> Option<(usize, Scored)> {
     ranked
         .iter()
-        .filter(|(ci, ..)| CANDIDATES[*ci].effect != "depth_dependent_cutting")
+        .filter(|(ci, ..)| *ci != CUTTING)
         .map(|(ci, alone, ..)| {
             let set = [(&CANDIDATES[*ci], alone.grid_value)];
             (*ci, along_depth::beside_profile(data, alone, &set, half_m))
