@@ -139,12 +139,12 @@ pub(super) struct Bar {
 
 impl Bar {
     /// Whether the step from `before` to `after` is significant. What it
-    /// takes is measured over the whole trials, or, where it explains
-    /// the phases it acts in ([`Bar::explains_where_it_acts`]) and those
-    /// are where the needle rests in the tissue, over them: a relaxing
-    /// branch of τ = 1 s after a 12 s insertion takes half a noise floor
-    /// in the dwell and a fifth of one over the whole trial, its size
-    /// diluted by the samples where it does not act. There its gains are
+    /// takes is measured over the whole trials, or, where it acts in the
+    /// dwell with the needle at rest in the tissue
+    /// ([`Bar::taken_at_rest`]), over the dwell: a relaxing branch of
+    /// τ = 1 s after a 12 s insertion takes half a noise floor in the
+    /// dwell and a fifth of one over the whole trial, its size diluted by
+    /// the samples where it does not act. There its gains are
     /// consistent where they are so on the trials' dwells
     /// ([`rest_consistency`]): a trial driven at 1 mm/s holds a third of
     /// the branch of one at 3 mm/s and gains little over its whole
