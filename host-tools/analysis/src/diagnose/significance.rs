@@ -31,28 +31,28 @@ pub(super) fn improvement(base: &Scored, with: &Scored) -> (f64, Consistency) {
         .zip(&with.per_trial)
         .map(|(b, w)| (b.0.max(1e-300) / w.0.max(1e-300)).ln())
         .collect();
-    let consistency = Consistency {
-        t: paired_t(&d),
-        every_trial: d.len() >= SIGN_TRIALS && d.iter().all(|&g| g > 0.0),
-    };
-    (shrink, consistency)
+    (shrink, Consistency::of(&d))
 }
 
 /// How consistently the per-trial improvements in the dwell hold, as
 /// [`improvement`]'s, over the trials with a dwell (log ratios of its
 /// mean squares: a backfit may place a trial's stop again).
 fn rest_consistency(before: &Scored, after: &Scored) -> Consistency {
-    let ms = |(sse, n): (f64, usize)| (n > 0).then(|| sse / n as f64);
     let d: Vec<f64> = before
         .per_trial_dwell
         .iter()
         .zip(&after.per_trial_dwell)
-        .filter_map(|(&b, &w)| Some((ms(b)?.max(1e-300) / ms(w)?.max(1e-300)).ln()))
+        .filter_map(|(&b, &w)| {
+            Some((mean_square(b)?.max(1e-300) / mean_square(w)?.max(1e-300)).ln())
+        })
         .collect();
-    Consistency {
-        t: paired_t(&d),
-        every_trial: d.len() >= SIGN_TRIALS && d.iter().all(|&g| g > 0.0),
-    }
+    Consistency::of(&d)
+}
+
+/// The mean square of a squared error over its sample count (N²), if
+/// there are samples.
+fn mean_square((sse, n): (f64, usize)) -> Option<f64> {
+    (n > 0).then(|| sse / n as f64)
 }
 
 /// How consistently a model gains on the withheld trials.
@@ -65,6 +65,14 @@ pub(super) struct Consistency {
 }
 
 impl Consistency {
+    /// Of the per-trial log ratios `d` (positive where a trial gains).
+    fn of(d: &[f64]) -> Self {
+        Self {
+            t: paired_t(d),
+            every_trial: d.len() >= SIGN_TRIALS && d.iter().all(|&g| g > 0.0),
+        }
+    }
+
     /// A paired t of at least [`MIN_T`], or a gain on every withheld
     /// trial. The t asks the gains to be alike as well as positive; an
     /// effect whose size differs from trial to trial by its physics (a
@@ -245,9 +253,10 @@ impl Bar {
         let gains = phase_gains(left, after);
         let taken: f64 = gains.iter().sum();
         let (b, a) = (left.by_phase[DWELL], after.by_phase[DWELL]);
-        let ms = |(sse, n): (f64, usize)| sse / n.max(1) as f64;
-        (taken > 0.0 && gains[DWELL] >= PHASE_TAKES * taken && self.explains_phase(b, a))
-            .then(|| (ms(b) - ms(a)).max(0.0).sqrt())
+        if taken <= 0.0 || gains[DWELL] < PHASE_TAKES * taken || !self.explains_phase(b, a) {
+            return None;
+        }
+        Some((mean_square(b)? - mean_square(a)?).max(0.0).sqrt())
     }
 
     /// Whether a step from `before` to `after` (held-out squared error and
@@ -259,8 +268,7 @@ impl Bar {
     /// explained.
     fn explains_phase(self, before: (f64, usize), after: (f64, usize)) -> bool {
         let noise_ms = self.noise_n * self.noise_n;
-        let ms = |(sse, n): (f64, usize)| (n > 0).then(|| sse / n as f64);
-        let (Some(b), Some(a)) = (ms(before), ms(after)) else {
+        let (Some(b), Some(a)) = (mean_square(before), mean_square(after)) else {
             return false;
         };
         let excess = b - noise_ms;
@@ -498,6 +506,16 @@ mod tests {
         }
     }
 
+    /// The bar on a load cell of noise `noise_n`, no gap before, what is
+    /// left counting as explained within 1.5 floors.
+    fn bar_at(noise_n: f64) -> Bar {
+        Bar {
+            noise_n,
+            baseline_n: 0.0,
+            explained_below_n: EXPLAINED_FACTOR * noise_n,
+        }
+    }
+
     /// A relaxation after the stop acts in the dwell, a sixth of each
     /// trial: explaining it (0.8 noise floors taken there) is
     /// significant, though over the whole trial it takes 0.3 floors;
@@ -509,11 +527,7 @@ mod tests {
     fn an_effect_is_as_large_as_it_is_where_it_acts() {
         let noise = 0.012_f64;
         let n2 = noise * noise;
-        let bar = Bar {
-            noise_n: noise,
-            baseline_n: 0.0,
-            explained_below_n: 1.5 * noise,
-        };
+        let bar = bar_at(noise);
         let counts = [1250, 500, 1250];
         let whole = |s: &Scored| s.rms();
         let before = trials_by_phase([n2, n2 + 0.8e-4, n2], counts);
@@ -558,11 +572,7 @@ mod tests {
     fn a_gain_at_rest_is_consistent_where_every_dwell_gains() {
         let noise = 0.012_f64;
         let n2 = noise * noise;
-        let bar = Bar {
-            noise_n: noise,
-            baseline_n: 0.0,
-            explained_below_n: 1.5 * noise,
-        };
+        let bar = bar_at(noise);
         let counts = [1250, 500, 1250];
         let dwell_excess = [
             0.3e-4, 0.3e-4, 0.3e-4, 0.6e-4, 0.6e-4, 0.6e-4, 0.6e-4, 3.0e-4, 3.0e-4, 3.0e-4,

@@ -864,15 +864,20 @@ pub fn check_noise_n(flag: &str, noise_n: f64) -> Result<()> {
 /// two standard deviations out.
 pub const MOST_CUTTING_SHARE: f64 = 0.6;
 
+/// One insertion's factor on a quantity of coefficient of variation `cv`:
+/// 1 + cv·z for a standard normal z, within 0.3–2 (no tissue is a third
+/// as stiff or twice as stiff as itself from one insertion to the next).
+fn spread_factor(cv: f64, rng: &mut impl Rng) -> f64 {
+    let z: f64 = rng.sample(rand_distr::StandardNormal);
+    (1.0 + cv * z).clamp(0.3, 2.0)
+}
+
 /// `tissue` as one insertion meets it, varied by `spread` ([`Rig::spread`]).
 pub fn vary(tissue: &TissueParams, spread: f64, rng: &mut impl Rng) -> TissueParams {
     if spread <= 0.0 {
         return *tissue;
     }
-    let mut factor = |cv: f64| {
-        let z: f64 = rng.sample(rand_distr::StandardNormal);
-        (1.0 + cv * z).clamp(0.3, 2.0)
-    };
+    let mut factor = |cv: f64| spread_factor(cv, rng);
     let (stiff, depth, cut, fric) = (
         factor(spread),
         factor(spread / 2.0),
@@ -925,10 +930,7 @@ pub fn vary_effects(effects: &[Effect], spread: f64, rng: &mut impl Rng) -> Vec<
     if spread <= 0.0 {
         return effects.to_vec();
     }
-    let mut factor = |cv: f64| {
-        let z: f64 = rng.sample(rand_distr::StandardNormal);
-        (1.0 + cv * z).clamp(0.3, 2.0)
-    };
+    let mut factor = |cv: f64| spread_factor(cv, rng);
     effects
         .iter()
         .map(|effect| match *effect {
