@@ -90,7 +90,7 @@ fn step_to(rate_hz: f64, most_hz: f64) -> usize {
 }
 
 /// Every `step`-th value, from the first.
-pub fn every(values: &[f64], step: usize) -> Vec<f64> {
+pub fn every<T: Copy>(values: &[T], step: usize) -> Vec<T> {
     values.iter().step_by(step.max(1)).copied().collect()
 }
 

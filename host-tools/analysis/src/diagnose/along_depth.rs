@@ -86,9 +86,10 @@ fn rescored<'a>(
     for (p, left) in data.iter().zip(residuals) {
         let mut dwell = (0.0, 0);
         for (i, e) in left.iter().enumerate() {
-            by_phase[p.phase[i]].0 += e * e;
-            by_phase[p.phase[i]].1 += 1;
-            if p.phase[i] == DWELL {
+            let ph = p.protocol_phase[i];
+            by_phase[ph].0 += e * e;
+            by_phase[ph].1 += 1;
+            if ph == DWELL {
                 dwell = (dwell.0 + e * e, dwell.1 + 1);
             }
         }

@@ -113,7 +113,11 @@ fn nominal_again(
         refits
             .into_iter()
             .zip(data)
-            .map(|(r, p)| prepare(p.file.clone(), r.kept, r.geometry, &params, r.velocity))
+            .map(|(r, p)| {
+                let mut again = prepare(p.file.clone(), r.kept, r.geometry, &params, r.velocity);
+                again.keep_protocol_phase(&p.protocol_phase);
+                again
+            })
             .collect(),
     ))
 }

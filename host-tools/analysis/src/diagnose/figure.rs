@@ -144,10 +144,10 @@ pub fn draw(path: &Path, p: &Prepared, withheld: &Withheld) -> Result<()> {
     // wide enough for the name.
     let mut start = 0;
     for i in 1..=t.len() {
-        if i < t.len() && p.phase[i] == p.phase[start] {
+        if i < t.len() && p.protocol_phase[i] == p.protocol_phase[start] {
             continue;
         }
-        let ph = p.phase[start];
+        let ph = p.protocol_phase[start];
         let (from, to) = (t[start], t[i - 1]);
         let band = Rectangle::new([(from, y.start), (to, y.end)], BANDS[ph].filled());
         chart.draw_series([band]).map_err(err)?;

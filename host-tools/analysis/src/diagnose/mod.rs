@@ -113,7 +113,7 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
                 p.trial.f_n[i],
                 p.nominal_n[i],
                 p.residual_n[i],
-                PHASES[p.phase[i]],
+                PHASES[p.protocol_phase[i]],
                 p.fitted_n[i],
                 p.trial.f_n[i] - p.fitted_n[i],
             );
@@ -420,7 +420,7 @@ struct Supports {
 
 impl Supports {
     fn of(p: &Prepared, cols: &[Vec<f64>]) -> Self {
-        let runs = phase_runs(&p.phase)
+        let runs = phase_runs(&p.protocol_phase)
             .into_iter()
             .map(|(ph, r)| {
                 let within = cols.iter().map(|c| support(c, &r)).collect();
@@ -1255,7 +1255,7 @@ fn where_(data: &[Prepared]) -> Vec<Place> {
         for i in 0..p.trial.len() {
             let e = p.residual_n[i] * p.residual_n[i];
             *bins
-                .entry((p.phase[i], (p.trial.x_m[i] / BIN_M).floor() as i64))
+                .entry((p.protocol_phase[i], (p.trial.x_m[i] / BIN_M).floor() as i64))
                 .or_default() += e;
             total += e;
         }

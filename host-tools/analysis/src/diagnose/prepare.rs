@@ -82,8 +82,17 @@ pub struct Prepared {
     /// fitted.
     pub fitted_n: Vec<f64>,
     pub residual_n: Vec<f64>,
-    /// Index into [`PHASES`].
+    /// Index into [`PHASES`], by the needle's motion in the tissue: what
+    /// the nominal's terms follow.
     pub phase: Vec<usize>,
+    /// The protocol's phase (index into [`PHASES`]) as the encoder has
+    /// it, what the robot did: where the held-out error is tallied and
+    /// shown. The same as `phase` but in the tissue's frame, where the
+    /// needle held still in a moving tissue slides back and forth
+    /// through it (the robot's dwell is `reversal` there, and each turn
+    /// of the breath a short `dwell`): the effects of the tissue that
+    /// act in the robot's dwell are judged where they act.
+    pub protocol_phase: Vec<usize>,
     /// The needle's velocity (relative to the tissue where the trial is
     /// in the tissue's frame) and its jumps.
     pub velocity: NeedleVelocity,
@@ -136,6 +145,15 @@ impl Prepared {
         odds_of_sliding(&self.other_side, v_mps, self.params.half_band_mps, i)
     }
 
+    /// Take the protocol's phases of the same samples prepared before
+    /// (`protocol_phase`): a trial moved into the tissue's frame and
+    /// prepared again finds its phases from the motion in the tissue.
+    pub fn keep_protocol_phase(&mut self, protocol_phase: &[usize]) {
+        if protocol_phase.len() == self.trial.len() {
+            self.protocol_phase = protocol_phase.to_vec();
+        }
+    }
+
     /// The samples of the trial's first dwell, if it has one.
     pub fn first_dwell(&self) -> Option<std::ops::Range<usize>> {
         let start = self.phase.iter().position(|&ph| ph == DWELL)?;
@@ -179,6 +197,7 @@ impl Prepared {
                 thinned(&self.trial, &self.geometry, &self.velocity, step);
             let mut p = prepare(self.file.clone(), trial, geometry, &self.params, velocity);
             p.fitted_n = needle_io::trial::every(&self.fitted_n, step);
+            p.keep_protocol_phase(&needle_io::trial::every(&self.protocol_phase, step));
             Box::new(p)
         })
     }
@@ -201,13 +220,9 @@ impl Prepared {
             g.tare_n = self.geometry.tare_n;
             relaxed_surfaces(&mut [&mut g], self.params.relaxation);
             let (trial, v) = (self.trial.clone(), self.velocity.clone());
-            Some(Box::new(prepare(
-                self.file.clone(),
-                trial,
-                g,
-                &self.params,
-                v,
-            )))
+            let mut p = prepare(self.file.clone(), trial, g, &self.params, v);
+            p.keep_protocol_phase(&self.protocol_phase);
+            Some(Box::new(p))
         });
         sudden.as_deref().unwrap_or(self)
     }
@@ -341,6 +356,7 @@ pub fn prepare(
         geometry,
         nominal_n,
         residual_n,
+        protocol_phase: phase.clone(),
         phase,
         velocity,
         other_side: parts.other_side,

@@ -238,10 +238,10 @@ fn phase_bands(p: &Prepared) -> Vec<Band> {
     let mut bands = Vec::new();
     let mut start = 0;
     for i in 1..=t.len() {
-        if i < t.len() && p.phase[i] == p.phase[start] {
+        if i < t.len() && p.protocol_phase[i] == p.protocol_phase[start] {
             continue;
         }
-        let phase = p.phase[start];
+        let phase = p.protocol_phase[start];
         if let Some(colour) = BAND_COLOURS[phase] {
             bands.push(Band {
                 from: t[start],
