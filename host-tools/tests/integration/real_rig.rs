@@ -309,6 +309,66 @@ fn with_no_effect_the_nominal_holds_through_dwell_and_dragged_withdrawal() {
     assert_eq!(out["verdict"]["effect"], "none");
 }
 
+/// Each trial's loading curve yielding over the `samples` up to its fall:
+/// from where the law stood there, the force flattens and eases by
+/// `ease_n` before the capsule falls, with the noise the samples before
+/// it had about a straight line.
+fn yield_before_the_fall(dir: &Path, samples: usize, ease_n: f64) {
+    for k in 0..SKIN.trials {
+        let path = dir.join(format!("trial_{k:03}.csv"));
+        let mut trial = needle_io::trial::read(&path).unwrap();
+        let (x, f) = (&trial.x_m, &trial.f_n);
+        // The last sample before the capsule's fall (a newton or more in
+        // one sample), at the top of the loading curve.
+        let top = (0..f.len()).max_by(|&a, &b| f[a].total_cmp(&f[b])).unwrap();
+        let peak = (top..f.len() - 1).find(|&i| f[i] - f[i + 1] > 1.0).unwrap();
+        let from = peak - samples;
+        let before = from - samples - 1..from;
+        let n = before.len() as f64;
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / n;
+        let (mx, mf) = (mean(&x[before.clone()]), mean(&f[before.clone()]));
+        let slope = before
+            .clone()
+            .map(|i| (x[i] - mx) * (f[i] - mf))
+            .sum::<f64>()
+            / before.clone().map(|i| (x[i] - mx).powi(2)).sum::<f64>();
+        let line = |i: usize| mf + slope * (x[i] - mx);
+        let level = line(from);
+        let eased: Vec<f64> = (0..=samples)
+            .map(|k| {
+                let noise = f[before.start + k] - line(before.start + k);
+                level - ease_n * k as f64 / samples as f64 + noise
+            })
+            .collect();
+        trial.f_n[from..=peak].copy_from_slice(&eased);
+        needle_io::trial::write(&path, &trial).unwrap();
+    }
+}
+
+#[test]
+fn a_capsule_that_yields_before_it_falls_is_the_nominal() {
+    // Real tissue's force flattens, then eases for 1-20 samples before it
+    // falls (the book, *What real recordings look like*): here over the
+    // last 15 samples before the fall, easing by 0.2 N (4 % of the
+    // peak), each trial's own capsule. The loading curve's law would keep
+    // rising there; each trial's yield is the nominal's, and what the
+    // loading leaves is the noise.
+    let dir = tempfile::tempdir().unwrap();
+    Skin { layers: 0, ..SKIN }.write(dir.path());
+    yield_before_the_fall(dir.path(), 15, 0.2);
+    let (_, data) = load(dir.path(), None).unwrap();
+    let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
+    let noise = out["noise_floor_n"].as_f64().unwrap();
+    let loading = out["baseline"]["by_phase"]["loading"]["rms_n"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        loading < 1.3 * noise,
+        "loading {loading} N, noise {noise} N"
+    );
+    assert_eq!(out["verdict"]["effect"], "none", "{}", out["verdict"]);
+}
+
 #[test]
 fn viscoelasticity_is_named_first_from_the_dwell_and_takes_most_of_the_gap() {
     // Ten times the standard branch (200 N/m, τ 1 s): 0.4 N held at

@@ -134,9 +134,10 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
 /// nominal's own friction term, the stiffness scale its own loading
 /// force, the held terms the force it holds in its first dwell
 /// (`held_in_first_dwell`) and at the static band in the rests after it
-/// (`held_at_the_band`), and the tip's load as it lets go on the first
-/// retraction (`tip_unloading`), which [`SPREAD`] frees per trial.
-pub const NOMINAL_CORRECTIONS: [&str; 16] = [
+/// (`held_at_the_band`), the tip's load as it lets go on the first
+/// retraction (`tip_unloading`), and the capsule's ease past its peak
+/// before it falls (`yielding`), which [`SPREAD`] frees per trial.
+pub const NOMINAL_CORRECTIONS: [&str; 17] = [
     "a1_n_per_m",
     "a2_n_per_m2",
     "cp_n_per_m",
@@ -153,6 +154,7 @@ pub const NOMINAL_CORRECTIONS: [&str; 16] = [
     "held_at_band",
     "friction_scale_let_go",
     "tip_unloading_n",
+    "yield_n_per_m",
 ];
 
 /// The corrections each trial has its own value of, fitted on the trial
@@ -179,8 +181,8 @@ pub const NOMINAL_CORRECTIONS: [&str; 16] = [
 /// `friction_scale_let_go` (the friction of a withdrawal once the tissue
 /// it dragged out has let go, its own scale: the shaft then slides
 /// through tissue that was stretched and let go, whose friction the
-/// insertion need not set) and `tip_unloading_n`.
-pub const SPREAD: [usize; 13] = [0, 3, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
+/// insertion need not set), `tip_unloading_n` and `yield_n_per_m`.
+pub const SPREAD: [usize; 14] = [0, 3, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
@@ -241,8 +243,36 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
     cols.push(held_at_the_band(p));
     cols.push(after_n);
     cols.push(p.tip_unloading.clone());
+    cols.push(yielding(p));
     cols.extend(set.iter().flat_map(|(c, g)| (c.columns)(p, *g)));
     cols
+}
+
+/// The capsule yielding past its peak: from the peak (`needle fit`'s
+/// puncture) to the fall's first sharp step (`TrialFit::fallen_index`),
+/// on the loading curve, how far the needle has advanced past the peak,
+/// a force per metre each trial's own. The fall itself is not yielding
+/// (a fall over a few samples at 500 Hz would give the column the
+/// fall's slope). Real
+/// tissue flattens and eases for 1–20 samples before it falls (it starts
+/// to yield), and a 3 mm artery has no sharp fall: its force rolls over
+/// and eases off over a millimetre or two. The loading curve's law keeps
+/// rising there; how far each capsule eases before it tears is its own.
+fn yielding(p: &Prepared) -> Vec<f64> {
+    let peak = p.geometry.puncture_index;
+    let Some(&peak_x_m) = p.trial.x_m.get(peak) else {
+        return vec![0.0; p.trial.len()];
+    };
+    let fall = p.geometry.fallen_index;
+    (0..p.trial.len())
+        .map(|i| {
+            if i > peak && i < fall && p.phase[i] == LOADING {
+                p.trial.x_m[i] - peak_x_m
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 /// The force the nominal holds through its first dwell. A stop at the
