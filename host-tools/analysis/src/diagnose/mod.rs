@@ -251,13 +251,13 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
 /// The capsule yielding past its peak: from the peak (`needle fit`'s
 /// puncture) to the fall's first sharp step (`TrialFit::fallen_index`),
 /// on the loading curve, how far the needle has advanced past the peak,
-/// a force per metre each trial's own. The fall itself is not yielding
-/// (a fall over a few samples at 500 Hz would give the column the
-/// fall's slope). Real
-/// tissue flattens and eases for 1–20 samples before it falls (it starts
-/// to yield), and a 3 mm artery has no sharp fall: its force rolls over
-/// and eases off over a millimetre or two. The loading curve's law keeps
-/// rising there; how far each capsule eases before it tears is its own.
+/// a force per metre each trial's own. Real tissue flattens and eases
+/// for 1–20 samples before it falls (it starts to yield), and a 3 mm
+/// artery has no sharp fall: its force rolls over and eases off over a
+/// millimetre or two. The loading curve's law keeps rising there; how
+/// far each capsule eases before it tears is its own. The fall itself is
+/// not yield (a fall over a few samples at 500 Hz would give the column
+/// the fall's slope).
 fn yielding(p: &Prepared) -> Vec<f64> {
     let peak = p.geometry.puncture_index;
     let Some(&peak_x_m) = p.trial.x_m.get(peak) else {

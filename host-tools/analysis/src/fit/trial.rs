@@ -1178,6 +1178,7 @@ pub fn slipped(
         // rises through the first few, and a grip let go over several
         // rises for as many (its tail would pull the landing below the
         // free level).
+        // (Five samples of landing at least, as the loop's end leaves.)
         let mut from = i + 3;
         while from + 8 <= end && mean(from..from + 3) - mean(from - 3..from) >= step_n {
             from += 1;
@@ -1698,22 +1699,22 @@ mod tests {
     /// release onto a friction still pulling 40 mN is.
     #[test]
     fn a_grip_let_go_over_several_samples_is_no_slip() {
-        let (pulled, _) = tent((-0.42, 0.0), 0.0126);
+        let noise = |k: u32| {
+            if (k.wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
+                0.0126
+            } else {
+                -0.0126
+            }
+        };
         let released = |landing_n: f64| -> Vec<f64> {
-            (0..200usize)
+            (0..200u32)
                 .map(|k| {
-                    let noise = pulled[k]
-                        - if k < 100 {
-                            -0.42 * k as f64 / 100.0
-                        } else {
-                            0.0
-                        };
                     let level = match k {
-                        0..100 => -0.42 * k as f64 / 100.0,
-                        100..106 => landing_n + (-0.42 - landing_n) * (106 - k) as f64 / 7.0,
+                        0..100 => -0.42 * f64::from(k) / 100.0,
+                        100..106 => landing_n + (-0.42 - landing_n) * f64::from(106 - k) / 7.0,
                         _ => landing_n,
                     };
-                    level + noise
+                    level + noise(k)
                 })
                 .collect()
         };
