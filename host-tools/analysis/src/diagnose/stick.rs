@@ -93,8 +93,12 @@ fn gave_way(f: &[f64], x: &[f64], parts: &Parts, start: usize, noise_n: f64) -> 
     let sliding_n = value(split.slide, slide(e));
     let noise_n = noise_n.max(1e-4);
     let ramp = split.tent_rms_n <= TENT_FIT_NOISE_SD * noise_n;
+    // An elastic tent pulls harder the further it is stretched; a pull
+    // that eases with the travel is the shaft's friction over a length
+    // that shortens, and a surface's grip beside it.
+    let stretched = split.tent[1] >= 0.0;
     let pulled = held_n <= -crate::fit::trial::SNAP_NOISE_SD * noise_n;
-    (ramp && pulled && sliding_n - held_n >= OVERSHOOT_NOISE_SD * noise_n).then_some(e)
+    (ramp && stretched && pulled && sliding_n - held_n >= OVERSHOOT_NOISE_SD * noise_n).then_some(e)
 }
 
 /// The best split of `f` over `range` into a `tent` (two columns) up to
@@ -235,6 +239,21 @@ mod tests {
         assert_eq!(crate::fit::trial::slipped(&f, &x, 0, 0.01, deep), None);
         let e = gave_way(&f, &x, &parts, 0, 0.01).expect("a stick");
         assert!((103..=107).contains(&e), "{e}");
+    }
+
+    /// The shaft's friction over the length left, one and a half times
+    /// the nominal's, and a surface's grip of 0.15 N beside it, until the
+    /// tissue lets go at sample 300 (over three samples, onto zero): the
+    /// pull eases as the needle comes out, where a tent's would grow. No
+    /// stick, though a tent's line up to the let-go fits it as well.
+    #[test]
+    fn a_pull_that_eases_as_the_needle_comes_out_is_no_tent() {
+        let gripped = |i: usize, _, kinetic_n: f64| {
+            let pull_n = 1.5 * kinetic_n - 0.15;
+            pull_n * (1.0 - ((i as f64 - 299.0) / 3.0).clamp(0.0, 1.0))
+        };
+        let (f, x, parts) = withdrawal(gripped);
+        assert_eq!(gave_way(&f, &x, &parts, 0, 0.01), None);
     }
 
     /// The dwell's last three samples before a withdrawal at sample 10,

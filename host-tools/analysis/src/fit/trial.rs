@@ -1327,20 +1327,52 @@ fn one_way(
         let c = fit.solve();
         (outside + c.map_or(f64::INFINITY, |c| fit.sse(&c)), c)
     };
+    // Where it lets go, the pull ends: the friction over the length left
+    // and a surface's grip of its own beside it (a ring round the shaft
+    // that drags the surface out), zero past it.
+    let ends_at = |x_w: f64| {
+        let (mut fit, mut outside) = (Lsq::<2>::default(), 0.0);
+        for &(xi, _, fi) in &out {
+            if xi > x_w {
+                fit.add([xi - x_w, 1.0], fi);
+            } else {
+                outside += fi * fi;
+            }
+        }
+        fit.solve().map(|c| (outside + fit.sse(&c), c[1]))
+    };
     let mut let_go = None;
     let snapped = snapped_free(&out, noise_n, before_contact_n);
     let let_go_snapped = snapped.is_some() && out.len() >= MIN_STROKE_SAMPLES;
     if out.len() >= MIN_STROKE_SAMPLES {
-        let (mut best, mut best_x) = (f64::INFINITY, contact_x_m);
         let from_m = contact_x_m - depth.max(MOST_DRAG_M);
-        for k in 0..=400 {
-            let x_w = from_m + (x_s2 - from_m) * k as f64 / 400.0;
+        let grid = (0..=400).map(|k| from_m + (x_s2 - from_m) * k as f64 / 400.0);
+        let least = |sse: &dyn Fn(f64) -> Option<f64>| {
+            grid.clone()
+                .filter_map(|x_w| Some((sse(x_w)?, x_w)))
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+        };
+        let line = least(&|x_w| {
             let (sse, c) = withdraw_at(x_w);
-            if c.is_some() && sse < best {
-                (best, best_x) = (sse, x_w);
-            }
-        }
-        let_go = snapped.or(best.is_finite().then_some(best_x));
+            c.map(|_| sse)
+        });
+        // The grip beside the line where the data hold it: a pull of three
+        // noise sd or more (under it, no grip a line cannot pass for), and
+        // by Schwarz's criterion its one more parameter worth ln n noise
+        // variances.
+        let noise_n = noise_n.max(1e-4);
+        let gripped = least(&|x_w| {
+            ends_at(x_w)
+                .filter(|&(_, grip_n)| grip_n <= -3.0 * noise_n)
+                .map(|f| f.0)
+        });
+        let worth_n2 = (out.len() as f64).ln() * noise_n.powi(2);
+        let best = match (line, gripped) {
+            (Some(l), Some(g)) if l.0 - g.0 > worth_n2 => Some(g),
+            (Some(l), _) => Some(l),
+            (None, g) => g,
+        };
+        let_go = snapped.or(best.map(|b| b.1));
     }
     // Where the needle let go is x_s3 when it lies inside the tissue.
     let from_let_go = let_go
@@ -1739,6 +1771,35 @@ mod tests {
                     -0.0126
                 };
                 (x, -0.002, -40.0 * (x - let_go_m).max(0.0) + noise)
+            })
+            .collect();
+        let friction = one_way(&out, &[], contact_m, x_s2, 0.0126, 0.0).unwrap();
+        let found = friction.let_go_x_m.unwrap();
+        assert!((found - let_go_m).abs() < 2e-4, "let go at {found} m");
+    }
+
+    /// A withdrawal pulled mostly by a surface's grip (0.09 N) beside a
+    /// friction of 2 N/m over the length left, let go 4 mm before the
+    /// first contact onto zero by 7 noise sd (no snap of ten): where it
+    /// let go is where the pull ends, found with the grip beside the
+    /// friction line (a line through zero alone puts it millimetres out).
+    #[test]
+    fn a_grip_beside_the_friction_lets_go_where_the_pull_ends() {
+        let (contact_m, x_s2, let_go_m) = (0.04, 0.046, 0.036);
+        let out: Vec<Xvf> = (0..1500)
+            .map(|k| {
+                let x = 0.065 - 2e-5 * f64::from(k);
+                let noise = if ((k as u32).wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
+                    0.0126
+                } else {
+                    -0.0126
+                };
+                let pull = if x > let_go_m {
+                    -0.09 - 2.0 * (x - let_go_m)
+                } else {
+                    0.0
+                };
+                (x, -0.002, pull + noise)
             })
             .collect();
         let friction = one_way(&out, &[], contact_m, x_s2, 0.0126, 0.0).unwrap();
