@@ -1293,7 +1293,9 @@ fn fall_level(window: &[f64]) -> f64 {
 /// direction at one speed. The withdrawal gives where the needle lets go
 /// (a grid from x_s2 back to [`MOST_DRAG_M`] before x_s1, or as far
 /// before it as the capsule was pushed in if that is more: a dragged
-/// tissue lets go before x_s1) and its friction per length
+/// tissue lets go before x_s1; each point judged by the friction line in
+/// the length left, with a surface's grip beside it where the data hold
+/// one, and zero past it) and its friction per length
 /// c_n + b_n·v at that speed; the insertion, a straight line in l through
 /// the advancing samples (membranes' loading taken out as outliers), gives
 /// c_p + b_p·v at its speed and the cutting force as the intercept. Each
