@@ -1594,16 +1594,20 @@ mod tests {
         tent((-0.6, landing_n), 0.005)
     }
 
+    /// Noise of sd `sd_n` at sample `k`: ±`sd_n` by a fixed sequence, so
+    /// that a test's figures do not move with a random generator.
+    fn fixed_noise(k: u32, sd_n: f64) -> f64 {
+        if (k.wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
+            sd_n
+        } else {
+            -sd_n
+        }
+    }
+
     /// [`tent_snapping_onto`] from a pull of `pull_n` with noise of
     /// `noise_sd_n`.
     fn tent((pull_n, landing_n): (f64, f64), noise_sd_n: f64) -> (Vec<f64>, Vec<f64>) {
-        let noise = |k: u32| {
-            if (k.wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
-                noise_sd_n
-            } else {
-                -noise_sd_n
-            }
-        };
+        let noise = |k: u32| fixed_noise(k, noise_sd_n);
         let f = (0..200u32)
             .map(|k| {
                 let level = if k < 100 {
@@ -1655,12 +1659,7 @@ mod tests {
             .zip(0u32..)
             .map(|(&x, k)| {
                 let d = (x - contact_m).max(0.0);
-                let sign = if (k.wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
-                    1.0
-                } else {
-                    -1.0
-                };
-                d / (a_per_n * d + b_m_per_n) + 0.012 * sign
+                d / (a_per_n * d + b_m_per_n) + fixed_noise(k, 0.012)
             })
             .collect();
         let trial = sampled(100.0, &x.iter().copied().zip(f).collect::<Vec<_>>());
@@ -1733,13 +1732,6 @@ mod tests {
     /// release onto a friction still pulling 40 mN is.
     #[test]
     fn a_grip_let_go_over_several_samples_is_no_slip() {
-        let noise = |k: u32| {
-            if (k.wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
-                0.0126
-            } else {
-                -0.0126
-            }
-        };
         let released = |landing_n: f64| -> Vec<f64> {
             (0..200u32)
                 .map(|k| {
@@ -1748,7 +1740,7 @@ mod tests {
                         100..106 => landing_n + (-0.42 - landing_n) * f64::from(106 - k) / 7.0,
                         _ => landing_n,
                     };
-                    level + noise(k)
+                    level + fixed_noise(k, 0.0126)
                 })
                 .collect()
         };
@@ -1757,26 +1749,34 @@ mod tests {
         assert!(slipped(&released(-0.04), &x, 0, 0.0126, (0.035, 0.0)).is_some());
     }
 
+    /// Where `one_way` puts the let-go of a withdrawal at 2 mm/s from
+    /// `from_m`, 20 µm a sample for `samples`, pulled by `pull_n` of the
+    /// position with noise of 12.6 mN, the capsule's first contact at
+    /// `contact_m` and its puncture at `x_s2`.
+    fn let_go_of(
+        (from_m, samples): (f64, u32),
+        pull_n: impl Fn(f64) -> f64,
+        (contact_m, x_s2): (f64, f64),
+    ) -> f64 {
+        let out: Vec<Xvf> = (0..samples)
+            .map(|k| {
+                let x = from_m - 2e-5 * f64::from(k);
+                (x, -0.002, pull_n(x) + fixed_noise(k, 0.0126))
+            })
+            .collect();
+        let friction = one_way(&out, &[], contact_m, x_s2, 0.0126, 0.0).unwrap();
+        friction.let_go_x_m.unwrap()
+    }
+
     /// A withdrawal whose tissue is dragged out 8 mm past its first
     /// contact, from a capsule punctured 5 mm in (an artery's): the
     /// friction line in the length left ends where it let go, found
     /// though it lies further out than the puncture was deep.
     #[test]
     fn a_tissue_dragged_out_further_than_the_puncture_was_deep_lets_go_where_it_did() {
-        let (contact_m, x_s2, let_go_m) = (0.036, 0.041, 0.028);
-        let out: Vec<Xvf> = (0..1000)
-            .map(|k| {
-                let x = 0.040 - 2e-5 * f64::from(k);
-                let noise = if ((k as u32).wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
-                    0.0126
-                } else {
-                    -0.0126
-                };
-                (x, -0.002, -40.0 * (x - let_go_m).max(0.0) + noise)
-            })
-            .collect();
-        let friction = one_way(&out, &[], contact_m, x_s2, 0.0126, 0.0).unwrap();
-        let found = friction.let_go_x_m.unwrap();
+        let let_go_m = 0.028;
+        let pull = |x: f64| -40.0 * (x - let_go_m).max(0.0);
+        let found = let_go_of((0.040, 1000), pull, (0.036, 0.041));
         assert!((found - let_go_m).abs() < 2e-4, "let go at {found} m");
     }
 
@@ -1787,25 +1787,15 @@ mod tests {
     /// friction line (a line through zero alone puts it millimetres out).
     #[test]
     fn a_grip_beside_the_friction_lets_go_where_the_pull_ends() {
-        let (contact_m, x_s2, let_go_m) = (0.04, 0.046, 0.036);
-        let out: Vec<Xvf> = (0..1500)
-            .map(|k| {
-                let x = 0.065 - 2e-5 * f64::from(k);
-                let noise = if ((k as u32).wrapping_mul(2_654_435_761) >> 16) & 1 == 0 {
-                    0.0126
-                } else {
-                    -0.0126
-                };
-                let pull = if x > let_go_m {
-                    -0.09 - 2.0 * (x - let_go_m)
-                } else {
-                    0.0
-                };
-                (x, -0.002, pull + noise)
-            })
-            .collect();
-        let friction = one_way(&out, &[], contact_m, x_s2, 0.0126, 0.0).unwrap();
-        let found = friction.let_go_x_m.unwrap();
+        let let_go_m = 0.036;
+        let pull = |x: f64| {
+            if x > let_go_m {
+                -0.09 - 2.0 * (x - let_go_m)
+            } else {
+                0.0
+            }
+        };
+        let found = let_go_of((0.065, 1500), pull, (0.04, 0.046));
         assert!((found - let_go_m).abs() < 2e-4, "let go at {found} m");
     }
 
