@@ -309,6 +309,20 @@ fn with_no_effect_the_nominal_holds_through_dwell_and_dragged_withdrawal() {
     assert_eq!(out["verdict"]["effect"], "none");
 }
 
+#[test]
+fn a_moving_tissue_is_judged_by_the_protocols_phases() {
+    // Breathing under a needle held still: in the tissue's frame, where
+    // the nominal is fitted once the motion is named, the needle slides
+    // back and forth, and its dwell read as `reversal`. What is left is
+    // tallied by what the robot did: this protocol has no reversal.
+    let out = diagnosis_without_layers("tissue_motion");
+    let v = &out["verdict"];
+    assert_eq!(v["effect"], "tissue_motion", "{v}");
+    let phases = v["left_by_phase"].as_object().unwrap();
+    assert!(phases.contains_key("dwell"), "{v}");
+    assert!(!phases.contains_key("reversal"), "{v}");
+}
+
 /// Each trial's loading curve yielding over the `samples` up to its fall:
 /// from where the law stood there, the force flattens and eases by
 /// `ease_n` before the capsule falls, with the noise the samples before
