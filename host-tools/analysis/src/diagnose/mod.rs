@@ -48,7 +48,7 @@ use needle_io::trial::{Skipped, Unreadable};
 use self::candidates::{Candidate, CANDIDATES, CUTTING};
 use self::crossval::{folds, Gram, PerTrial};
 use self::figure::Withheld;
-use self::prepare::{prepare, Prepared, LOADING, PHASES, WITHDRAWAL};
+use self::prepare::{prepare, Prepared, INSERTION, LOADING, PHASES, WITHDRAWAL};
 use crate::fit::predict::{needle_velocity, NeedleVelocity};
 use crate::fit::{fit_tared, TrialFit};
 
@@ -960,8 +960,15 @@ pub fn diagnose_with_progress(
     // A profile free in every trial is the last resort: it is not tried
     // over a shared law that holds on the withheld trials (its free
     // profile would take that effect's residual along the insertion,
-    // where depth and time go together, and name cutting for it).
-    if steps.is_empty() && baseline.rms() > EXPLAINED_FACTOR * noise {
+    // where depth and time go together, and name cutting for it). It is
+    // tried where a gap is left, over the whole trials or in the
+    // insertion alone: a cutting that wanders along each path acts only
+    // where the tip cuts, and a dwell and withdrawal the nominal fits to
+    // the noise dilute a gap of two noise floors there to one of 1.1
+    // over the whole.
+    let gap_left = baseline.rms() > EXPLAINED_FACTOR * noise
+        || baseline.phase_rms(INSERTION) > EXPLAINED_FACTOR * noise;
+    if steps.is_empty() && gap_left {
         progress("trying a cutting force free along depth in each trial");
         if let Some(along) = cutting_along_depth((data, &baseline, &[]), bar, false) {
             let half_m = along.1.grid_value;

@@ -28,7 +28,7 @@ pub const PHASES: [&str; 7] = [
 ];
 pub const APPROACH: usize = 0;
 pub const LOADING: usize = 1;
-const INSERTION: usize = 2;
+pub const INSERTION: usize = 2;
 pub const DWELL: usize = 3;
 const REVERSAL: usize = 4;
 pub const WITHDRAWAL: usize = 5;
