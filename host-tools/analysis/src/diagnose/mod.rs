@@ -638,16 +638,45 @@ impl Scored {
 /// the training trials, keep the grid value with the least training error,
 /// score the withheld trials.
 fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate>) -> Scored {
+    score_beside(data, &Fixed::of(data, fixed), cand)
+}
+
+/// The nominal's corrections and a set of candidates (each at its grid
+/// value) as columns of every trial, with their sums: what every
+/// candidate scored beside the same set shares.
+struct Fixed<'s, 'c> {
+    set: &'s [(&'c Candidate, f64)],
+    cols: Vec<Vec<Vec<f64>>>,
+    supports: Vec<Supports>,
+    sums: Vec<[Gram; PHASES.len()]>,
+}
+
+impl<'s, 'c> Fixed<'s, 'c> {
+    /// Made once, not once per grid value or per candidate: a fixed
+    /// tissue_motion re-evaluates the model a dozen times per trial, and
+    /// the sums of the nominal's own 17 columns are most of a score's.
+    fn of(data: &[Prepared], set: &'s [(&'c Candidate, f64)]) -> Self {
+        let cols: Vec<_> = data.iter().map(|p| columns(p, set)).collect();
+        let supports = Supports::all(data, &cols);
+        let sums = grams(data, &cols, &supports);
+        Self {
+            set,
+            cols,
+            supports,
+            sums,
+        }
+    }
+}
+
+/// [`score`] beside `fixed` made once for every candidate scored beside
+/// it.
+fn score_beside(data: &[Prepared], fixed: &Fixed, cand: Option<&Candidate>) -> Scored {
     let grid: &[f64] = cand.map_or(&[0.0], |c| c.grid);
-    // The fixed terms' columns once, not once per grid value: a fixed
-    // tissue_motion re-evaluates the model a dozen times per trial.
-    let fixed_cols: Vec<_> = data.iter().map(|p| columns(p, fixed)).collect();
-    // The fixed columns' own sums once; per grid value only what the
-    // candidate's columns add (a ninth of the work for one column).
-    let supports = Supports::all(data, &fixed_cols);
-    let base = grams(data, &fixed_cols, &supports);
+    // Per grid value only what the candidate's columns add to the fixed
+    // columns' sums (a ninth of the work for one column).
+    let (fixed_cols, supports, base) = (&fixed.cols, &fixed.supports, &fixed.sums);
     let per_grid: Vec<Vec<[Gram; PHASES.len()]>> = match cand {
-        None => vec![base],
+        None => vec![base.clone()],
         // Trial by trial, every grid value's columns at once: a
         // candidate's grid values can share their work.
         Some(c) => {
@@ -670,7 +699,7 @@ fn score(data: &[Prepared], fixed: &[(&Candidate, f64)], cand: Option<&Candidate
         }
     };
     let k = folds(data.len());
-    let signed = non_negative_columns(fixed.iter().map(|(c, _)| *c).chain(cand));
+    let signed = non_negative_columns(fixed.set.iter().map(|(c, _)| *c).chain(cand));
     let per = per_trial_fit(&signed);
     let totals: Vec<Vec<Gram>> = per_grid
         .iter()
@@ -896,11 +925,12 @@ pub fn diagnose_with_progress(
         .collect();
     let (data, baseline) = fitted_and_baseline(data.to_vec());
     let data = &data;
+    let nominal_alone = Fixed::of(data, &[]);
     let mut ranked: Vec<(usize, Scored, f64, Consistency)> = CANDIDATES
         .iter()
         .enumerate()
         .map(|(ci, c)| {
-            let s = score(data, &[], Some(c));
+            let s = score_beside(data, &nominal_alone, Some(c));
             let (shrink, t) = improvement(&baseline, &s);
             (ci, s, shrink, t)
         })

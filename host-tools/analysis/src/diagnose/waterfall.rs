@@ -8,7 +8,7 @@ use super::backfit::{
 use super::candidates::{Backfit, Candidate, CANDIDATES};
 use super::prepare::Prepared;
 use super::significance::{improvement, Bar, Consistency, MIN_SHRINK, NOTHING_LEFT_FACTOR};
-use super::{score, Nominal, Scored};
+use super::{score_beside, Fixed, Nominal, Scored};
 
 /// The waterfall from the first effect: each further effect is the
 /// candidate of most shrink that is significant against what the effects
@@ -31,11 +31,12 @@ pub(super) fn waterfall(
             break;
         }
         progress(&format!("searching for effect {}", steps.len() + 1));
+        let beside = Fixed::of(&cur, &fixed);
         let mut next: Vec<(usize, Scored)> = CANDIDATES
             .iter()
             .enumerate()
             .filter(|(cj, _)| steps.iter().all(|(ci, _)| ci != cj))
-            .map(|(cj, c)| (cj, score(&cur, &fixed, Some(c))))
+            .map(|(cj, c)| (cj, score_beside(&cur, &beside, Some(c))))
             .filter(|(_, with)| bar.worthy(left, with))
             .collect();
         next.sort_by(|a, b| a.1.rms().total_cmp(&b.1.rms()));
