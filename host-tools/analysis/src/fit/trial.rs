@@ -208,13 +208,26 @@ fn noise(f: &[f64]) -> f64 {
 /// The capsule puncture: the first of `falls` (below 60 % of the running
 /// peak, or by a tenth of it and [`FAST_FALL_NOISE_SD`] noise sd within three samples —
 /// only the latter for [`Falls::Sudden`]; the peak well above noise) with
-/// the needle further in than at the peak — a force that falls at rest (a tissue relaxing through a dwell,
-/// cutting stopping with the needle) is no puncture, and neither is a
+/// the needle further in than at the peak and than it has ever been: the
+/// capsule lies ahead of the tip, in tissue it has not cut. A force that
+/// falls at rest (a tissue relaxing through a dwell, cutting stopping
+/// with the needle) is no puncture, nor one that falls in a stroke
+/// inside the cut track (friction changing sides as the needle turns
+/// back, a stroke's viscous friction easing as it slows), and neither is a
 /// spike without a loading curve before it (a holder's inertia as the
 /// drive sets off, a knock); returns the peak's index and the first
 /// sample that had fallen.
 fn find_puncture(f: &[f64], x: &[f64], noise_n: f64, falls: Falls) -> Option<(usize, usize)> {
     let mut peak = 0;
+    // How far in the needle has been before this sample, each position
+    // the median of it and its neighbours: an encoder's leap for one
+    // sample is no depth reached.
+    let mut deepest_m = f64::NEG_INFINITY;
+    let settled_m = |i: usize| {
+        let mut three = [x[i.saturating_sub(1)], x[i], x[(i + 1).min(x.len() - 1)]];
+        three.sort_by(f64::total_cmp);
+        three[1]
+    };
     for i in 0..f.len() {
         if f[i] > f[peak] {
             peak = i;
@@ -229,7 +242,9 @@ fn find_puncture(f: &[f64], x: &[f64], noise_n: f64, falls: Falls) -> Option<(us
             && f[i - 3] - f[i] > (0.1 * f[peak]).max(FAST_FALL_NOISE_SD * noise_n)
             && f[i] < 0.9 * f[peak];
         let fallen = fast || (falls == Falls::AnyFall && f[i] < 0.6 * f[peak]);
-        if f[peak] > 0.1 + 10.0 * noise_n && fallen && x[i] > x[peak] {
+        let into_new_tissue = x[i] > x[peak] && x[i] > deepest_m;
+        deepest_m = deepest_m.max(settled_m(i));
+        if f[peak] > 0.1 + 10.0 * noise_n && fallen && into_new_tissue {
             if loading_samples(f, peak, noise_n) >= MIN_LOADING_SAMPLES {
                 return Some((peak, i));
             }
@@ -1917,6 +1932,44 @@ mod tests {
             "{} against {capsule_x_m}, fallen {} samples on",
             trial.x_m[peak],
             fallen - peak
+        );
+    }
+
+    /// A capsule giving way onto a cutting force as large as its own (no
+    /// fall: liver 2's low tail, 0.2 N onto 0.19), then a stroke back and
+    /// in again inside the cut track, whose force peaks on the way in and
+    /// falls by twice the friction as the needle turns back short of the
+    /// deepest point. That turn is further in than the stroke's peak, but
+    /// in tissue already cut: no puncture.
+    #[test]
+    fn a_fall_in_a_stroke_inside_the_cut_track_is_no_puncture() {
+        let (rate, v_mps, contact_m) = (100.0, 0.003, 0.005);
+        let (mut at, mut x) = liver_capsule_to(0.2, (rate, v_mps, contact_m));
+        let top_m = x + 0.02;
+        while x < top_m {
+            at.push((x, 0.2 + 1.0 * (x - top_m + 0.02)));
+            x += v_mps / rate;
+        }
+        // Back 2 mm, against a friction of 0.1 N.
+        while x > top_m - 0.002 {
+            at.push((x, -0.1));
+            x -= v_mps / rate;
+        }
+        // In again 1.5 mm, the force peaking half way (0.26 N), and back.
+        let turn_m = top_m - 0.0005;
+        while x < turn_m {
+            let half_way = 1.0 - ((x - turn_m + 0.00075) / 0.00075).abs();
+            at.push((x, 0.2 + 0.06 * half_way));
+            x += v_mps / rate;
+        }
+        at.extend((0..50).map(|_| {
+            x -= v_mps / rate;
+            (x, -0.1)
+        }));
+        let trial = sampled(rate, &at);
+        assert_eq!(
+            find_puncture(&trial.f_n, &trial.x_m, 0.012, Falls::AnyFall),
+            None
         );
     }
 
