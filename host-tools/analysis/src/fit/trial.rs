@@ -1304,6 +1304,26 @@ fn fall_level(window: &[f64]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The withdrawing samples `out` split at a let-go at `x_w`: those
+/// further in, with the tissue still on the shaft, summed for a least
+/// squares fit of their pull on `row` of the length left (x − x_w); and
+/// the sum of the squared pull past it, where the free needle reads zero.
+fn pull_past<const N: usize>(
+    out: &[Xvf],
+    x_w: f64,
+    row: impl Fn(f64) -> [f64; N],
+) -> (Lsq<N>, f64) {
+    let (mut fit, mut outside) = (Lsq::<N>::default(), 0.0);
+    for &(xi, _, fi) in out {
+        if xi > x_w {
+            fit.add(row(xi - x_w), fi);
+        } else {
+            outside += fi * fi;
+        }
+    }
+    (fit, outside)
+}
+
 /// Insert–dwell–withdraw: no inward stroke inside the cut track, each
 /// direction at one speed. The withdrawal gives where the needle lets go
 /// (a grid from x_s2 back to [`MOST_DRAG_M`] before x_s1, or as far
@@ -1333,14 +1353,7 @@ fn one_way(
     let out: Vec<Xvf> = track.iter().copied().filter(|s| s.1 < 0.0).collect();
     let depth = x_s2 - contact_x_m;
     let withdraw_at = |x_w: f64| {
-        let (mut fit, mut outside) = (Lsq::<1>::default(), 0.0);
-        for &(xi, _, fi) in &out {
-            if xi > x_w {
-                fit.add([xi - x_w], fi);
-            } else {
-                outside += fi * fi;
-            }
-        }
+        let (fit, outside) = pull_past(&out, x_w, |l| [l]);
         let c = fit.solve();
         (outside + c.map_or(f64::INFINITY, |c| fit.sse(&c)), c)
     };
@@ -1348,14 +1361,7 @@ fn one_way(
     // and a surface's grip of its own beside it (a ring round the shaft
     // that drags the surface out), zero past it.
     let ends_at = |x_w: f64| {
-        let (mut fit, mut outside) = (Lsq::<2>::default(), 0.0);
-        for &(xi, _, fi) in &out {
-            if xi > x_w {
-                fit.add([xi - x_w, 1.0], fi);
-            } else {
-                outside += fi * fi;
-            }
-        }
+        let (fit, outside) = pull_past(&out, x_w, |l| [l, 1.0]);
         fit.solve().map(|c| (outside + fit.sse(&c), c[1]))
     };
     let mut let_go = None;
