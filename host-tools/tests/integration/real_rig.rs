@@ -440,12 +440,16 @@ fn assert_named_in_turn_and_explained(out: &Value, effects: &[&str]) {
 }
 
 /// After the fall real skin climbs again 1.2–3.3× within 3 mm: the layer
-/// beneath the ruptured capsule loads before it cuts. The simulator's
-/// literature form of depth-dependent cutting has it (40 % of the
-/// cutting force at the fall, back within 5 % by 2.4 mm); on the skin
-/// phantom, each trial 10 % its own, it is named first and closed.
+/// beneath the ruptured capsule loads before it cuts, in every
+/// insertion by its own amount. The simulator's literature form of
+/// depth-dependent cutting has it (40 % of the cutting force at the
+/// fall, back within 5 % by 2.4 mm), with a rise as the square root of
+/// depth that, at insert–dwell–withdraw's one speed, is a friction per
+/// length. On the skin phantom, each trial 10 % its own, the nominal
+/// reads each trial's reload (its correction's mean gain near 1) and
+/// the gap is closed with nothing to name.
 #[test]
-fn a_layer_loaded_again_after_the_fall_is_named_and_closed() {
+fn a_layer_loaded_again_after_the_fall_is_the_nominals() {
     let out = Skin {
         effects: "depth_dependent_cutting",
         form: Form::Literature,
@@ -456,7 +460,9 @@ fn a_layer_loaded_again_after_the_fall_is_named_and_closed() {
     }
     .diagnosis();
     let v = &out["verdict"];
-    assert_eq!(v["effect"], "depth_dependent_cutting", "{v}");
+    assert_eq!(v["effect"], "none", "{v}");
+    let reload = out["baseline"]["corrections"]["reload_n"].as_f64().unwrap();
+    assert!((0.5..1.5).contains(&reload), "{}", out["baseline"]);
     let noise = out["noise_floor_n"].as_f64().unwrap();
     let after = v["heldout_rms_after_n"].as_f64().unwrap();
     assert!(after < 1.5 * noise, "{after} vs {noise}: {v}");

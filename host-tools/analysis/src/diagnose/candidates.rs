@@ -11,7 +11,6 @@ use std::f64::consts::TAU;
 
 use super::motion::{harmonics_along, moved_model, PhaseWander, TissueShift};
 use super::prepare::{Prepared, AFTER, APPROACH, LOADING};
-use crate::fit::lsq::Lsq;
 
 /// A candidate's columns for one trial, one vector per linear parameter.
 pub type Columns = Vec<Vec<f64>>;
@@ -148,13 +147,9 @@ pub const CANDIDATES: [Candidate; 8] = [
     },
     Candidate {
         effect: "depth_dependent_cutting",
-        grid_name: "reload_length_m",
-        grid: &[0.0, 0.000_25, 0.000_5, 0.001],
-        linear: &[
-            "cutting_per_m_n_per_m",
-            "cutting_correction_n",
-            "reload_gain",
-        ],
+        grid_name: "depth_exponent",
+        grid: &[1.0, 0.5],
+        linear: &["cutting_growth_at_10_mm_n", "cutting_correction_n"],
         columns: depth_cutting,
         on_grid: None,
         grid_params: grid_as_named,
@@ -730,95 +725,26 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
 }
 
 /// Cutting that depends on depth: growing with depth past the surface
-/// (the paper: cutting "rose slightly with depth"), beside a cutting
-/// offset; and, at `reload_m` > 0, building up again over the first
-/// millimetres past the puncture ([`reloading`]).
-fn depth_cutting(p: &Prepared, reload_m: f64) -> Vec<Vec<f64>> {
+/// as a power of it (the paper: cutting "rose slightly with depth";
+/// `exponent` 1, a rise in proportion, or ½, one that slows as it goes,
+/// as a power law or a saturating rise has it), beside a cutting offset.
+/// The growth is the share of the cutting force the nominal has on,
+/// times (depth / [`GROWTH_DEPTH_M`])^`exponent`: its gain is the growth
+/// at that depth, N. (A layer loaded again after the puncture is each
+/// trial's own, the nominal's: `super::reload`.)
+fn depth_cutting(p: &Prepared, exponent: f64) -> Vec<Vec<f64>> {
     let n = p.trial.len();
     let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
     for i in 0..n {
-        a[i] = p.cutting[i] * (p.trial.x_m[i] - p.geometry.contact_x_m);
+        let depth_m = (p.trial.x_m[i] - p.geometry.contact_x_m).max(0.0);
+        a[i] = p.cutting[i] * (depth_m / GROWTH_DEPTH_M).powf(exponent);
         b[i] = p.cutting[i];
     }
-    vec![a, b, reloading(p, reload_m)]
+    vec![a, b]
 }
 
-/// A layer loaded again after the puncture: when a capsule ruptures the
-/// tissue ahead of the tip springs back, and the layer beneath must be
-/// compressed to its own cutting force before it cuts. Real recordings
-/// fall to 20–45 % of the peak and climb 1.2–3.3× within the next 3 mm,
-/// by a different amount in each insertion. The force falls short of its
-/// steady course by a deficit Δ that decays as e^{−s/λ} over s, the
-/// tip's deepest advance past the bottom of the fall (λ = `reload_m`: a
-/// length, since the tip must advance to load the layer however long
-/// that takes). Δ is each trial's own, read off its record: the steady
-/// course is the straight line through the force the advancing needle
-/// cuts with 3–6 mm past the fall ([`RELOADED_FROM_M`]), carried back to
-/// the fall, and Δ is how far the bottom of the fall lies below it — so,
-/// like a wall's force, it is the withheld trial's own reading, and its
-/// held-out score is that of the law's shape and gain. The column is
-/// −Δ·e^{−s/λ} times the share of the cutting force the nominal has on,
-/// its gain 1 where the law holds. Zero at λ = 0, and in a trial whose
-/// fall lies within three noise sd of that line (or above it), or that
-/// does not cut along 1.5 mm of that stretch.
-fn reloading(p: &Prepared, reload_m: f64) -> Vec<f64> {
-    let n = p.trial.len();
-    let mut col = vec![0.0; n];
-    let Some(last_loading) = (0..n).rev().find(|&i| p.phase[i] == LOADING) else {
-        return col;
-    };
-    if reload_m <= 0.0 || last_loading + 1 >= n {
-        return col;
-    }
-    let (x, f) = (&p.trial.x_m, &p.trial.f_n);
-    // The bottom of the fall: the lowest force over the first
-    // [`FALL_ADVANCE_M`] past the loading curve, at any sample rate.
-    let fall_end = (last_loading + 1..n)
-        .find(|&i| x[i] - x[last_loading + 1] > FALL_ADVANCE_M)
-        .unwrap_or(n);
-    let bottom = (last_loading + 1..fall_end)
-        .min_by(|&i, &j| f[i].total_cmp(&f[j]))
-        .unwrap_or(last_loading + 1);
-    let past_m = |i: usize| x[i] - x[bottom];
-    let cutting = |i: usize| p.cutting[i] > 0.5 && p.velocity.v_mps[i] >= p.params.half_band_mps;
-    let steady: Vec<usize> = (bottom..n)
-        .filter(|&i| cutting(i) && (RELOADED_FROM_M..=2.0 * RELOADED_FROM_M).contains(&past_m(i)))
-        .collect();
-    let (Some(&first), Some(&last)) = (steady.first(), steady.last()) else {
-        return col;
-    };
-    if past_m(last) - past_m(first) < 0.5 * RELOADED_FROM_M {
-        return col;
-    }
-    let mut line = Lsq::<2>::default();
-    for &i in &steady {
-        line.add([1.0, past_m(i)], f[i]);
-    }
-    let Some([steady_at_fall_n, _]) = line.solve() else {
-        return col;
-    };
-    let deficit_n = steady_at_fall_n - f[bottom];
-    if deficit_n <= 3.0 * p.noise_n {
-        return col;
-    }
-    let mut deepest_m = x[bottom];
-    for i in bottom..n {
-        deepest_m = deepest_m.max(x[i]);
-        col[i] = -deficit_n * p.cutting[i] * (-(deepest_m - x[bottom]) / reload_m).exp();
-    }
-    col
-}
-
-/// Past the fall by this much, a layer loaded again has reached its
-/// steady course (the recordings: within 3 mm; the longest λ tried
-/// leaves 5 % of the deficit there); [`reloading`] reads the course from
-/// here to twice as far.
-const RELOADED_FROM_M: f64 = 0.003;
-
-/// A puncture's fall takes two samples at a real rig's 100 Hz: at 2 mm/s
-/// 40 µm of advance. Its bottom is looked for over this much, whatever
-/// the sample rate.
-const FALL_ADVANCE_M: f64 = 0.000_2;
+/// The depth at which [`depth_cutting`]'s growth is given.
+const GROWTH_DEPTH_M: f64 = 0.01;
 
 /// [`inertia`]'s grid: a rigid holder (0), a drive's first-order lag of
 /// 3, 10 or 30 ms, then, from 1 on, the mounts of [`mount_at`], a mode

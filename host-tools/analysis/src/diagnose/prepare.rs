@@ -121,6 +121,10 @@ pub struct Prepared {
     /// front, 1 to 0 over the compliance chosen on the trial
     /// (the `tip` module); made once, with the rest of the trial.
     pub tip_unloading: Vec<f64>,
+    /// The layer beneath the capsule loaded again after the puncture: the
+    /// force's shortfall below its steady course, as the trial reads it
+    /// (the `reload` module); made once, with the rest of the trial.
+    pub reload: Vec<f64>,
     /// The first sample of the needle out of the tissue for good as the
     /// measured force has it (see `came_free` in this module); the trial's length if it
     /// does not say.
@@ -368,10 +372,12 @@ pub fn prepare(
         structures,
         trial,
         tip_unloading: Vec::new(),
+        reload: Vec::new(),
         search: Default::default(),
         sudden: Default::default(),
     };
     prepared.tip_unloading = super::tip::unloading(&prepared);
+    prepared.reload = super::reload::reloading(&prepared);
     prepared
 }
 

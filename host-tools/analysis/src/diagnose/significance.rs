@@ -6,7 +6,7 @@
 //! ([`Bar::a_cause`], [`Bar::stand`]).
 
 use super::crossval::paired_t;
-use super::prepare::{DWELL, PHASES};
+use super::prepare::{DWELL, INSERTION, PHASES};
 use super::Scored;
 
 /// Least held-out shrink that can name an effect.
@@ -186,6 +186,34 @@ impl Bar {
                 })
         };
         (shrink >= MIN_SHRINK && consistency.holds() && taken >= least) || at_rest()
+    }
+
+    /// Whether a step that acts only where the tip cuts (cutting's
+    /// profile along depth in each trial) is significant measured there,
+    /// as [`Bar::worthy`] measures an effect at rest in the dwell: it
+    /// shrinks the whole trials by [`MIN_SHRINK`], consistently, most of
+    /// its gain ([`PHASE_TAKES`]) lies in the insertion, and what it takes
+    /// there is no less than [`MIN_EFFECT_FLOORS`] of the noise floor. On
+    /// insert–dwell–withdraw the insertion is a third of each trial; the
+    /// rest, fitted to the noise, would dilute a profile that takes 22 mN
+    /// of the insertion on a 12 mN floor (the nominal reading each
+    /// trial's reload at the fall) to 5.8 mN over the whole.
+    pub(super) fn worthy_where_it_cuts(self, before: &Scored, after: &Scored) -> bool {
+        let (shrink, consistency) = improvement(before, after);
+        let gains = phase_gains(before, after);
+        let total: f64 = gains.iter().sum();
+        let (Some(b), Some(a)) = (
+            mean_square(before.by_phase[INSERTION]),
+            mean_square(after.by_phase[INSERTION]),
+        ) else {
+            return false;
+        };
+        let taken = (b - a).max(0.0).sqrt();
+        shrink >= MIN_SHRINK
+            && consistency.holds()
+            && total > 0.0
+            && gains[INSERTION] >= PHASE_TAKES * total
+            && taken >= MIN_EFFECT_FLOORS * self.noise_n
     }
 
     /// The share of the gap (the baseline's mean square above the noise)
