@@ -6,23 +6,24 @@
 //! it cuts. Every real recording shows it: the force falls to 20–45 % of
 //! the peak and climbs 1.2–3.3× within the next 3 mm, by a different
 //! amount in each insertion. The paper's model cuts at its full force
-//! from the fall on; so judged, the reload's misfit (up to half a newton
-//! at the fall of a skin phantom) was read as a cutting that depends on
-//! depth in every recording. It is each insertion's own, as the capsule's
+//! from the fall on; so judged, the reload's misfit (0.7–2.2 N at the
+//! fall of a skin phantom written apart) was read as a cutting that
+//! depends on depth in every recording. It is each insertion's own, as the capsule's
 //! yield before it tears is, and the nominal reads it off the trial.
 
 use super::prepare::{Prepared, LOADING};
 use crate::fit::lsq::Lsq;
 
 /// The force's shortfall below its steady course after the puncture, per
-/// sample: −Δ·e^{−s/λ} times the share of the cutting force the nominal
-/// has on, s the tip's deepest advance past the bottom of the fall (a
-/// length, since the tip must advance to load the layer however long
-/// that takes). The steady course is the straight line through the force
-/// the advancing needle cuts with 3–6 mm past the fall
-/// ([`RELOADED_FROM_M`]), carried back to the fall; Δ is how far the
-/// bottom of the fall lies below it, and λ the length of
-/// [`reload_lengths_m`] that follows the record from the bottom to the
+/// sample from the first past the loading curve: −Δ·e^{−s/λ} times the
+/// share of the cutting force the nominal has on, s the tip's deepest
+/// advance past the bottom of the fall, none before it (a length, since
+/// the tip must advance to load the layer however long that takes). The
+/// steady course is the straight line through the force the advancing
+/// needle cuts with 3–6 mm past the fall ([`RELOADED_FROM_M`]), carried
+/// back to the fall where it rises with depth ([`Fall::course_n`]); Δ is
+/// how far the bottom of the fall lies below it, and λ the length of
+/// [`reload_lengths_m`] that follows the record from the fall to the
 /// steady stretch best — both the trial's own reading, the withheld
 /// trial's too, by this rule fixed before any effect is looked at. Its
 /// gain is 1 where the law holds. Zero in a trial whose fall lies within
