@@ -161,14 +161,14 @@ impl Bar {
     /// for the bar) leaves no course in time there for a candidate to
     /// take; in a phase of motion it does (a friction or cutting scale
     /// per trial that the shared law misses along depth), and there the
-    /// whole trial is the measure. Where the dwell holds most of what is
-    /// to explain ([`Bar::gap_at_rest`]), so is its shrink, [`MIN_SHRINK`]
-    /// of the dwell's RMS, with no loss over the whole trial: a nominal
-    /// that fits the rest of the trial better leaves such an effect a
-    /// smaller share of the whole, not a smaller one where it acts.
-    /// Where most lies in the motion (a cutting that wanders along each
-    /// path), a step of the dwell is measured against the whole, and
-    /// does not lead what takes most of it.
+    /// whole trial is the measure. Where more of what is to explain lies
+    /// in the dwell than in any phase of motion ([`Bar::rest_leads`]), so
+    /// is its shrink, [`MIN_SHRINK`] of the dwell's RMS, with no loss over
+    /// the whole trial: a nominal that fits the rest of the trial better
+    /// leaves such an effect a smaller share of the whole, not a smaller
+    /// one where it acts. Where a phase of motion holds more (a cutting
+    /// that wanders along each path), a step of the dwell is measured
+    /// against the whole, and does not lead what takes most of it.
     pub(super) fn worthy(self, before: &Scored, after: &Scored) -> bool {
         let (shrink, consistency) = improvement(before, after);
         let least = MIN_EFFECT_FLOORS * self.noise_n;
@@ -177,9 +177,7 @@ impl Bar {
             self.taken_at_rest(before, after)
                 .is_some_and(|(taken, dwell_shrink)| {
                     let shrunk = shrink >= MIN_SHRINK
-                        || (shrink > 0.0
-                            && dwell_shrink >= MIN_SHRINK
-                            && self.gap_at_rest(before) >= PHASE_TAKES);
+                        || (shrink > 0.0 && dwell_shrink >= MIN_SHRINK && self.rest_leads(before));
                     taken >= least
                         && shrunk
                         && (consistency.holds() || rest_consistency(before, after).holds())
@@ -288,13 +286,17 @@ impl Bar {
         taken > 0.0 && held >= PHASE_TAKES * taken
     }
 
-    /// The share of `before`'s excess over the noise (summed over its
-    /// samples, in squared error) that lies in the dwell.
-    fn gap_at_rest(self, before: &Scored) -> f64 {
+    /// Whether more of `before`'s excess over the noise (summed over its
+    /// samples, in squared error) lies in the dwell than in any other
+    /// phase.
+    fn rest_leads(self, before: &Scored) -> bool {
         let noise_ms = self.noise_n * self.noise_n;
         let excess = |(sse, n): (f64, usize)| (sse - noise_ms * n as f64).max(0.0);
-        let total: f64 = before.by_phase.iter().map(|&p| excess(p)).sum();
-        excess(before.by_phase[DWELL]) / total.max(f64::MIN_POSITIVE)
+        let at_rest = excess(before.by_phase[DWELL]);
+        at_rest > 0.0
+            && (0..PHASES.len())
+                .filter(|&k| k != DWELL)
+                .all(|k| excess(before.by_phase[k]) < at_rest)
     }
 
     /// What a step takes in the dwell (held-out RMS, N) and its shrink
@@ -641,6 +643,13 @@ mod tests {
         let moving_after = trials_by_phase([n2 + 0.5e-4, n2, n2], counts);
         assert!(improvement(&moving, &moving_after).0 < MIN_SHRINK);
         assert!(!bar.worthy(&moving, &moving_after));
+        // Beside a withdrawal and an insertion that together hold more of
+        // the gap than the dwell (47 %), each less: the dwell is still
+        // where most of it lies.
+        let spread = trials_by_phase([n2 + 0.4e-5, n2 + 0.8e-4, n2 + 1.4e-5], counts);
+        let spread_after = trials_by_phase([n2 + 0.4e-5, n2, n2 + 1.4e-5], counts);
+        assert!(improvement(&spread, &spread_after).0 < MIN_SHRINK);
+        assert!(bar.worthy(&spread, &spread_after));
     }
 
     /// Relaxation on trials driven at 1, 2 and 3 mm/s: the slow trials'
