@@ -192,11 +192,9 @@ struct Cut {
 
 impl Cut {
     fn of(p: &Prepared, residual_n: Vec<f64>) -> Self {
-        // Advancing with the cutting on: at rest the nominal holds the
-        // tip's force, at one depth, and a dwell's samples are no profile.
-        let cuts = |i: usize| p.cutting[i] > 0.5 && p.velocity.v_mps[i] >= p.params.half_band_mps;
+        // Where the needle cuts: a dwell's samples are no profile.
         let mut by_depth: Vec<(f64, usize)> = (0..p.trial.len())
-            .filter(|&i| cuts(i))
+            .filter(|&i| p.cuts(i))
             .map(|i| (p.trial.x_m[i], i))
             .collect();
         by_depth.sort_by(|a, b| a.0.total_cmp(&b.0));

@@ -663,7 +663,7 @@ struct Fixed<'s, 'c> {
 impl<'s, 'c> Fixed<'s, 'c> {
     /// Made once, not once per grid value or per candidate: a fixed
     /// tissue_motion re-evaluates the model a dozen times per trial, and
-    /// the sums of the nominal's own 17 columns are most of a score's.
+    /// the sums of the nominal's own columns are most of a score's.
     fn of(data: &[Prepared], set: &'s [(&'c Candidate, f64)]) -> Self {
         let cols: Vec<_> = data.iter().map(|p| columns(p, set)).collect();
         let supports = Supports::all(data, &cols);

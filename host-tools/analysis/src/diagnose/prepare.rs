@@ -231,6 +231,13 @@ impl Prepared {
         sudden.as_deref().unwrap_or(self)
     }
 
+    /// The needle cuts at sample `i`: advancing, with the nominal's
+    /// cutting more than half on (at rest the nominal holds the tip's
+    /// force, at one depth).
+    pub fn cuts(&self, i: usize) -> bool {
+        self.cutting[i] > 0.5 && self.velocity.v_mps[i] >= self.params.half_band_mps
+    }
+
     /// The needle touches tissue at sample `i`: loading, or after the
     /// puncture until the measured force says it came free, or where it
     /// does not say, with some of its length in the tissue as the nominal

@@ -34,9 +34,7 @@ pub(super) fn reloading(p: &Prepared) -> Vec<f64> {
     let Some(last_loading) = (0..n).rev().find(|&i| p.phase[i] == LOADING) else {
         return vec![0.0; n];
     };
-    let cuts: Vec<bool> = (0..n)
-        .map(|i| p.cutting[i] > 0.5 && p.velocity.v_mps[i] >= p.params.half_band_mps)
-        .collect();
+    let cuts: Vec<bool> = (0..n).map(|i| p.cuts(i)).collect();
     Record {
         x_m: &p.trial.x_m,
         f_n: &p.trial.f_n,
@@ -54,8 +52,7 @@ struct Record<'a> {
     f_n: &'a [f64],
     /// The share of the cutting force the nominal has on, each sample.
     cutting: &'a [f64],
-    /// Whether the needle cuts at each sample: advancing, with the
-    /// nominal's cutting more than half on.
+    /// Whether the needle cuts at each sample ([`Prepared::cuts`]).
     cuts: &'a [bool],
     /// The first sample past the loading curve.
     fallen: usize,

@@ -198,20 +198,10 @@ impl Bar {
     /// trial's reload at the fall) to 5.8 mN over the whole.
     pub(super) fn worthy_where_it_cuts(self, before: &Scored, after: &Scored) -> bool {
         let (shrink, consistency) = improvement(before, after);
-        let gains = phase_gains(before, after);
-        let total: f64 = gains.iter().sum();
-        let (Some(b), Some(a)) = (
-            mean_square(before.by_phase[INSERTION]),
-            mean_square(after.by_phase[INSERTION]),
-        ) else {
-            return false;
-        };
-        let taken = (b - a).max(0.0).sqrt();
         shrink >= MIN_SHRINK
             && consistency.holds()
-            && total > 0.0
-            && gains[INSERTION] >= PHASE_TAKES * total
-            && taken >= MIN_EFFECT_FLOORS * self.noise_n
+            && acting_in(INSERTION, before, after)
+                .is_some_and(|(b, a)| (b - a).max(0.0).sqrt() >= MIN_EFFECT_FLOORS * self.noise_n)
     }
 
     /// The share of the gap (the baseline's mean square above the noise)
@@ -304,13 +294,10 @@ impl Bar {
     /// [`PHASE_TAKES`] of its gain and it explains the dwell
     /// ([`Bar::explains_phase`]).
     fn taken_at_rest(self, left: &Scored, after: &Scored) -> Option<(f64, f64)> {
-        let gains = phase_gains(left, after);
-        let taken: f64 = gains.iter().sum();
-        let (b, a) = (left.by_phase[DWELL], after.by_phase[DWELL]);
-        if taken <= 0.0 || gains[DWELL] < PHASE_TAKES * taken || !self.explains_phase(b, a) {
+        if !self.explains_phase(left.by_phase[DWELL], after.by_phase[DWELL]) {
             return None;
         }
-        let (b, a) = (mean_square(b)?, mean_square(a)?);
+        let (b, a) = acting_in(DWELL, left, after)?;
         Some(((b - a).max(0.0).sqrt(), 1.0 - (a / b.max(1e-300)).sqrt()))
     }
 
@@ -331,6 +318,21 @@ impl Bar {
             && ((a - noise_ms).max(0.0) <= PHASE_LEFT * excess
                 || a <= (NOTHING_LEFT_FACTOR * self.noise_n).powi(2))
     }
+}
+
+/// The held-out mean squares (N²) of `phase` before and after a step from
+/// `left` to `after`, if that phase is where the step acts: it holds
+/// [`PHASE_TAKES`] of what the step takes.
+fn acting_in(phase: usize, left: &Scored, after: &Scored) -> Option<(f64, f64)> {
+    let gains = phase_gains(left, after);
+    let taken: f64 = gains.iter().sum();
+    if taken <= 0.0 || gains[phase] < PHASE_TAKES * taken {
+        return None;
+    }
+    Some((
+        mean_square(left.by_phase[phase])?,
+        mean_square(after.by_phase[phase])?,
+    ))
 }
 
 /// What a step from `left` to `after` takes in each phase (held-out
