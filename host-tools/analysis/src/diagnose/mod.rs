@@ -1020,7 +1020,7 @@ pub fn diagnose_with_progress(
     let left = after.as_ref().unwrap_or(&baseline);
     let gap_open = left.rms() > explained_below_n;
     let closest: Vec<&str> = steps.iter().map(|(ci, _)| CANDIDATES[*ci].effect).collect();
-    let credible = bar.stand(&baseline, &steps);
+    let credible = bar.named(&baseline, &steps);
     let effect = verdict_effect(
         steps.first().map(|(ci, _)| CANDIDATES[*ci].effect),
         credible,
@@ -1092,15 +1092,15 @@ pub fn diagnose_with_progress(
 }
 
 /// The verdict's first word, from the first effect the waterfall names,
-/// whether the named ones stand as the gap's cause ([`Bar::stand`]), and
-/// the nominal's held-out RMS with the level under which what is left
-/// counts as explained. Never `none` over a gap: a residual above the
-/// nominal's tolerance that no candidate takes away is something none of
-/// them is, and a gap the named effects leave mostly open is not theirs —
-/// they are the closest, and the verdict is `unexplained`. But where the
-/// nominal itself is within its tolerance there is no gap: candidates
-/// that hold without standing as its cause are the closest to a misfit
-/// the nominal is allowed, and the verdict is `none`.
+/// whether the verdict names it ([`Bar::named`]), and the nominal's
+/// held-out RMS with the level under which what is left counts as
+/// explained. Never `none` over a gap: a residual above the nominal's
+/// tolerance that no candidate takes away is something none of them is,
+/// and one whose first effect is no cause of it is not theirs — they are
+/// the closest, and the verdict is `unexplained`. But where the nominal
+/// itself is within its tolerance there is no gap: candidates that hold
+/// without standing as its cause are the closest to a misfit the nominal
+/// is allowed, and the verdict is `none`.
 fn verdict_effect(
     first: Option<&'static str>,
     credible: bool,
