@@ -172,6 +172,8 @@ fn evaluate_rejects_rates_and_noises_it_cannot_simulate() {
         ("--noise-n", "1e308", "--noise-n 1e308"),
         ("--tare-n", "11", "--tare-n 11"),
         ("--effects", "tissue_motion=1e300", "strength 1e300"),
+        ("--tear-mm", "NaN", "--tear-mm NaN"),
+        ("--tear-mm", "7", "--tear-mm 7"),
     ] {
         let err = refused(&["simulate", "--out", d, "--trials", "1", flag, bad]);
         assert!(err.contains(says), "{flag} {bad}: {err}");

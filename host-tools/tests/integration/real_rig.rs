@@ -29,6 +29,7 @@ const RIG: Rig = Rig {
     jitter: true,
     tare_sd_n: 0.004,
     spread: 0.0,
+    tear_m: 0.0,
 };
 
 /// What varies between the tests' datasets; the rest is [`SENSOR`] and

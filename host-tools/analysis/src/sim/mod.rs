@@ -97,6 +97,13 @@ pub struct Protocol {
     /// last beyond): a heterogeneous tissue, whose cutting force wanders
     /// along each needle's path in its own way. Empty: no wander.
     pub cutting_wander: Vec<f64>,
+    /// How far past its peak the capsule tears, m: a wall with no sharp
+    /// fall (a 3 mm artery's force rolls over and eases off over 1–2.5
+    /// mm; book, *What real recordings look like*) carries less of its
+    /// peak force the further the tip pushes through it
+    /// ([`tearing_share`]). 0: it gives way at once, the paper's
+    /// puncture.
+    pub tear_m: f64,
     /// Sample times, s (a rig's jittered clock with gaps); `None`: every
     /// 1/rate from 0.
     #[serde(skip)]
@@ -105,6 +112,19 @@ pub struct Protocol {
 
 /// Depth between the knots of [`Protocol::cutting_wander`], m.
 pub const WANDER_STEP_M: f64 = 0.0005;
+
+/// The share of its peak force a capsule tearing over `tear_m` still
+/// carries with the tip `past_m` beyond where it peaked: cos², so the
+/// force flattens at the peak and rolls over, easing off to the force
+/// inside the tissue by `tear_m` (none for a wall that gives way at once).
+pub fn tearing_share(past_m: f64, tear_m: f64) -> f64 {
+    if tear_m <= 0.0 || past_m >= tear_m {
+        return 0.0;
+    }
+    (std::f64::consts::FRAC_PI_2 * past_m.max(0.0) / tear_m)
+        .cos()
+        .powi(2)
+}
 
 impl Protocol {
     /// [`Self::cutting_wander`]'s factor `depth_m` past the surface (1
@@ -190,6 +210,9 @@ pub struct Rig {
     /// phantoms 7–13 % on the peak, 9–20 % after it, their hold relaxing
     /// 32–47 %.
     pub spread: f64,
+    /// How far past its peak each trial's capsule tears, m (each trial
+    /// 0.5–1.5 times it; [`Protocol::tear_m`]); 0: a sharp fall.
+    pub tear_m: f64,
 }
 
 /// A ground-truth event. For a puncture or a structure, `t_s` is the
@@ -237,6 +260,7 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
         tent_n_per_m: 0.0,
         tare_n: 0.0,
         cutting_wander: Vec::new(),
+        tear_m: 0.0,
         times_s: None,
         surface_x_m: surface,
         segments: vec![
@@ -303,6 +327,7 @@ pub fn insert_dwell_withdraw(
         tent_n_per_m: rng.gen_range(250.0..600.0),
         tare_n: 0.0,
         cutting_wander: Vec::new(),
+        tear_m: 0.0,
         times_s: None,
     }
 }
@@ -581,6 +606,7 @@ pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
         tent_n_per_m: 0.0,
         tare_n: 0.0,
         cutting_wander: Vec::new(),
+        tear_m: 0.0,
         times_s: None,
         segments: vec![
             Segment::Move {
@@ -665,6 +691,11 @@ pub struct SimulateArgs {
     /// half of it on the puncture depth), within 0..=0.5.
     #[arg(long, default_value_t = 0.0)]
     pub spread: f64,
+    /// The capsule tears over this many mm past its peak instead of
+    /// falling at once (each trial 0.5–1.5 times it): its force rolls over
+    /// and eases off, as a 3 mm artery's does over 1–2.5 mm; 0 to 5.
+    #[arg(long, default_value_t = 0.0)]
+    pub tear_mm: f64,
 }
 
 #[derive(Serialize)]
@@ -980,6 +1011,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if args.layers > 3 {
         bail!("--layers must be within 0..=3");
     }
+    if !(0.0..=5.0).contains(&args.tear_mm) {
+        bail!("--tear-mm {}: must be within 0..=5", args.tear_mm);
+    }
     let tissue = needle_io::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
     let effects = effects::parse_list(&args.effects)?;
     let sensor = Sensor {
@@ -1002,6 +1036,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             jitter: args.jitter,
             tare_sd_n: args.tare_n,
             spread: args.spread,
+            tear_m: args.tear_mm * 1e-3,
         },
     }
     .write(&args.out)?;
@@ -1155,6 +1190,12 @@ impl Dataset<'_> {
                 );
                 let reach_m = deepest_x_m(&protocol) - protocol.surface_x_m;
                 protocol.cutting_wander = cutting_wander(reach_m, size, &mut wander_rng);
+            }
+            if rig.tear_m > 0.0 {
+                let mut tear_rng = ChaCha8Rng::seed_from_u64(
+                    seed.wrapping_mul(3_571).wrapping_add(k as u64) ^ 0x7EA2_7EA2,
+                );
+                protocol.tear_m = rig.tear_m * tear_rng.gen_range(0.5..1.5);
             }
             if rig.jitter {
                 let duration_s = motion::duration_s(&protocol.segments, 0.0);

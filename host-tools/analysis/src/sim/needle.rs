@@ -29,6 +29,9 @@ pub(super) struct Needle<'a> {
     deepest_m: f64,
     /// Where the capsule gave way (tissue frame), m.
     punctured_m: f64,
+    /// The capsule's force where it gave way, N: what a tearing wall
+    /// carries a share of ([`super::tearing_share`]).
+    peak_n: f64,
     /// The friction law's memory of the last sliding direction.
     last_sliding: f64,
     /// The tip's cutting force when the needle last moved, N.
@@ -62,6 +65,7 @@ impl<'a> Needle<'a> {
             relaxed_surface_m: 0.0,
             deepest_m: 0.0,
             punctured_m: 0.0,
+            peak_n: 0.0,
             last_sliding: 0.0,
             last_cutting_n: 0.0,
             previous_m: 0.0,
@@ -119,6 +123,7 @@ impl<'a> Needle<'a> {
             self.relaxed_surface_m = s1 + self.tissue.relaxation * d;
             self.deepest_m = p_m;
             self.punctured_m = p_m;
+            self.peak_n = f;
             truth.puncture_x_m = Some(x_m);
             truth.puncture_force_n = Some(f);
             truth.relaxed_surface_x_m = Some(self.relaxed_surface_m);
@@ -149,7 +154,9 @@ impl<'a> Needle<'a> {
             return 0.0;
         }
         let f = self.shaft_and_tip_n(k, p_m, l, far);
-        let mut f = self.tent.step(protocol, self.tissue, k, (p_m, l), f);
+        let f = self.tent.step(protocol, self.tissue, k, (p_m, l), f);
+        let holding = super::tearing_share(self.deepest_m - self.punctured_m, protocol.tear_m);
+        let mut f = holding * self.peak_n + (1.0 - holding) * f;
         let at = (k.t_s, k.t_s - k.dt_s, x_m);
         for (n, layer) in protocol.layers.iter().enumerate() {
             let stretch = p_m - (protocol.surface_x_m + layer.depth_m);
