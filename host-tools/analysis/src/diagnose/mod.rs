@@ -31,6 +31,7 @@ mod reload;
 mod report;
 mod significance;
 mod stick;
+mod tear;
 mod tip;
 mod waterfall;
 
@@ -137,10 +138,11 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
 /// (`held_in_first_dwell`) and at the static band in the rests after it
 /// (`held_at_the_band`), the tip's load as it lets go on the first
 /// retraction (`tip_unloading`), the capsule's ease past its peak
-/// before it falls (`yielding`), and the layer beneath it loaded again
-/// after the fall (`reload_n`, the `reload` module), which [`SPREAD`]
-/// frees per trial.
-pub const NOMINAL_CORRECTIONS: [&str; 18] = [
+/// before it falls (`yielding`), the layer beneath it loaded again
+/// after the fall (`reload_n`, the `reload` module) and the capsule
+/// tearing past it (`tear_n`, the `tear` module), which [`SPREAD`] frees
+/// per trial.
+pub const NOMINAL_CORRECTIONS: [&str; 19] = [
     "a1_n_per_m",
     "a2_n_per_m2",
     "cp_n_per_m",
@@ -159,6 +161,7 @@ pub const NOMINAL_CORRECTIONS: [&str; 18] = [
     "tip_unloading_n",
     "yield_n_per_m",
     "reload_n",
+    "tear_n",
 ];
 
 /// The corrections each trial has its own value of, fitted on the trial
@@ -171,9 +174,10 @@ pub const NOMINAL_CORRECTIONS: [&str; 18] = [
 /// trial's tissue stops in its static band) and at the band in later
 /// rests, where the withdrawal lets go (its relaxed surface), and the
 /// tip's load as it unloads on the first retraction
-/// (`Prepared::tip_unloading`), and how far the force falls short of its
+/// (`Prepared::tip_unloading`), how far the force falls short of its
 /// course as the layer beneath the capsule is loaded again
-/// (`Prepared::reload`). Real tissue differs from one insertion to the
+/// (`Prepared::reload`), and how far it stands above it as a wall tears
+/// rather than breaks (`Prepared::tear`). Real tissue differs from one insertion to the
 /// next in these (the paper: puncture 2.30 ± 0.83 N, cutting 0.94 ±
 /// 0.36 N; real withdrawals let go 1.5–9 mm before the first contact, a
 /// different place each time; the force climbs back 1.2–3.3× within 3 mm
@@ -188,9 +192,9 @@ pub const NOMINAL_CORRECTIONS: [&str; 18] = [
 /// `friction_scale_let_go` (the friction of a withdrawal once the tissue
 /// it dragged out has let go, its own scale: the shaft then slides
 /// through tissue that was stretched and let go, whose friction the
-/// insertion need not set), `tip_unloading_n`, `yield_n_per_m` and
-/// `reload_n`.
-pub const SPREAD: [usize; 15] = [0, 3, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17];
+/// insertion need not set), `tip_unloading_n`, `yield_n_per_m`,
+/// `reload_n` and `tear_n`.
+pub const SPREAD: [usize; 16] = [0, 3, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
@@ -253,6 +257,7 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
     cols.push(p.tip_unloading.clone());
     cols.push(yielding(p));
     cols.push(p.reload.clone());
+    cols.push(p.tear.clone());
     cols.extend(set.iter().flat_map(|(c, g)| (c.columns)(p, *g)));
     cols
 }

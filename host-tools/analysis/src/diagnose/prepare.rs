@@ -125,6 +125,9 @@ pub struct Prepared {
     /// force's shortfall below its steady course, as the trial reads it
     /// (the `reload` module); made once, with the rest of the trial.
     pub reload: Vec<f64>,
+    /// The capsule's excess over the course as it tears, the nominal's
+    /// column (the `tear` module); made once, after the reload.
+    pub tear: Vec<f64>,
     /// The first sample of the needle out of the tissue for good as the
     /// measured force has it (see `came_free` in this module); the trial's length if it
     /// does not say.
@@ -380,11 +383,13 @@ pub fn prepare(
         trial,
         tip_unloading: Vec::new(),
         reload: Vec::new(),
+        tear: Vec::new(),
         search: Default::default(),
         sudden: Default::default(),
     };
     prepared.tip_unloading = super::tip::unloading(&prepared);
     prepared.reload = super::reload::reloading(&prepared);
+    prepared.tear = super::tear::tearing(&prepared);
     prepared
 }
 

@@ -30,36 +30,38 @@ use crate::fit::lsq::Lsq;
 /// three noise sd of that line (or above it), or that does not cut along
 /// 1.5 mm of that stretch.
 pub(super) fn reloading(p: &Prepared) -> Vec<f64> {
-    let n = p.trial.len();
-    let Some(last_loading) = (0..n).rev().find(|&i| p.phase[i] == LOADING) else {
-        return vec![0.0; n];
-    };
-    let cuts: Vec<bool> = (0..n).map(|i| p.cuts(i)).collect();
-    Record {
-        x_m: &p.trial.x_m,
-        f_n: &p.trial.f_n,
-        cutting: &p.cutting,
-        cuts: &cuts,
-        fallen: last_loading + 1,
-        noise_n: p.noise_n,
-    }
-    .shortfall()
+    let cuts: Vec<bool> = (0..p.trial.len()).map(|i| p.cuts(i)).collect();
+    Record::of(p, &cuts).map_or_else(|| vec![0.0; p.trial.len()], |r| r.shortfall())
 }
 
 /// What [`reloading`] reads of one trial.
-struct Record<'a> {
-    x_m: &'a [f64],
-    f_n: &'a [f64],
+pub(super) struct Record<'a> {
+    pub(super) x_m: &'a [f64],
+    pub(super) f_n: &'a [f64],
     /// The share of the cutting force the nominal has on, each sample.
-    cutting: &'a [f64],
+    pub(super) cutting: &'a [f64],
     /// Whether the needle cuts at each sample ([`Prepared::cuts`]).
-    cuts: &'a [bool],
+    pub(super) cuts: &'a [bool],
     /// The first sample past the loading curve.
-    fallen: usize,
-    noise_n: f64,
+    pub(super) fallen: usize,
+    pub(super) noise_n: f64,
 }
 
-impl Record<'_> {
+impl<'a> Record<'a> {
+    /// `p`'s record past its loading curve, with `cuts` its
+    /// [`Prepared::cuts`] at every sample; `None` with no loading curve.
+    pub(super) fn of(p: &'a Prepared, cuts: &'a [bool]) -> Option<Self> {
+        let last_loading = (0..p.trial.len()).rev().find(|&i| p.phase[i] == LOADING)?;
+        Some(Record {
+            x_m: &p.trial.x_m,
+            f_n: &p.trial.f_n,
+            cutting: &p.cutting,
+            cuts,
+            fallen: last_loading + 1,
+            noise_n: p.noise_n,
+        })
+    }
+
     /// [`reloading`]'s column.
     fn shortfall(&self) -> Vec<f64> {
         let mut col = vec![0.0; self.x_m.len()];
@@ -99,6 +101,13 @@ impl Record<'_> {
     /// along at least 1.5 mm lies more than three noise sd above the
     /// fall's bottom.
     fn fall(&self) -> Option<Fall> {
+        self.course().filter(|fall| fall.broke(self.noise_n))
+    }
+
+    /// The fall and the steady course past it, if a stretch 3–6 mm past
+    /// the fall's bottom is cut along for at least 1.5 mm, however far
+    /// the bottom lies below the course (or above it).
+    pub(super) fn course(&self) -> Option<Fall> {
         let (x, f, n) = (self.x_m, self.f_n, self.x_m.len());
         let fallen = self.fallen;
         if fallen >= n {
@@ -130,7 +139,7 @@ impl Record<'_> {
             deficit_n: 0.0,
         };
         fall.deficit_n = fall.course_n(x[bottom]) - f[bottom];
-        (fall.deficit_n > 3.0 * self.noise_n).then_some(fall)
+        Some(fall)
     }
 }
 
@@ -145,9 +154,9 @@ fn reload_lengths_m() -> impl Iterator<Item = f64> {
 }
 
 /// A puncture's fall and the steady course the force climbs back to.
-struct Fall {
+pub(super) struct Fall {
     /// The first sample past the steady stretch.
-    steady_end: usize,
+    pub(super) steady_end: usize,
     /// The steady course's force at the bottom's position, N, and its
     /// slope, N/m.
     at_bottom_n: f64,
@@ -159,6 +168,12 @@ struct Fall {
 }
 
 impl Fall {
+    /// Whether the capsule broke: the fall's bottom lies more than three
+    /// noise sd (`noise_n`) below the course.
+    pub(super) fn broke(&self, noise_n: f64) -> bool {
+        self.deficit_n > 3.0 * noise_n
+    }
+
     /// The steady course's force at position `x_m`, N: the line through
     /// the steady stretch, carried back to the fall where it rises with
     /// depth (as the shaft's friction grows); where it falls with depth
@@ -166,7 +181,7 @@ impl Fall {
     /// carry back, and is held at its level where the stretch begins —
     /// carried back, a line falling 1.4 N a millimetre put a course
     /// 4.5 N above a fall's bottom.
-    fn course_n(&self, x_m: f64) -> f64 {
+    pub(super) fn course_n(&self, x_m: f64) -> f64 {
         let mut past_m = x_m - self.bottom_x_m;
         if self.slope_n_per_m < 0.0 {
             past_m = past_m.max(RELOADED_FROM_M);
@@ -186,28 +201,37 @@ const RELOADED_FROM_M: f64 = 0.003;
 const FALL_ADVANCE_M: f64 = 0.000_2;
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
-    /// An insertion at 20 µm a sample whose capsule gave way at sample
-    /// 100: the force then follows `course_n` of the advance past the
-    /// fall, `force_n` of (sample, advance) is what the samples read
-    /// from the fall on, with noise of sd 10 mN (a fixed ±1 sequence).
-    /// The needle cuts throughout with the nominal's cutting on.
-    fn column(force_n: impl Fn(usize, f64) -> f64) -> Vec<f64> {
-        let n = 600;
-        let x: Vec<f64> = (0..n).map(|i| 2e-5 * i as f64).collect();
-        let f: Vec<f64> = (0..n)
+    /// 600 samples of an insertion at 20 µm a sample: positions (m) and
+    /// forces (N), `force_n` of (sample, advance past sample 100) with
+    /// noise of sd 10 mN (a fixed ±1 sequence).
+    pub(in crate::diagnose) fn insertion(
+        force_n: impl Fn(usize, f64) -> f64,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let x: Vec<f64> = (0..600).map(|i| 2e-5 * i as f64).collect();
+        let f = (0..600)
             .map(|i| {
                 let noise = if (i as u32).wrapping_mul(2_654_435_761) >> 16 & 1 == 0 {
                     0.01
                 } else {
                     -0.01
                 };
-                let past_m = x[i] - x[100];
-                noise + if i < 100 { 3.0 } else { force_n(i, past_m) }
+                noise + force_n(i, x[i] - x[100])
             })
             .collect();
+        (x, f)
+    }
+
+    /// An insertion ([`insertion`]) whose capsule gave way at sample
+    /// 100: the force then follows `course_n` of the advance past the
+    /// fall, `force_n` of (sample, advance) is what the samples read
+    /// from the fall on. The needle cuts throughout with the nominal's
+    /// cutting on.
+    fn column(force_n: impl Fn(usize, f64) -> f64) -> Vec<f64> {
+        let (x, f) = insertion(|i, past_m| if i < 100 { 3.0 } else { force_n(i, past_m) });
+        let n = x.len();
         let (cutting, cuts) = (vec![1.0; n], vec![true; n]);
         Record {
             x_m: &x,
