@@ -126,7 +126,8 @@ pub struct Prepared {
     /// (the `reload` module); made once, with the rest of the trial.
     pub reload: Vec<f64>,
     /// The capsule's excess over the course as it tears, the nominal's
-    /// column (the `tear` module); made once, after the reload.
+    /// column (the `tear` module); made once, with the reload (a trial's
+    /// wall breaks or tears: one of the two is zero).
     pub tear: Vec<f64>,
     /// The first sample of the needle out of the tissue for good as the
     /// measured force has it (see `came_free` in this module); the trial's length if it
@@ -388,8 +389,9 @@ pub fn prepare(
         sudden: Default::default(),
     };
     prepared.tip_unloading = super::tip::unloading(&prepared);
-    prepared.reload = super::reload::reloading(&prepared);
-    prepared.tear = super::tear::tearing(&prepared);
+    let [reload, tear] = super::reload::after_the_fall(&prepared);
+    prepared.reload = reload;
+    prepared.tear = tear;
     prepared
 }
 

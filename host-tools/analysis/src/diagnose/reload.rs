@@ -29,12 +29,24 @@ use crate::fit::lsq::Lsq;
 /// gain is 1 where the law holds. Zero in a trial whose fall lies within
 /// three noise sd of that line (or above it), or that does not cut along
 /// 1.5 mm of that stretch.
-pub(super) fn reloading(p: &Prepared) -> Vec<f64> {
-    let cuts: Vec<bool> = (0..p.trial.len()).map(|i| p.cuts(i)).collect();
-    Record::of(p, &cuts).map_or_else(|| vec![0.0; p.trial.len()], |r| r.shortfall())
+///
+/// A wall breaks or tears: where its fall's bottom lies within three
+/// noise sd of the course (or above it) the trial's second column is
+/// the capsule's tear (`super::tear`), read over the same course; the
+/// two are never both on. Returns `[reload, tear]`.
+pub(super) fn after_the_fall(p: &Prepared) -> [Vec<f64>; 2] {
+    let n = p.trial.len();
+    let cuts: Vec<bool> = (0..n).map(|i| p.cuts(i)).collect();
+    match (
+        Record::of(p, &cuts),
+        p.trial.x_m.get(p.geometry.puncture_index),
+    ) {
+        (Some(record), Some(&peak_x_m)) => record.after_the_fall(peak_x_m),
+        _ => [vec![0.0; n], vec![0.0; n]],
+    }
 }
 
-/// What [`reloading`] reads of one trial.
+/// What [`after_the_fall`] reads of one trial.
 pub(super) struct Record<'a> {
     pub(super) x_m: &'a [f64],
     pub(super) f_n: &'a [f64],
@@ -50,7 +62,7 @@ pub(super) struct Record<'a> {
 impl<'a> Record<'a> {
     /// `p`'s record past its loading curve, with `cuts` its
     /// [`Prepared::cuts`] at every sample; `None` with no loading curve.
-    pub(super) fn of(p: &'a Prepared, cuts: &'a [bool]) -> Option<Self> {
+    fn of(p: &'a Prepared, cuts: &'a [bool]) -> Option<Self> {
         let last_loading = (0..p.trial.len()).rev().find(|&i| p.phase[i] == LOADING)?;
         Some(Record {
             x_m: &p.trial.x_m,
@@ -62,12 +74,20 @@ impl<'a> Record<'a> {
         })
     }
 
-    /// [`reloading`]'s column.
-    fn shortfall(&self) -> Vec<f64> {
+    /// [`after_the_fall`]'s columns for this record, whose capsule
+    /// peaked at `peak_x_m`.
+    pub(super) fn after_the_fall(&self, peak_x_m: f64) -> [Vec<f64>; 2] {
+        let zeros = || vec![0.0; self.x_m.len()];
+        match self.course() {
+            Some(fall) if fall.broke(self.noise_n) => [self.shortfall(&fall), zeros()],
+            Some(fall) => [zeros(), super::tear::excess(self, &fall, peak_x_m)],
+            None => [zeros(), zeros()],
+        }
+    }
+
+    /// The reload's column after `fall`, a break.
+    fn shortfall(&self, fall: &Fall) -> Vec<f64> {
         let mut col = vec![0.0; self.x_m.len()];
-        let Some(fall) = self.fall() else {
-            return col;
-        };
         let x = self.x_m;
         // From the first sample past the loading curve: the samples of
         // the fall before its lowest one (which noise picks among them)
@@ -97,17 +117,10 @@ impl<'a> Record<'a> {
         col
     }
 
-    /// The fall, if the force reloads after it: a steady stretch cut
-    /// along at least 1.5 mm lies more than three noise sd above the
-    /// fall's bottom.
-    fn fall(&self) -> Option<Fall> {
-        self.course().filter(|fall| fall.broke(self.noise_n))
-    }
-
     /// The fall and the steady course past it, if a stretch 3–6 mm past
     /// the fall's bottom is cut along for at least 1.5 mm, however far
     /// the bottom lies below the course (or above it).
-    pub(super) fn course(&self) -> Option<Fall> {
+    fn course(&self) -> Option<Fall> {
         let (x, f, n) = (self.x_m, self.f_n, self.x_m.len());
         let fallen = self.fallen;
         if fallen >= n {
@@ -143,7 +156,7 @@ impl<'a> Record<'a> {
     }
 }
 
-/// Reload lengths λ [`reloading`] chooses from, m: a geometric grid from
+/// Reload lengths λ [`Record::shortfall`] chooses from, m: a geometric grid from
 /// a quarter of a millimetre to about two and a half, each a quarter past
 /// the one before. Real recordings reload within 3 mm (λ ≤ 1 mm); a
 /// slower one is allowed for. A shorter one is not a layer loaded again:
@@ -191,7 +204,7 @@ impl Fall {
 }
 
 /// Past the fall by this much, a layer loaded again has reached its
-/// steady course (the recordings: within 3 mm); [`reloading`] reads the
+/// steady course (the recordings: within 3 mm); [`Record::course`] reads the
 /// course from here to twice as far.
 const RELOADED_FROM_M: f64 = 0.003;
 
@@ -233,7 +246,7 @@ pub(super) mod tests {
         let (x, f) = insertion(|i, past_m| if i < 100 { 3.0 } else { force_n(i, past_m) });
         let n = x.len();
         let (cutting, cuts) = (vec![1.0; n], vec![true; n]);
-        Record {
+        let [reload, _] = Record {
             x_m: &x,
             f_n: &f,
             cutting: &cutting,
@@ -241,7 +254,8 @@ pub(super) mod tests {
             fallen: 100,
             noise_n: 0.01,
         }
-        .shortfall()
+        .after_the_fall(x[100]);
+        reload
     }
 
     /// A layer loaded again: 0.6 N short of a course of 1 N rising 20 N/m

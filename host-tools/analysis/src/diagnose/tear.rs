@@ -11,8 +11,7 @@
 //! insertion's own, as the capsule's yield before it falls is, and the
 //! nominal reads it off the trial.
 
-use super::prepare::Prepared;
-use super::reload::Record;
+use super::reload::{Fall, Record};
 
 /// The force's excess over its steady course as the capsule tears, per
 /// sample from the first past the loading curve: A·g(s/L), s the tip's
@@ -25,35 +24,16 @@ use super::reload::Record;
 /// the steady stretch's end, and g and L are the pair of [`SHAPES`] ×
 /// [`tear_lengths_m`] that leave least — the trial's own reading, the
 /// withheld trial's too, by this rule fixed before any effect is looked
-/// at. Its gain is 1 where the law holds. A wall tears or breaks: zero
-/// where the force falls three noise sd below the course within the
-/// fall's first samples (a break, whose aftermath is the reload's — and
-/// a compliant mount's ring, which rebounds above the course after its
-/// first trough), where A is under three noise sd, or with no such
-/// course.
-pub(super) fn tearing(p: &Prepared) -> Vec<f64> {
-    let n = p.trial.len();
-    let cuts: Vec<bool> = (0..n).map(|i| p.cuts(i)).collect();
-    match (
-        Record::of(p, &cuts),
-        p.trial.x_m.get(p.geometry.puncture_index),
-    ) {
-        (Some(record), Some(&peak_x_m)) => excess(&record, peak_x_m),
-        _ => vec![0.0; n],
-    }
-}
-
-/// [`tearing`]'s column for `record`, whose capsule peaked at
-/// `peak_x_m`.
-fn excess(record: &Record, peak_x_m: f64) -> Vec<f64> {
+/// at. Its gain is 1 where the law holds; zero where A is under three
+/// noise sd. Read only after a `fall` that is no break
+/// (`super::reload::after_the_fall`): a wall tears or breaks, and after
+/// a break the force's aftermath is the reload's — and a compliant
+/// mount's ring, which rebounds above the course after its first
+/// trough.
+pub(super) fn excess(record: &Record, fall: &Fall, peak_x_m: f64) -> Vec<f64> {
     let (x, f) = (record.x_m, record.f_n);
     let n = x.len();
     let mut col = vec![0.0; n];
-    // A wall that broke, its force fallen below the course within a few
-    // samples (what the reload reads), did not tear.
-    let Some(fall) = record.course().filter(|fall| !fall.broke(record.noise_n)) else {
-        return col;
-    };
     let from = record.fallen;
     let deepest: Vec<f64> = x[from..]
         .iter()
@@ -120,7 +100,7 @@ const SHAPES: [Shape; 4] = [
     |u| (1.0 - u).clamp(0.0, 1.0).powi(2),
 ];
 
-/// Tear lengths L [`tearing`] chooses from, m: a geometric grid from half
+/// Tear lengths L [`excess`] chooses from, m: a geometric grid from half
 /// a millimetre to about three and a half, each 15 % past the one before
 /// (a tear of 1.8 N read off the grid is then within 0.1 N of itself).
 /// An artery's force eases off over 1–2.5 mm. A shorter ease is not a
@@ -160,7 +140,8 @@ mod tests {
             fallen: 103,
             noise_n: 0.01,
         };
-        excess(&record, x[100])
+        let [_, tear] = record.after_the_fall(x[100]);
+        tear
     }
 
     /// A wall tearing over 1.53 mm (a length of the grid) and over 1.62
