@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # `needle diagnose` on a generator written apart from the analysis
 # (`validation/GENERATOR/`, Python, each its own author's physics and
-# choices, neither having read the analysis, this project's simulator or
-# `host-tools/tests/integration/apart/`): `second-apart` or `third-apart`.
-# Fifteen datasets of ten trials each: no effect on both protocols, one
+# choices, none having read the analysis, this project's simulator or
+# `host-tools/tests/integration/apart/`): `second-apart`, `third-apart` or
+# `fourth-apart`. The first two: fifteen datasets of ten trials each: no
+# effect on both protocols, one
 # effect each, and three phantoms with real recordings' traits. One line a
 # dataset: ok or BAD (the first effect named is one the data holds, or
 # `none` where it holds none), the dataset, what it holds, what is named
@@ -13,11 +14,12 @@
 #   scripts/written-apart.sh GENERATOR [SEED] [OUT]   (SEED defaults to 2;
 #                                                     about a minute on two cores)
 #
-# Needs python3 (the generator, and to read the JSON). Seed 1 of each was
+# (`fourth-apart`: nine, walls that tear, with and without relaxation.)
+# Needs python3 (the generator, and to read the JSON). Seed 1 of the first two was
 # looked at while the analysis changed (the book's *Sim-to-real gap
 # diagnosis* says what it led to); other seeds were not.
 set -euo pipefail
-generator=${1:?usage: scripts/written-apart.sh second-apart|third-apart [SEED] [OUT]}
+generator=${1:?usage: scripts/written-apart.sh second-apart|third-apart|fourth-apart [SEED] [OUT]}
 seed=${2:-2}
 out=${3:-/dev/stdout}
 . "$(dirname "$0")/common.sh"
