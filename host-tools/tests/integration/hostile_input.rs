@@ -174,6 +174,9 @@ fn evaluate_rejects_rates_and_noises_it_cannot_simulate() {
         ("--effects", "tissue_motion=1e300", "strength 1e300"),
         ("--tear-mm", "NaN", "--tear-mm NaN"),
         ("--tear-mm", "7", "--tear-mm 7"),
+        ("--accel-mps2", "NaN", "--accel-mps2 NaN"),
+        ("--accel-mps2", "20", "--accel-mps2 20"),
+        ("--accel-mps2", "0.001", "--accel-mps2 0.001"),
     ] {
         let err = refused(&["simulate", "--out", d, "--trials", "1", flag, bad]);
         assert!(err.contains(says), "{flag} {bad}: {err}");

@@ -213,6 +213,11 @@ pub struct Rig {
     /// How far past its peak each trial's capsule tears, m (each trial
     /// 0.5–1.5 times it; [`Protocol::tear_m`]); 0: a sharp fall.
     pub tear_m: f64,
+    /// The stage's acceleration, m/s²: every move reaches and sheds its
+    /// speed at it, as a real drive's trapezoidal profile does (0.05 m/s²
+    /// ramps 1–3 mm/s over 20–60 ms, a sample to six at 100 Hz); 0: the
+    /// speed changes at once.
+    pub accel_mps2: f64,
 }
 
 /// A ground-truth event. For a puncture or a structure, `t_s` is the
@@ -267,6 +272,7 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
             Segment::Move {
                 to_m: deepest,
                 speed_mps: speed,
+                accel_mps2: 0.0,
             },
             Segment::Dwell {
                 duration_s: rng.gen_range(1.0..2.0),
@@ -274,16 +280,19 @@ pub fn random_protocol(rng: &mut impl Rng) -> Protocol {
             Segment::Move {
                 to_m: deepest - amplitude,
                 speed_mps: speed,
+                accel_mps2: 0.0,
             },
             Segment::Oscillate {
                 amplitude_m: amplitude,
                 freq_hz: freq,
                 cycles,
+                from_rest: false,
             },
             Segment::Dwell { duration_s: 1.0 },
             Segment::Move {
                 to_m: 0.0,
                 speed_mps: speed,
+                accel_mps2: 0.0,
             },
             Segment::Dwell { duration_s: 0.5 },
         ],
@@ -311,11 +320,13 @@ pub fn insert_dwell_withdraw(
             Segment::Move {
                 to_m: deepest,
                 speed_mps: speed,
+                accel_mps2: 0.0,
             },
             Segment::Dwell { duration_s: 5.0 },
             Segment::Move {
                 to_m: 0.0,
                 speed_mps: speed,
+                accel_mps2: 0.0,
             },
             Segment::Dwell { duration_s: 0.5 },
         ],
@@ -612,6 +623,7 @@ pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
             Segment::Move {
                 to_m: deepest,
                 speed_mps: plan.speed_mps,
+                accel_mps2: 0.0,
             },
             Segment::Dwell {
                 duration_s: plan.dwell_s,
@@ -619,6 +631,7 @@ pub fn insertion(tissue: &TissueParams, plan: &Plan) -> (Trial, Truth) {
             Segment::Move {
                 to_m: 0.0,
                 speed_mps: plan.speed_mps,
+                accel_mps2: 0.0,
             },
         ],
     };
@@ -696,6 +709,11 @@ pub struct SimulateArgs {
     /// and eases off, as a 3 mm artery's does over 1–2.5 mm; 0 to 5.
     #[arg(long, default_value_t = 0.0)]
     pub tear_mm: f64,
+    /// The stage's acceleration, m/s²: each move ramps its speed up and
+    /// down at it (a real drive's trapezoid); 0 (the default) changes
+    /// speed at once; else 0.005 to 10.
+    #[arg(long, default_value_t = 0.0)]
+    pub accel_mps2: f64,
 }
 
 #[derive(Serialize)]
@@ -1014,6 +1032,12 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if !(0.0..=5.0).contains(&args.tear_mm) {
         bail!("--tear-mm {}: must be within 0..=5", args.tear_mm);
     }
+    if !(args.accel_mps2 == 0.0 || (0.005..=10.0).contains(&args.accel_mps2)) {
+        bail!(
+            "--accel-mps2 {}: must be 0 or within 0.005..=10",
+            args.accel_mps2
+        );
+    }
     let tissue = needle_io::tissue::resolve(args.tissue.as_deref(), args.params.as_deref())?;
     let effects = effects::parse_list(&args.effects)?;
     let sensor = Sensor {
@@ -1037,6 +1061,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             tare_sd_n: args.tare_n,
             spread: args.spread,
             tear_m: args.tear_mm * 1e-3,
+            accel_mps2: args.accel_mps2,
         },
     }
     .write(&args.out)?;
@@ -1196,6 +1221,19 @@ impl Dataset<'_> {
                     seed.wrapping_mul(3_571).wrapping_add(k as u64) ^ 0x7EA2_7EA2,
                 );
                 protocol.tear_m = rig.tear_m * tear_rng.gen_range(0.5..1.5);
+            }
+            for seg in &mut protocol.segments {
+                match seg {
+                    Segment::Move { accel_mps2, .. } => *accel_mps2 = rig.accel_mps2,
+                    Segment::Oscillate {
+                        from_rest, cycles, ..
+                    } if rig.accel_mps2 > 0.0 => {
+                        *from_rest = true;
+                        *cycles = cycles.ceil();
+                    }
+                    Segment::Oscillate { .. } => {}
+                    Segment::Dwell { .. } => {}
+                }
             }
             if rig.jitter {
                 let duration_s = motion::duration_s(&protocol.segments, 0.0);

@@ -7,23 +7,58 @@ use std::f64::consts::TAU;
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Segment {
-    /// Constant speed to `to_m`.
-    Move { to_m: f64, speed_mps: f64 },
+    /// To `to_m` at `speed_mps`, reached and shed at `accel_mps2` (a
+    /// trapezoid, or a triangle where the move is too short to reach
+    /// it); 0: the speed changes at once.
+    Move {
+        to_m: f64,
+        speed_mps: f64,
+        #[serde(skip_serializing_if = "at_once")]
+        accel_mps2: f64,
+    },
     /// Rest.
     Dwell { duration_s: f64 },
     /// x0 + A·sin(2π f t) for `cycles` cycles (a whole or half number, so
-    /// it ends where it began, moving at full speed: an abrupt stop).
+    /// it ends where it began, moving at full speed: an abrupt stop); or,
+    /// `from_rest` (a drive that ramps its speed), x0 − A·(1 − cos 2π f t),
+    /// starting and ending at rest (a whole number of cycles where it
+    /// began).
     Oscillate {
         amplitude_m: f64,
         freq_hz: f64,
         cycles: f64,
+        #[serde(skip_serializing_if = "std::ops::Not::not")]
+        from_rest: bool,
     },
+}
+
+fn at_once(accel_mps2: &f64) -> bool {
+    *accel_mps2 <= 0.0
+}
+
+/// A move of `distance_m` at `speed_mps` whose speed changes at
+/// `accel_mps2`: the speed it reaches and how long it takes to, s (0 for
+/// a speed reached at once).
+fn ramp(distance_m: f64, speed_mps: f64, accel_mps2: f64) -> (f64, f64) {
+    if accel_mps2 <= 0.0 {
+        return (speed_mps, 0.0);
+    }
+    let top_mps = speed_mps.min((accel_mps2 * distance_m).sqrt());
+    (top_mps, top_mps / accel_mps2)
 }
 
 impl Segment {
     fn duration_s(&self, from_m: f64) -> f64 {
         match *self {
-            Segment::Move { to_m, speed_mps } => (to_m - from_m).abs() / speed_mps.max(1e-9),
+            Segment::Move {
+                to_m,
+                speed_mps,
+                accel_mps2,
+            } => {
+                let d = (to_m - from_m).abs();
+                let (top_mps, ramp_s) = ramp(d, speed_mps, accel_mps2);
+                d / top_mps.max(1e-9) + ramp_s
+            }
             Segment::Dwell { duration_s } => duration_s,
             Segment::Oscillate {
                 freq_hz, cycles, ..
@@ -34,21 +69,43 @@ impl Segment {
     /// Position and velocity `t` seconds into the segment.
     fn at(&self, from_m: f64, t: f64) -> (f64, f64) {
         match *self {
-            Segment::Move { to_m, speed_mps } => {
-                let dir = (to_m - from_m).signum();
-                (from_m + dir * speed_mps * t, dir * speed_mps)
+            Segment::Move {
+                to_m,
+                speed_mps,
+                accel_mps2,
+            } => {
+                let (dir, d) = ((to_m - from_m).signum(), (to_m - from_m).abs());
+                let (top_mps, ramp_s) = ramp(d, speed_mps, accel_mps2);
+                let end_s = self.duration_s(from_m);
+                let (s, v) = if t < ramp_s {
+                    (0.5 * accel_mps2 * t * t, accel_mps2 * t)
+                } else if t <= end_s - ramp_s {
+                    (0.5 * top_mps * ramp_s + top_mps * (t - ramp_s), top_mps)
+                } else {
+                    let left_s = (end_s - t).max(0.0);
+                    (d - 0.5 * accel_mps2 * left_s * left_s, accel_mps2 * left_s)
+                };
+                (from_m + dir * s, dir * v)
             }
             Segment::Dwell { .. } => (from_m, 0.0),
             Segment::Oscillate {
                 amplitude_m,
                 freq_hz,
+                from_rest,
                 ..
             } => {
                 let w = TAU * freq_hz;
-                (
-                    from_m + amplitude_m * (w * t).sin(),
-                    amplitude_m * w * (w * t).cos(),
-                )
+                if from_rest {
+                    (
+                        from_m - amplitude_m * (1.0 - (w * t).cos()),
+                        -amplitude_m * w * (w * t).sin(),
+                    )
+                } else {
+                    (
+                        from_m + amplitude_m * (w * t).sin(),
+                        amplitude_m * w * (w * t).cos(),
+                    )
+                }
             }
         }
     }
@@ -56,7 +113,8 @@ impl Segment {
     fn end(&self, from_m: f64) -> f64 {
         match *self {
             Segment::Move { to_m, .. } => to_m,
-            _ => from_m,
+            Segment::Oscillate { .. } => self.at(from_m, self.duration_s(from_m)).0,
+            Segment::Dwell { .. } => from_m,
         }
     }
 }
