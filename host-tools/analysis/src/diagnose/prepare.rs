@@ -341,7 +341,7 @@ pub fn prepare(
     let parts = predict_parts_at(params, &geometry, &trial, velocity.clone());
     let n = trial.len();
     let mut nominal_n = parts.total_n();
-    let phase = phases(&trial, &geometry, &parts);
+    let phase = phases(&trial, &geometry, &parts, params.half_band_mps);
     // While the withdrawing needle drags the tissue along, the force is
     // the tent's (the stick's own corrections, per trial), not kinetic
     // friction.
@@ -502,7 +502,7 @@ pub fn relaxed_surface(geometry: &TrialFit, rho: f64) -> f64 {
 }
 
 /// The phase of every sample (index into [`PHASES`]).
-fn phases(trial: &Trial, geometry: &TrialFit, parts: &Parts) -> Vec<usize> {
+fn phases(trial: &Trial, geometry: &TrialFit, parts: &Parts, half_band_mps: f64) -> Vec<usize> {
     let n = trial.len();
     let v_mps = &parts.v_mps;
     let after_puncture = |i: &usize| *i > parts.puncture_index;
@@ -510,7 +510,12 @@ fn phases(trial: &Trial, geometry: &TrialFit, parts: &Parts) -> Vec<usize> {
         .filter(after_puncture)
         .find(|&i| v_mps[i] < -MOVING_MPS)
         .unwrap_or(n);
-    let last_forward = (0..n).rev().find(|&i| v_mps[i] > MOVING_MPS).unwrap_or(0);
+    // A stroke easing to its turn still advances, however slowly: the
+    // withdrawal starts once the needle no longer slides forward.
+    let last_forward = (0..n)
+        .rev()
+        .find(|&i| v_mps[i] > half_band_mps)
+        .unwrap_or(0);
     let left = (0..n)
         .filter(after_puncture)
         .find(|&i| parts.length_m[i] <= 0.0 && i > first_back)

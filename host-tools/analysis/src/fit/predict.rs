@@ -651,8 +651,30 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
         }
         start = end;
     }
+    let ramps = set_off_ramps(&rests, &jumps, k);
+    for r in &ramps {
+        for i in r.clone() {
+            v[i] = (x[i + 1] - x[i - 1]) / (t[i + 1] - t[i - 1]);
+        }
+    }
     // The samples either side of each jump, with the other side's velocity
     // and how likely they are on that side.
+    let near_jump = |e: usize| jumps.iter().any(|j| j.index.abs_diff(e) <= 1);
+    // A rest's last samples may already move below half a step, however
+    // the jump after it is placed: a stage sets off at a finite
+    // acceleration, half a ramp before the lines either side cross, and
+    // Karnopp's friction turns at 5 µm/s. The force settles them. A rest
+    // whose last sample the jump already has moving ends at the jump.
+    let settled: Vec<(usize, f64, f64)> = rests
+        .iter()
+        .flat_map(|r| {
+            let end = jumps
+                .iter()
+                .find(|j| j.index + 1 == r.end)
+                .map_or(r.end, |j| j.index);
+            settling(r.start..end, &v, (k, least_mps), near_jump(r.start))
+        })
+        .collect();
     let mut uncertain = Vec::new();
     for j in &jumps {
         let [early, _, late] = j.landing(t);
@@ -673,15 +695,8 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
             uncertain.push((after, v[before], late));
         }
     }
-    let near_jump = |e: usize| jumps.iter().any(|j| j.index.abs_diff(e) <= 1);
-    uncertain.extend(rests.iter().flat_map(|r| {
-        settling(
-            r.clone(),
-            &v,
-            (k, least_mps),
-            [near_jump(r.start), near_jump(r.end)],
-        )
-    }));
+    uncertain.retain(|u| !settled.iter().any(|s| s.0 == u.0));
+    uncertain.extend(settled);
     let quantum_mps = step_m / (2 * k) as f64 / dt;
     let known: Vec<usize> = uncertain.iter().map(|u| u.0).collect();
     for (j, other, odds, here) in turning(&v, quantum_mps, least_rest) {
@@ -690,6 +705,9 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
             uncertain.push((j, other, odds));
         }
     }
+    // The encoder has a ramp's samples off the rest: moving, whatever
+    // the jump's placement leaves open.
+    uncertain.retain(|u| !ramps.iter().any(|r| r.contains(&u.0)));
     uncertain.sort_by_key(|u| u.0);
     NeedleVelocity {
         v_mps: v,
@@ -819,6 +837,32 @@ fn rests(x: &[f64], least: usize, step_m: f64) -> Vec<std::ops::Range<usize>> {
     runs
 }
 
+/// The samples a stage ramping up from a rest moves before the jump the
+/// lines either side place (each from the rest's end, where the encoder
+/// first reads it off the rest, to the jump, within a window of it). A
+/// stage sets off at a finite acceleration: the lines of rest and of the
+/// speed reached cross halfway up the ramp, half a ramp after it set off
+/// (15–40 ms for a 30–80 ms ramp, a sample or more at 100 Hz), and a
+/// sample in between moves while the jump's placement calls it at rest —
+/// where Karnopp's friction has already turned at 5 µm/s, a newton off.
+/// Such samples take the central difference about them (the ramp's
+/// speed); a set-off between samples (a jump in velocity) has none.
+fn set_off_ramps(
+    rests: &[std::ops::Range<usize>],
+    jumps: &[jumps::Jump],
+    k: usize,
+) -> Vec<std::ops::Range<usize>> {
+    rests
+        .iter()
+        .filter_map(|r| {
+            let j = jumps
+                .iter()
+                .find(|j| j.index > r.end && j.index <= r.end + k)?;
+            (r.end > 0).then_some(r.end..j.index)
+        })
+        .collect()
+}
+
 /// The samples about a rest where the encoder cannot tell whether the
 /// needle moves, each with the velocity of its other side, even odds,
 /// the force to settle them ([`other_side_odds`]): up to `k` at each end
@@ -826,19 +870,19 @@ fn rests(x: &[f64], least: usize, step_m: f64) -> Vec<std::ops::Range<usize>> {
 /// step, and up to `k` outside it creeping slower than `creep_mps` (a
 /// stage easing to a stop reads a micrometre a sample while the tissue
 /// already holds). A rest shorter than 2·`k` gives each end its own
-/// half. An end at a jump (`at_jump`: start, end) is left to the jump's
-/// own placement.
+/// half. A start at a jump (`start_at_jump`) is left to the jump's own
+/// placement: a stop at speed lands where the encoder reads the rest.
 fn settling(
     rest: std::ops::Range<usize>,
     v: &[f64],
     (k, creep_mps): (usize, f64),
-    at_jump: [bool; 2],
+    start_at_jump: bool,
 ) -> Vec<(usize, f64, f64)> {
     let mid = rest.start + rest.len() / 2;
     let creeping = |i: &usize| v[*i] != 0.0 && v[*i].abs() < creep_mps;
     let mut out = Vec::new();
     if let Some(&before) = rest.start.checked_sub(1).and_then(|i| v.get(i)) {
-        if before != 0.0 && !at_jump[0] {
+        if before != 0.0 && !start_at_jump {
             let from = rest.start.saturating_sub(k);
             let creep: Vec<usize> = (from..rest.start).rev().take_while(creeping).collect();
             out.extend(creep.into_iter().rev().map(|i| (i, 0.0, 0.5)));
@@ -846,7 +890,7 @@ fn settling(
         }
     }
     if let Some(&after) = v.get(rest.end) {
-        if after != 0.0 && !at_jump[1] {
+        if after != 0.0 {
             out.extend((mid.max(rest.end.saturating_sub(k))..rest.end).map(|i| (i, after, 0.5)));
             let to = (rest.end + k).min(v.len());
             out.extend((rest.end..to).take_while(creeping).map(|i| (i, 0.0, 0.5)));
@@ -1214,5 +1258,56 @@ mod tests {
         assert!(v.uncertain.iter().all(|u| [0usize, 500, 1000, 1500]
             .iter()
             .any(|t| u.0.abs_diff(*t) <= 10)));
+    }
+
+    /// A stage setting off from rest at 0.1 m/s² to 2 mm/s (a 20 ms
+    /// ramp, two samples at 100 Hz), 1 µm encoder, the set-off anywhere
+    /// between samples: a sample at rest reads at rest or is left to the
+    /// force, and a sample the ramp already has past 0.3 mm/s slides
+    /// forward or is left to the force with a forward alternative —
+    /// never held at rest where the encoder saw it leave.
+    #[test]
+    fn a_stage_ramping_up_from_rest_slides_from_its_first_samples() {
+        let (accel_mps2, speed_mps, dt) = (0.1, 0.002, 0.01);
+        let mut wrong = Vec::new();
+        for phase in 0..20 {
+            let start_s = 0.5 + dt * phase as f64 / 20.0;
+            let exact_mps = |t: f64| (accel_mps2 * (t - start_s)).clamp(0.0, speed_mps);
+            let exact_m = |t: f64| {
+                let ramp_s = speed_mps / accel_mps2;
+                let s = (t - start_s).max(0.0);
+                if s < ramp_s {
+                    0.5 * accel_mps2 * s * s
+                } else {
+                    0.5 * speed_mps * ramp_s + speed_mps * (s - ramp_s)
+                }
+            };
+            let t_s: Vec<f64> = (0..150).map(|i| i as f64 * dt).collect();
+            let trial = Trial {
+                f_n: vec![0.0; t_s.len()],
+                x_m: t_s
+                    .iter()
+                    .map(|&t| ((0.02 + exact_m(t)) * 1e6).round() * 1e-6)
+                    .collect(),
+                t_s,
+            };
+            let v = needle_velocity(&trial);
+            for (i, &t) in trial.t_s.iter().enumerate() {
+                let other = v.uncertain.iter().find(|u| u.0 == i).map(|u| u.1);
+                let sides = [Some(v.v_mps[i]), other];
+                let at_rest = exact_mps(t) == 0.0;
+                let right = if at_rest {
+                    sides.contains(&Some(0.0))
+                } else if exact_mps(t) > 3e-4 {
+                    sides.iter().flatten().any(|&s| s > 5e-6)
+                } else {
+                    true
+                };
+                if !right {
+                    wrong.push((phase, i, v.v_mps[i], other, exact_mps(t)));
+                }
+            }
+        }
+        assert!(wrong.is_empty(), "{wrong:?}");
     }
 }
