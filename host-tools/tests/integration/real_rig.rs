@@ -778,11 +778,14 @@ fn a_wall_that_tears_rather_than_falls_is_the_nominal() {
 /// ramp move while the lines of rest and of the speed reached cross half
 /// a ramp later, and Karnopp's friction turns at 5 µm/s. Taken as at
 /// rest, each set-off on the paper's protocol (every stroke starts from
-/// rest) is a newton off for a sample or two.
+/// rest) is a newton off for a sample or two. And it eases into each
+/// stop: the tissue then holds the friction at the band's edge, not at
+/// the last sample's speed (0.35 N of the skin's damping after an
+/// oscillation easing to rest, at 0.05 m/s²).
 #[test]
-fn a_stage_that_ramps_up_from_rest_is_the_nominal() {
+fn a_stage_that_ramps_its_speed_is_the_nominal() {
     let skin = needle_io::tissue::resolve(Some("skin_phantom"), None).unwrap();
-    for accel_mps2 in [0.1, 0.3] {
+    for accel_mps2 in [0.05, 0.1, 0.3] {
         let dir = tempfile::tempdir().unwrap();
         Dataset {
             tissue_name: "skin_phantom",

@@ -358,8 +358,11 @@ impl<'a> Inside<'a> {
             l_m: l,
             past_sd_m: (self.observer).past_sd_m(t_s, self.front_m, v.sd_mps, v.tissue_sd_m),
         };
-        let here = Sliding::at(params, v.v_mps[i], l, self.last_sliding, self.last_basis);
         let at_rest = v.v_mps[i].abs() < params.half_band_mps;
+        if at_rest {
+            self.eased_to_rest(i, l);
+        }
+        let here = Sliding::at(params, v.v_mps[i], l, self.last_sliding, self.last_basis);
         let cutting_n = self.tip_n(&at, v.v_mps[i], here.friction_n);
         (s.friction_n, s.friction_basis, s.cutting_n) = (here.friction_n, here.basis, cutting_n);
         self.other_side(i, &at, f_n, &here, &mut s);
@@ -379,6 +382,28 @@ impl<'a> Inside<'a> {
             self.observer.advanced(t_s);
         }
         s
+    }
+
+    /// A stage easing to rest passes into the static band between two
+    /// samples, its speed by then the band's edge: the sliding force the
+    /// tissue holds is the law's there (its Coulomb part), not the
+    /// law's at the last sample's velocity, which a window reads
+    /// millimetres a second above it (0.2–0.4 N of a skin's damping). A
+    /// stop at speed — a jump in the velocity at this sample — holds the
+    /// force it slid with.
+    fn eased_to_rest(&mut self, i: usize, l_m: f64) {
+        let (params, v) = (self.params, self.v);
+        let Some(&before_mps) = i.checked_sub(1).and_then(|b| v.v_mps.get(b)) else {
+            return;
+        };
+        if before_mps.abs() < params.half_band_mps
+            || v.jumps.iter().any(|j| j.index.abs_diff(i) <= 1)
+        {
+            return;
+        }
+        let edge_mps = params.half_band_mps.copysign(before_mps);
+        let edge = Sliding::at(params, edge_mps, l_m, self.last_sliding, self.last_basis);
+        (self.last_sliding, self.last_basis) = (edge.last_sliding, edge.basis);
     }
 
     fn odds(&self, at: &Here, v_mps: f64) -> Odds {
