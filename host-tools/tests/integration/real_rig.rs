@@ -45,6 +45,9 @@ struct Skin {
     seed: u64,
     /// Trial-to-trial spread of the tissue ([`Rig::spread`]).
     spread: f64,
+    protocol: ProtocolKind,
+    /// The stage's acceleration ([`Rig::accel_mps2`]).
+    accel_mps2: f64,
 }
 
 /// Ten trials at seed 5 with up to two membranes, standard form.
@@ -56,6 +59,8 @@ const SKIN: Skin = Skin {
     trials: 10,
     seed: 5,
     spread: 0.0,
+    protocol: ProtocolKind::InsertDwellWithdraw,
+    accel_mps2: 0.0,
 };
 
 impl Skin {
@@ -76,8 +81,10 @@ impl Skin {
             through: false,
             form: self.form,
             rig: Rig {
+                protocol: self.protocol,
                 layers: self.layers,
                 spread: self.spread,
+                accel_mps2: self.accel_mps2,
                 ..RIG
             },
         }
@@ -784,30 +791,16 @@ fn a_wall_that_tears_rather_than_falls_is_the_nominal() {
 /// oscillation easing to rest, at 0.05 m/s²).
 #[test]
 fn a_stage_that_ramps_its_speed_is_the_nominal() {
-    let skin = needle_io::tissue::resolve(Some("skin_phantom"), None).unwrap();
     for accel_mps2 in [0.05, 0.1, 0.3] {
-        let dir = tempfile::tempdir().unwrap();
-        Dataset {
-            tissue_name: "skin_phantom",
-            tissue: &skin.params,
-            effects: &[],
-            trials: 10,
+        let out = Skin {
+            protocol: ProtocolKind::Paper,
+            layers: 0,
+            spread: 0.15,
             seed: 1,
-            sensor: SENSOR,
-            through: false,
-            form: Form::Standard,
-            rig: Rig {
-                protocol: ProtocolKind::Paper,
-                layers: 0,
-                spread: 0.15,
-                accel_mps2,
-                ..RIG
-            },
+            accel_mps2,
+            ..SKIN
         }
-        .write(dir.path())
-        .unwrap();
-        let (_, data) = load(dir.path(), None).unwrap();
-        let out = serde_json::to_value(diagnose(&data, Nominal::Fitted)).unwrap();
+        .diagnosis();
         let noise = out["noise_floor_n"].as_f64().unwrap();
         let base = out["baseline"]["heldout_rms_n"].as_f64().unwrap();
         eprintln!("accel {accel_mps2}: held out {base} noise {noise}");

@@ -396,9 +396,7 @@ impl<'a> Inside<'a> {
         let Some(&before_mps) = i.checked_sub(1).and_then(|b| v.v_mps.get(b)) else {
             return;
         };
-        if before_mps.abs() < params.half_band_mps
-            || v.jumps.iter().any(|j| j.index.abs_diff(i) <= 1)
-        {
+        if before_mps.abs() < params.half_band_mps || beside_jump(&v.jumps, i) {
             return;
         }
         let edge_mps = params.half_band_mps.copysign(before_mps);
@@ -641,7 +639,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     // under a sample up to 1 kHz. A rest's start stays where the encoder
     // puts it: a needle within half a step of where it stops has stopped.
     for r in &rests {
-        let set_off = jumps.iter().any(|j| j.index + 1 == r.end);
+        let set_off = set_off_jump(&jumps, r).is_some();
         for edge in [Some(r.start), (!set_off).then_some(r.end)]
             .into_iter()
             .flatten()
@@ -684,7 +682,6 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     }
     // The samples either side of each jump, with the other side's velocity
     // and how likely they are on that side.
-    let near_jump = |e: usize| jumps.iter().any(|j| j.index.abs_diff(e) <= 1);
     // A rest's last samples may already move below half a step, however
     // the jump after it is placed: a stage sets off at a finite
     // acceleration, half a ramp before the lines either side cross, and
@@ -693,11 +690,13 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let settled: Vec<(usize, f64, f64)> = rests
         .iter()
         .flat_map(|r| {
-            let end = jumps
-                .iter()
-                .find(|j| j.index + 1 == r.end)
-                .map_or(r.end, |j| j.index);
-            settling(r.start..end, &v, (k, least_mps), near_jump(r.start))
+            let end = set_off_jump(&jumps, r).map_or(r.end, |j| j.index);
+            settling(
+                r.start..end,
+                &v,
+                (k, least_mps),
+                beside_jump(&jumps, r.start),
+            )
         })
         .collect();
     let mut uncertain = Vec::new();
@@ -725,7 +724,7 @@ pub fn needle_velocity(trial: &Trial) -> NeedleVelocity {
     let quantum_mps = step_m / (2 * k) as f64 / dt;
     let known: Vec<usize> = uncertain.iter().map(|u| u.0).collect();
     for (j, other, odds, here) in turning(&v, quantum_mps, least_rest) {
-        if !known.contains(&j) && !near_jump(j) && !near_jump(j + 1) {
+        if !known.contains(&j) && !beside_jump(&jumps, j) && !beside_jump(&jumps, j + 1) {
             v[j] = here;
             uncertain.push((j, other, odds));
         }
@@ -860,6 +859,20 @@ fn rests(x: &[f64], least: usize, step_m: f64) -> Vec<std::ops::Range<usize>> {
         start = i;
     }
     runs
+}
+
+/// Whether a jump in velocity lies beside sample `i` (its first sample
+/// after the jump within one of `i`).
+fn beside_jump(jumps: &[jumps::Jump], i: usize) -> bool {
+    jumps.iter().any(|j| j.index.abs_diff(i) <= 1)
+}
+
+/// The jump that sets off from `rest` at its last sample, if one does.
+fn set_off_jump<'j>(
+    jumps: &'j [jumps::Jump],
+    rest: &std::ops::Range<usize>,
+) -> Option<&'j jumps::Jump> {
+    jumps.iter().find(|j| j.index + 1 == rest.end)
 }
 
 /// The samples a stage ramping up from a rest moves before the jump the
