@@ -2,6 +2,7 @@
 //! §3), as JSON and as a tissue-library entry the firmware can load.
 
 pub mod cutting;
+pub mod drag;
 pub mod jumps;
 pub(crate) mod lsq;
 pub mod predict;

@@ -343,13 +343,13 @@ impl<'a> Inside<'a> {
         let mut s = SampleParts::default();
         // A withdrawing needle holds the tissue until it lets go, which a
         // dragged tissue does before x_s3 (even before x_s1).
-        let exit_m = match self.geometry.let_go_x_m {
-            Some(let_go) if v.v_mps[i] < -params.half_band_mps => {
-                let_go.min(self.geometry.relaxed_x_m)
+        let l = match (self.geometry.let_go_x_m, self.geometry.drag) {
+            (Some(let_go), drag) if v.v_mps[i] < -params.half_band_mps => {
+                let exit_m = let_go.min(self.geometry.relaxed_x_m);
+                drag.map_or(x_m - exit_m, |d| d.length_m(x_m, exit_m))
             }
-            _ => self.geometry.relaxed_x_m,
+            _ => x_m - self.geometry.relaxed_x_m,
         };
-        let l = x_m - exit_m;
         if l <= 0.0 {
             return s;
         }

@@ -6,6 +6,7 @@
 
 use anyhow::{bail, Result};
 
+use super::drag::{kinked, Drag, Xvf};
 use super::lsq::Lsq;
 use needle_io::trial::Trial;
 
@@ -70,6 +71,9 @@ pub struct TrialFit {
     /// trial's zero (`snapped_free`), not where the friction line reaches
     /// it.
     pub let_go_snapped: bool,
+    /// The dragged surface's kink on withdrawal, with `let_go_x_m`, where
+    /// the pull bends there ([`drag`](super::drag)).
+    pub drag: Option<Drag>,
     /// Relaxation of the force during the longest rest inside the tissue.
     pub dwell: Option<DwellRelaxation>,
     /// Membranes punctured after the capsule, in order.
@@ -589,7 +593,9 @@ pub fn fit_trial_at(trial: &Trial, falls: Falls) -> Result<TrialFit> {
         trial,
         dn,
         stuck,
-        friction.let_go_x_m.map(|g| g.min(relaxed_x_m)),
+        friction
+            .let_go_x_m
+            .map(|g| (g.min(relaxed_x_m), friction.drag)),
     );
 
     Ok(TrialFit {
@@ -618,6 +624,7 @@ pub fn fit_trial_at(trial: &Trial, falls: Falls) -> Result<TrialFit> {
         relaxation_identified: friction.identified,
         let_go_x_m: friction.let_go_x_m,
         let_go_snapped: friction.let_go_snapped,
+        drag: friction.drag,
         dwell,
         layers: layers_after(trial, &v, ip, noise_n),
         tare_n: 0.0,
@@ -663,17 +670,19 @@ fn puncture_fall(trial: &Trial, (ip, fallen): (usize, usize), noise_n: f64) -> (
 
 /// The static band D_n with the withdrawal's stick: it gives way where
 /// the tent's pull reaches D_n·l, l from `exit_m`, where the withdrawing
-/// needle lets go (the last `stuck` sample's force over its length).
+/// needle lets go, shortened by the dragged surface's travel where it
+/// followed (the last `stuck` sample's force over its length).
 fn with_the_stick(
     trial: &Trial,
     dn: Option<(f64, bool)>,
     stuck: impl IntoIterator<Item = usize>,
-    exit_m: Option<f64>,
+    exit: Option<(f64, Option<Drag>)>,
 ) -> Option<(f64, bool)> {
-    let (Some(last), Some(exit_m)) = (stuck.into_iter().last(), exit_m) else {
+    let (Some(last), Some((exit_m, drag))) = (stuck.into_iter().last(), exit) else {
         return dn;
     };
-    let l = trial.x_m[last] - exit_m;
+    let x_m = trial.x_m[last];
+    let l = drag.map_or(x_m - exit_m, |d| d.length_m(x_m, exit_m));
     if l >= 0.002 {
         stronger(dn, (trial.f_n[last] / l, true), -1.0)
     } else {
@@ -924,6 +933,7 @@ struct OneTrialFriction {
     identified: bool,
     let_go_x_m: Option<f64>,
     let_go_snapped: bool,
+    drag: Option<Drag>,
     cp: f64,
     bp: f64,
     cn: f64,
@@ -932,9 +942,6 @@ struct OneTrialFriction {
     insertion: Option<AtSpeed>,
     withdrawal: Option<AtSpeed>,
 }
-
-/// (x, v, f) of one sample.
-type Xvf = (f64, f64, f64);
 
 /// Strokes both ways inside the cut track (the paper's oscillation): c and
 /// b on each side, x_s3 on a grid over ρ so that the friction vanishes
@@ -1021,6 +1028,7 @@ fn both_ways(
         // The grid over ρ is where the withdrawing needle let go.
         let_go_x_m: None,
         let_go_snapped: false,
+        drag: None,
         cp,
         bp,
         cn,
@@ -1364,7 +1372,7 @@ fn one_way(
         let (fit, outside) = pull_past(&out, x_w, |l| [l, 1.0]);
         fit.solve().map(|c| (outside + fit.sse(&c), c[1]))
     };
-    let mut let_go = None;
+    let (mut let_go, mut drag, mut kinked_n_per_m) = (None, None, None);
     let snapped = snapped_free(&out, noise_n, before_contact_n);
     let let_go_snapped = snapped.is_some() && out.len() >= MIN_STROKE_SAMPLES;
     if out.len() >= MIN_STROKE_SAMPLES {
@@ -1395,7 +1403,15 @@ fn one_way(
             (Some(l), _) => Some(l),
             (None, g) => g,
         };
-        let_go = snapped.or(best.map(|b| b.1));
+        // The surface dragged out with the needle bends the pull where it
+        // stops following ([`kinked`]): worth its two more parameters by
+        // the same criterion. A snap back to zero is a tent's let-go, which
+        // the stick holds.
+        let bent = kinked(&out, grid.clone())
+            .filter(|k| best.is_some_and(|b| b.0 - k.sse > 2.0 * worth_n2) && snapped.is_none());
+        drag = bent.map(|k| k.drag);
+        let_go = snapped.or(bent.map(|k| k.let_go_m)).or(best.map(|b| b.1));
+        kinked_n_per_m = bent.map(|k| k.n_per_m);
     }
     // Where the needle let go is x_s3 when it lies inside the tissue.
     let from_let_go = let_go
@@ -1403,7 +1419,7 @@ fn one_way(
         .map(|x_w| (x_w - contact_x_m) / depth);
     let mean_speed = |s: &[Xvf]| s.iter().map(|p| p.1).sum::<f64>() / s.len().max(1) as f64;
     let withdrawal = let_go.and_then(|x_w| {
-        let [c] = withdraw_at(x_w).1?;
+        let c = kinked_n_per_m.or(withdraw_at(x_w).1.map(|[c]| c))?;
         Some(AtSpeed {
             speed_mps: mean_speed(&out),
             n_per_m: c,
@@ -1438,6 +1454,7 @@ fn one_way(
         identified,
         let_go_x_m: let_go,
         let_go_snapped,
+        drag,
         cp: 0.0,
         bp: damping(insertion),
         cn: 0.0,
@@ -1799,6 +1816,36 @@ mod tests {
         let pull = |x: f64| -40.0 * (x - let_go_m).max(0.0);
         let found = let_go_of((0.040, 1000), pull, (0.036, 0.041));
         assert!((found - let_go_m).abs() < 2e-4, "let go at {found} m");
+    }
+
+    /// A withdrawal whose surface is dragged out with the needle at 30 %
+    /// of its travel until 6 mm before the first contact, where it stops
+    /// following 16 mm before the needle gets there: `one_way` finds the
+    /// let-go there, the kink, and the shaft's own friction per length
+    /// below it — where a straight line from the let-go puts the let-go
+    /// 3 mm out and the friction a fifth low.
+    #[test]
+    fn a_surface_dragged_part_of_the_way_bends_the_pull_where_it_stops() {
+        let (contact_m, let_go_m) = (0.036, 0.030);
+        let drag = Drag {
+            kink_x_m: 0.046,
+            ratio: 0.3,
+        };
+        let pull = |x: f64| -50.0 * drag.length_m(x, let_go_m).max(0.0);
+        let out: Vec<Xvf> = (0..1500u32)
+            .map(|k| {
+                let x = 0.065 - 2e-5 * f64::from(k);
+                (x, -0.002, pull(x) + fixed_noise(k, 0.0126))
+            })
+            .collect();
+        let friction = one_way(&out, &[], contact_m, 0.041, 0.0126, 0.0).unwrap();
+        let found = friction.drag.expect("a kink");
+        let at = friction.let_go_x_m.unwrap();
+        assert!((at - let_go_m).abs() < 2e-4, "let go at {at} m");
+        assert!((found.kink_x_m - drag.kink_x_m).abs() < 1.5e-3, "{found:?}");
+        assert!((found.ratio - drag.ratio).abs() < 0.05, "{found:?}");
+        let per_m = friction.withdrawal.unwrap().n_per_m;
+        assert!((per_m + 50.0).abs() < 2.5, "{per_m} N/m");
     }
 
     /// A withdrawal pulled mostly by a surface's grip (0.09 N) beside a
