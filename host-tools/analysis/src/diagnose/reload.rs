@@ -26,14 +26,17 @@ use crate::fit::lsq::Lsq;
 /// [`reload_lengths_m`] that follows the record from the fall to the
 /// steady stretch best — both the trial's own reading, the withheld
 /// trial's too, by this rule fixed before any effect is looked at. Its
-/// gain is 1 where the law holds. Zero in a trial whose fall lies within
-/// three noise sd of that line (or above it), or that does not cut along
-/// 1.5 mm of that stretch.
+/// gain is 1 where the law holds. Zero in a trial that does not cut
+/// along 1.5 mm of that stretch.
 ///
 /// A wall breaks or tears: where its fall's bottom lies within three
 /// noise sd of the course (or above it) the trial's second column is
-/// the capsule's tear (`super::tear`), read over the same course; the
-/// two are never both on. Returns `[reload, tear]`.
+/// the capsule's tear (`super::tear`), read over the same course. A wall
+/// that tears can still leave the layer beneath to load again: where the
+/// force less the tear sinks more than three noise sd below the course
+/// within 3 mm (an artery's roll-over that eases off below it, then
+/// climbs back), the reload is read from that dip, and the tear again
+/// beside it. Returns `[reload, tear]`.
 pub(super) fn after_the_fall(p: &Prepared) -> [Vec<f64>; 2] {
     let n = p.trial.len();
     let cuts: Vec<bool> = (0..n).map(|i| p.cuts(i)).collect();
@@ -79,14 +82,60 @@ impl<'a> Record<'a> {
     pub(super) fn after_the_fall(&self, peak_x_m: f64) -> [Vec<f64>; 2] {
         let zeros = || vec![0.0; self.x_m.len()];
         match self.course() {
-            Some(fall) if fall.broke(self.noise_n) => [self.shortfall(&fall), zeros()],
-            Some(fall) => [zeros(), super::tear::excess(self, &fall, peak_x_m)],
+            Some(fall) if fall.broke(self.noise_n) => [self.shortfall(&fall, &zeros()), zeros()],
+            Some(fall) => self.torn(&fall, peak_x_m),
             None => [zeros(), zeros()],
         }
     }
 
-    /// The reload's column after `fall`, a break.
-    fn shortfall(&self, fall: &Fall) -> Vec<f64> {
+    /// `[reload, tear]` after `fall`, no break: the wall's excess as it
+    /// tears, and where the force then sinks below the course (the layer
+    /// beneath loaded again as the wall lets go of the tip), the reload
+    /// from there, the tear read again beside it.
+    fn torn(&self, fall: &Fall, peak_x_m: f64) -> [Vec<f64>; 2] {
+        let zeros = vec![0.0; self.x_m.len()];
+        let tear = super::tear::excess(self, fall, peak_x_m, &zeros);
+        match self.sunk(fall, &tear) {
+            Some(dip) => {
+                let reload = self.shortfall(&dip, &tear);
+                let tear = super::tear::excess(self, fall, peak_x_m, &reload);
+                [reload, tear]
+            }
+            None => [zeros, tear],
+        }
+    }
+
+    /// Where the force less `tear` sinks lowest below `fall`'s course
+    /// within [`RELOADED_FROM_M`] past the loading curve, as the bottom of
+    /// a fall to reload from, if more than three noise sd below it. Read
+    /// on means of [`DIP_SAMPLES`] samples: over a few millimetres the
+    /// least single sample of noise alone lies three sd low.
+    fn sunk(&self, fall: &Fall, tear: &[f64]) -> Option<Fall> {
+        let (x, f) = (self.x_m, self.f_n);
+        let from = self.fallen;
+        let cut: Vec<usize> = (from..fall.steady_end.min(x.len()))
+            .filter(|&i| self.cuts[i] && x[i] - x[from] <= RELOADED_FROM_M)
+            .collect();
+        let below = |i: usize| f[i] - tear[i] - fall.course_n(x[i]);
+        let (mean_n, at) = cut
+            .windows(DIP_SAMPLES)
+            .map(|w| {
+                let mean_n = w.iter().map(|&i| below(i)).sum::<f64>() / DIP_SAMPLES as f64;
+                (mean_n, w[DIP_SAMPLES / 2])
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))?;
+        (-mean_n > 3.0 * self.noise_n).then(|| Fall {
+            steady_end: fall.steady_end,
+            at_bottom_n: fall.course_n(x[at]),
+            slope_n_per_m: fall.slope_n_per_m,
+            bottom_x_m: x[at],
+            deficit_n: -mean_n,
+        })
+    }
+
+    /// The reload's column after `fall`, read on the force less `less`
+    /// (what another column of the trial's holds).
+    fn shortfall(&self, fall: &Fall, less: &[f64]) -> Vec<f64> {
         let mut col = vec![0.0; self.x_m.len()];
         let x = self.x_m;
         // From the first sample past the loading curve: the samples of
@@ -105,7 +154,7 @@ impl<'a> Record<'a> {
         let sse = |lambda_m: f64| -> f64 {
             (self.fallen..fall.steady_end)
                 .filter(|&i| self.cuts[i])
-                .map(|i| (self.f_n[i] - fall.course_n(x[i]) - short(i, lambda_m)).powi(2))
+                .map(|i| (self.f_n[i] - less[i] - fall.course_n(x[i]) - short(i, lambda_m)).powi(2))
                 .sum()
         };
         let Some(lambda_m) = reload_lengths_m().min_by(|&a, &b| sse(a).total_cmp(&sse(b))) else {
@@ -207,6 +256,10 @@ impl Fall {
 /// steady course (the recordings: within 3 mm); [`Record::course`] reads the
 /// course from here to twice as far.
 const RELOADED_FROM_M: f64 = 0.003;
+
+/// Samples [`Record::sunk`] averages to find a torn wall's dip below the
+/// course.
+const DIP_SAMPLES: usize = 5;
 
 /// A puncture's fall takes two samples at a real rig's 100 Hz: at 2 mm/s
 /// 40 µm of advance. Its bottom is looked for over this much, whatever
