@@ -116,6 +116,25 @@ fn fit_at(m: &Moments, x_e: f64, x_k: f64) -> Option<([f64; 2], f64)> {
 /// pull is its stretch, not the shaft's friction.
 pub const MOST_FOLLOWED: f64 = 0.75;
 
+/// The best straight pull from a let-go on `let_go_grid` (the law with
+/// no kink): `(let_go_m, n_per_m, sse)`, zero read past the let-go.
+pub fn straight(out: &[Xvf], let_go_grid: impl Iterator<Item = f64>) -> Option<(f64, f64, f64)> {
+    let m = Moments::of(out);
+    let all_ff = m.total().0[5];
+    let_go_grid
+        .filter_map(|x_e| {
+            let [n, sx, sxx, sf, sxf, sff] = m.past(x_e).0;
+            let aa = sxx - 2.0 * x_e * sx + x_e * x_e * n;
+            let af = sxf - x_e * sf;
+            (aa > 0.0).then(|| {
+                let c = af / aa;
+                (x_e, c, sff - c * af + (all_ff - sff))
+            })
+        })
+        .filter(|s| s.1 < 0.0)
+        .min_by(|a, b| a.2.total_cmp(&b.2))
+}
+
 /// Kinks tried between the let-go and the top of the withdrawal, as
 /// fractions of that span.
 const KINKS: usize = 24;

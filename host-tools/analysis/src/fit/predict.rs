@@ -343,8 +343,9 @@ impl<'a> Inside<'a> {
         let mut s = SampleParts::default();
         // A withdrawing needle holds the tissue until it lets go, which a
         // dragged tissue does before x_s3 (even before x_s1).
+        let retreating = self.geometry.retreat_t_s.is_none_or(|from_s| t_s >= from_s);
         let l = match (self.geometry.let_go_x_m, self.geometry.drag) {
-            (Some(let_go), drag) if v.v_mps[i] < -params.half_band_mps => {
+            (Some(let_go), drag) if v.v_mps[i] < -params.half_band_mps && retreating => {
                 let exit_m = let_go.min(self.geometry.relaxed_x_m);
                 drag.map_or(x_m - exit_m, |d| d.length_m(x_m, exit_m))
             }

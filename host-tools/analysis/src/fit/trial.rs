@@ -6,7 +6,7 @@
 
 use anyhow::{bail, Result};
 
-use super::drag::{kinked, Drag, Xvf};
+use super::drag::{kinked, straight, Drag, Xvf};
 use super::lsq::Lsq;
 use needle_io::trial::Trial;
 
@@ -74,6 +74,13 @@ pub struct TrialFit {
     /// The dragged surface's kink on withdrawal, with `let_go_x_m`, where
     /// the pull bends there ([`drag`](super::drag)).
     pub drag: Option<Drag>,
+    /// On a trial with strokes both ways whose final retreat dragged its
+    /// surface out past x_s3: when that retreat began, s.
+    /// `let_go_x_m` and `drag` hold from then on only; the oscillation's
+    /// backward strokes slide out of a surface that stays. `None` where
+    /// they hold on every withdrawing sample (insert–dwell–withdraw's one
+    /// withdrawal).
+    pub retreat_t_s: Option<f64>,
     /// Relaxation of the force during the longest rest inside the tissue.
     pub dwell: Option<DwellRelaxation>,
     /// Membranes punctured after the capsule, in order.
@@ -544,6 +551,7 @@ pub fn fit_trial_at(trial: &Trial, falls: Falls) -> Result<TrialFit> {
     let start = after(0.05);
     let Strokes {
         track,
+        retreat,
         advancing,
         rests,
         stuck,
@@ -558,21 +566,49 @@ pub fn fit_trial_at(trial: &Trial, falls: Falls) -> Result<TrialFit> {
         .count()
         >= MIN_STROKE_SAMPLES;
     let dwell = dwell_relaxation(trial, &v, ip);
-    let friction = if inward {
-        both_ways(
-            (&track, &advancing),
-            (contact_x_m, x_s2),
-            (noise_n, velocity_read_sd_mps(trial)),
-        )?
+    let (friction, retreat_t_s) = if inward {
+        let both = |track: &[Xvf]| {
+            both_ways(
+                (track, &advancing),
+                (contact_x_m, x_s2),
+                (noise_n, velocity_read_sd_mps(trial)),
+            )
+        };
+        let friction = both(&track)?;
+        // A final retreat that dragged its surface out pulls past x_s3,
+        // and the grid over ρ, which reads it as the strokes' exit, puts
+        // x_s3 too far out: the strokes alone place it then, and the
+        // retreat's let-go is read against that.
+        let dragged = |friction: &OneTrialFriction| {
+            let (i, from) = retreat?;
+            let out: Vec<Xvf> = track[from..]
+                .iter()
+                .copied()
+                .filter(|s| s.1 < 0.0)
+                .collect();
+            let relaxed = (friction.relaxed_x_m, contact_x_m);
+            dragged_out(&out, relaxed, (noise_n, before_contact_n)).map(|d| (i, d))
+        };
+        let strokes_alone = dragged(&friction)
+            .and_then(|_| both(&track[..retreat?.1]).ok())
+            .and_then(|alone| Some((dragged(&alone)?, alone)));
+        match strokes_alone {
+            Some(((i, (let_go_m, drag)), mut alone)) => {
+                (alone.let_go_x_m, alone.drag) = (Some(let_go_m), drag);
+                (alone, Some(trial.t_s[i]))
+            }
+            None => (friction, None),
+        }
     } else {
-        one_way(
+        let friction = one_way(
             &track,
             &advancing,
             contact_x_m,
             x_s2,
             noise_n,
             before_contact_n,
-        )?
+        )?;
+        (friction, None)
     };
     let OneTrialFriction {
         relaxed_x_m,
@@ -625,6 +661,7 @@ pub fn fit_trial_at(trial: &Trial, falls: Falls) -> Result<TrialFit> {
         let_go_x_m: friction.let_go_x_m,
         let_go_snapped: friction.let_go_snapped,
         drag: friction.drag,
+        retreat_t_s,
         dwell,
         layers: layers_after(trial, &v, ip, noise_n),
         tare_n: 0.0,
@@ -795,12 +832,23 @@ fn fit_loading(x: &[f64], f: &[f64], (j0, ip): (usize, usize), thr: f64) -> Resu
 struct Strokes {
     /// Moving inside the cut track.
     track: Vec<Xvf>,
+    /// The final retreat: its first sample, and how many of `track`'s
+    /// come before it.
+    retreat: Option<(usize, usize)>,
     /// Cutting new tissue.
     advancing: Vec<Xvf>,
     /// Indices at rest.
     rests: Vec<usize>,
     stuck: std::ops::Range<usize>,
 }
+
+/// How far behind the cutting front the tissue ahead of the tip may
+/// push on it: a tip drawn back lets the compressed tissue go over its
+/// contact compliance, hundredths to tenths of a millimetre, and one
+/// coming back may compress it again before it cuts. [`strokes`] reads
+/// no friction there, either way (the diagnosis's tip columns read the
+/// compliance, up to this).
+const TIP_COMPLIANCE_M: f64 = 0.4e-3;
 
 /// [`Strokes`] from sample `start` on, the puncture at `ip`.
 fn strokes(
@@ -842,7 +890,11 @@ fn strokes(
     let stuck = retreat
         .and_then(|r| slipped(f, x, r, noise_n, (x[ip], free_n)).map(|s| r..s))
         .unwrap_or(0..0);
+    let mut retreat_in_track = None;
     for i in start..trial.len() {
+        if retreat == Some(i) {
+            retreat_in_track = Some((i, track.len()));
+        }
         let new_tissue = x[i] >= deepest;
         deepest = deepest.max(x[i]);
         if stuck.contains(&i) {
@@ -851,7 +903,7 @@ fn strokes(
         if v[i].abs() >= SLIDING_MPS && stepping(i) {
             if new_tissue && v[i] > 0.0 && advances_after(i) {
                 advancing.push((x[i], v[i], f[i]));
-            } else {
+            } else if x[i] < deepest - TIP_COMPLIANCE_M {
                 track.push((x[i], v[i], f[i]));
             }
         } else if v[i].abs() < REST_MPS {
@@ -860,6 +912,7 @@ fn strokes(
     }
     Strokes {
         track,
+        retreat: retreat_in_track,
         advancing,
         rests,
         stuck,
@@ -941,6 +994,39 @@ struct OneTrialFriction {
     cutting_force_n: f64,
     insertion: Option<AtSpeed>,
     withdrawal: Option<AtSpeed>,
+}
+
+/// Whether the final retreat `out` of a trial with strokes both ways
+/// dragged its surface out: where it let go and the drag's kink, if any
+/// ([`super::drag`]). The strokes place x_s3 (`relaxed_x_m`) where the
+/// oscillation's backward strokes leave the tissue, and a real
+/// withdrawal comes free 1.5–9 mm before the first contact (at
+/// `contact_x_m`); the pull on the final retreat then ends out there.
+/// Dragged out is past the first contact: a pull that ends between it
+/// and x_s3 is the strokes' x_s3 read a little off, which a fit at
+/// 1 kHz finds worth a let-go of its own. Judged against the same free
+/// friction line from x_s3: a let-go must pay ln n noise variances, a
+/// kink two more; none after a snap (the tent's let-go, which the stick
+/// holds).
+fn dragged_out(
+    out: &[Xvf],
+    (relaxed_x_m, contact_x_m): (f64, f64),
+    (noise_n, before_contact_n): (f64, f64),
+) -> Option<(f64, Option<Drag>)> {
+    if out.len() < MIN_STROKE_SAMPLES || snapped_free(out, noise_n, before_contact_n).is_some() {
+        return None;
+    }
+    let from_m = contact_x_m - MOST_DRAG_M.max(relaxed_x_m - contact_x_m);
+    let grid = || (0..=400).map(move |k| from_m + (contact_x_m - from_m) * k as f64 / 400.0);
+    let worth_n2 = (out.len() as f64).ln() * noise_n.max(1e-4).powi(2);
+    let (_, _, at_s3) = straight(out, std::iter::once(relaxed_x_m))?;
+    let (let_go_m, _, line) = straight(out, grid())?;
+    let bent = kinked(out, grid()).filter(|k| line - k.sse > 2.0 * worth_n2);
+    match bent {
+        Some(k) if at_s3 - k.sse > 3.0 * worth_n2 => Some((k.let_go_m, Some(k.drag))),
+        _ if at_s3 - line > worth_n2 => Some((let_go_m, None)),
+        _ => None,
+    }
 }
 
 /// Strokes both ways inside the cut track (the paper's oscillation): c and
@@ -1608,7 +1694,7 @@ fn stronger(kept: Option<Held>, new: Held, sign: f64) -> Option<Held> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use needle_holder::model::params::LIVER1;
 
@@ -1623,6 +1709,20 @@ mod tests {
 
     fn liver() -> Trial {
         crate::sim::insertion(&LIVER1, &crate::sim::Plan::PAPER).0
+    }
+
+    /// Liver 1 on the paper's protocol with its oscillation, whose turns
+    /// come back to the cutting front, at 500 Hz with 2 mN of noise.
+    pub(crate) fn oscillating() -> Trial {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let protocol = crate::sim::random_protocol(&mut rng);
+        let sensor = crate::sim::Sensor {
+            rate_hz: 500.0,
+            noise_n: 0.002,
+            encoder_m: 1e-6,
+        };
+        crate::sim::simulate_trial(&LIVER1, &protocol, &[], &sensor, &mut rng).0
     }
 
     /// A withdrawal's tent pulling to −0.6 N, snapping back at sample 100
@@ -2086,6 +2186,55 @@ mod tests {
         let near = |p: f64, q: f64| (p - q).abs() <= 1e-3 * p.abs().max(1e-3);
         assert!(near(a.cutting_force_n, b.cutting_force_n));
         assert!(near(a.cp_n_per_m, b.cp_n_per_m) && near(a.bp_ns_per_m2, b.bp_ns_per_m2));
+    }
+
+    /// The paper's protocol, its tip compressing the tissue ahead by up
+    /// to 0.3 N over the last 0.2 mm before the cutting front on every
+    /// return to it, and letting it go over as much on every retraction:
+    /// the strokes' friction is what it was without it.
+    #[test]
+    fn a_tip_pressing_on_the_front_at_each_turn_is_no_friction() {
+        let plain = oscillating();
+        let mut pressed = plain.clone();
+        let mut deepest_m = f64::MIN;
+        for (x, f) in pressed.x_m.iter().zip(pressed.f_n.iter_mut()) {
+            let back_m = deepest_m - x;
+            if back_m > 0.0 && back_m < 0.2e-3 {
+                *f += 0.3 * (1.0 - back_m / 0.2e-3);
+            }
+            deepest_m = deepest_m.max(*x);
+        }
+        let (a, b) = (fit_trial(&plain).unwrap(), fit_trial(&pressed).unwrap());
+        let near = |p: f64, q: f64| (p - q).abs() <= 0.02 * p.abs().max(1.0);
+        assert!(near(a.cp_n_per_m, b.cp_n_per_m), "{a:?} {b:?}");
+        assert!(near(a.bp_ns_per_m2, b.bp_ns_per_m2), "{a:?} {b:?}");
+        assert!(near(a.cn_n_per_m, b.cn_n_per_m), "{a:?} {b:?}");
+        assert!(near(a.bn_ns_per_m2, b.bn_ns_per_m2), "{a:?} {b:?}");
+    }
+
+    /// A final retreat at 2 mm/s whose pull goes on 5 mm past the first
+    /// contact (at 30 mm; x_s3 at 33 mm): dragged out, let go there. One
+    /// that ends at x_s3 was not.
+    #[test]
+    fn a_final_retreat_pulling_past_x_s3_dragged_its_surface_out() {
+        let retreat = |let_go_m: f64| -> Vec<Xvf> {
+            (0..1500u32)
+                .map(|k| {
+                    let x = 0.045 - 2e-5 * f64::from(k);
+                    (
+                        x,
+                        -0.002,
+                        -50.0 * (x - let_go_m).max(0.0) + fixed_noise(k, 0.01),
+                    )
+                })
+                .collect()
+        };
+        let (x_s3, contact) = (0.033, 0.030);
+        let dragged = dragged_out(&retreat(0.025), (x_s3, contact), (0.01, 0.0));
+        let (let_go_m, drag) = dragged.expect("dragged out");
+        assert!((let_go_m - 0.025).abs() < 2e-4, "let go at {let_go_m} m");
+        assert!(drag.is_none());
+        assert!(dragged_out(&retreat(x_s3), (x_s3, contact), (0.01, 0.0)).is_none());
     }
 
     /// A load cell zeroed 0.1 N high, more than the 46 mN above which
