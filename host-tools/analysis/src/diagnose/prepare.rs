@@ -121,6 +121,10 @@ pub struct Prepared {
     /// front, 1 to 0 over the compliance chosen on the trial
     /// (the `tip` module); made once, with the rest of the trial.
     pub tip_unloading: Vec<f64>,
+    /// The tip's load on every later return to the cutting front, 1 to 0
+    /// over the compliance chosen on the trial (the `tip` module); made
+    /// once, with the rest of the trial.
+    pub tip_return: Vec<f64>,
     /// The layer beneath the capsule loaded again after the puncture: the
     /// force's shortfall below its steady course, as the trial reads it
     /// (the `reload` module); made once, with the rest of the trial.
@@ -383,12 +387,14 @@ pub fn prepare(
         structures,
         trial,
         tip_unloading: Vec::new(),
+        tip_return: Vec::new(),
         reload: Vec::new(),
         tear: Vec::new(),
         search: Default::default(),
         sudden: Default::default(),
     };
     prepared.tip_unloading = super::tip::unloading(&prepared);
+    prepared.tip_return = super::tip::returning(&prepared);
     let [reload, tear] = super::reload::after_the_fall(&prepared);
     prepared.reload = reload;
     prepared.tear = tear;
