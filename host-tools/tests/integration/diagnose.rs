@@ -750,7 +750,7 @@ fn a_slip_onto_a_slow_relaxations_hold_is_a_slip() {
 fn breathing_that_outruns_the_needle_is_named() {
     // The literature form's period wanders by ±20 % over 30 s: a
     // steady phase strays by 1.5 rad over a trial, and the wander's fit
-    // leaves 4.2–7.7 noise floors over seeds 1–6 (4.5 at this one; 5.2
+    // leaves 4.2–7.7 noise floors over seeds 1–6 (4.5 at this one; 5.0
     // since `needle fit` reads no friction within 0.4 mm of the cutting
     // front, where in the tissue's frame a breathing tissue brings the
     // tip back every breath).
@@ -873,7 +873,7 @@ fn a_holder_on_a_ringing_mount_is_named() {
 /// ramp at each reversal. Its stiffness is the sliding friction's level
 /// over x_c — of the friction ahead: read off the friction left behind,
 /// a withdrawal after a faster insertion would load seven times too
-/// fast. (Seed 1: 33.3 → 18.6 mN, 32.9 → 22.1 since `needle fit` reads
+/// fast. (Seed 1: 33.3 → 18.6 mN; 30.7 → 20.6 since `needle fit` reads
 /// no friction within 0.4 mm of the cutting front, where the first
 /// bristle ramp after the turn at the front lies.)
 #[test]
