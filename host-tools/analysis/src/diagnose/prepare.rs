@@ -393,8 +393,7 @@ pub fn prepare(
         search: Default::default(),
         sudden: Default::default(),
     };
-    prepared.tip_unloading = super::tip::unloading(&prepared);
-    prepared.tip_return = super::tip::returning(&prepared);
+    [prepared.tip_unloading, prepared.tip_return] = super::tip::columns(&prepared);
     let [reload, tear] = super::reload::after_the_fall(&prepared);
     prepared.reload = reload;
     prepared.tear = tear;

@@ -4,7 +4,7 @@
 use super::crossval::Gram;
 use super::prepare::Prepared;
 
-/// Contact compliances of the tip [`unloading`] chooses from, m: a
+/// Contact compliances of the tip [`columns`] chooses from, m: a
 /// geometric grid from a hundredth of a millimetre to four tenths of
 /// one, each a tenth past the one before.
 fn compliances_m() -> impl Iterator<Item = f64> {
@@ -18,28 +18,29 @@ pub(super) fn widest_compliance_m() -> f64 {
 }
 
 /// The tip's force as it unloads on the first retraction from the
-/// cutting front. The tissue ahead of a cutting tip is compressed by the
-/// cutting force; drawn back, the tip lets it go over its contact
-/// compliance (hundredths to tenths of a millimetre), not at once as in
-/// the paper's model, whose cutting force stops with the advance. The
-/// column is a linear unloading, 1 at the front to 0 a compliance behind
-/// it ([`unloading_window`]). Each trial's own, load and compliance: the
-/// load is the trial's own cutting force, the compliance its tissue's,
-/// chosen on the trial (with its friction's scale beside it) by the rule
-/// fixed here.
-pub(super) fn unloading(p: &Prepared) -> Vec<f64> {
-    unloading_window(p).map_or_else(|| vec![0.0; p.trial.len()], |w| ramped(p, &w.first))
-}
-
-/// The tip's force on every return to the cutting front after its first
-/// retraction (an oscillation's turns there, a stroke back in): whether
-/// the tissue ahead springs back into the cut and is compressed again
-/// before the tip cuts, held at rest there and let go again, or stays
-/// out of its way, is the tissue's own. So it is a column of its own,
-/// its load and compliance the trial's own, chosen by the same rule as
-/// [`unloading`]'s.
-pub(super) fn returning(p: &Prepared) -> Vec<f64> {
-    unloading_window(p).map_or_else(|| vec![0.0; p.trial.len()], |w| ramped(p, &w.returns))
+/// cutting front, and on every return to it after that: `[unloading,
+/// returning]`, each a linear ramp, 1 at the front to 0 a compliance
+/// behind it ([`unloading_window`]).
+///
+/// The tissue ahead of a cutting tip is compressed by the cutting force;
+/// drawn back, the tip lets it go over its contact compliance
+/// (hundredths to tenths of a millimetre), not at once as in the paper's
+/// model, whose cutting force stops with the advance. Each trial's own,
+/// load and compliance: the load is the trial's own cutting force, the
+/// compliance its tissue's, chosen on the trial (with its friction's
+/// scale beside it) by the rule fixed here.
+///
+/// On a return to the front (an oscillation's turns there, a stroke
+/// back in), whether the tissue ahead springs back into the cut and is
+/// compressed again before the tip cuts, held at rest there and let go
+/// again, or stays out of its way, is the tissue's own. So it is a
+/// column of its own, its load and compliance the trial's own, chosen by
+/// the same rule.
+pub(super) fn columns(p: &Prepared) -> [Vec<f64>; 2] {
+    match unloading_window(p) {
+        Some(w) => [ramped(p, &w.first), ramped(p, &w.returns)],
+        None => [vec![0.0; p.trial.len()], vec![0.0; p.trial.len()]],
+    }
 }
 
 /// A linear ramp over `window`, 1 at the front to 0 a compliance behind
@@ -167,12 +168,12 @@ mod tests {
     use needle_holder::model::params::LIVER1;
 
     /// `trial` prepared against liver 1, and the least-squares gain of
-    /// its returns' column ([`returning`]) on `pressing_n`.
+    /// its returns' column ([`columns`]) on `pressing_n`.
     fn returns_gain(trial: needle_io::trial::Trial, pressing_n: &[f64]) -> (Vec<f64>, f64) {
         let geometry = fit_trial(&trial).unwrap();
         let velocity = needle_velocity(&trial);
         let p = prepare("t".into(), trial, geometry, &LIVER1, velocity);
-        let col = returning(&p);
+        let col = p.tip_return;
         let cc: f64 = col.iter().map(|c| c * c).sum();
         let cr: f64 = col.iter().zip(pressing_n).map(|(c, r)| c * r).sum();
         let gain = if cc > 0.0 { cr / cc } else { 0.0 };

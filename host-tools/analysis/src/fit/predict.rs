@@ -5,6 +5,7 @@
 use needle_holder::model::params::TissueParams;
 
 use super::cutting::{CuttingObserver, Odds};
+use super::drag::withdrawing_length_m;
 use super::jumps;
 use super::trial::TrialFit;
 use needle_io::trial::Trial;
@@ -346,8 +347,7 @@ impl<'a> Inside<'a> {
         let retreating = self.geometry.retreat_t_s.is_none_or(|from_s| t_s >= from_s);
         let l = match (self.geometry.let_go_x_m, self.geometry.drag) {
             (Some(let_go), drag) if v.v_mps[i] < -params.half_band_mps && retreating => {
-                let exit_m = let_go.min(self.geometry.relaxed_x_m);
-                drag.map_or(x_m - exit_m, |d| d.length_m(x_m, exit_m))
+                withdrawing_length_m(x_m, let_go.min(self.geometry.relaxed_x_m), drag)
             }
             _ => x_m - self.geometry.relaxed_x_m,
         };

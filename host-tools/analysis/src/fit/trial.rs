@@ -6,7 +6,7 @@
 
 use anyhow::{bail, Result};
 
-use super::drag::{kinked, straight, Drag, Xvf};
+use super::drag::{withdrawing_length_m, Drag, Pulls, Xvf};
 use super::lsq::Lsq;
 use needle_io::trial::Trial;
 
@@ -579,13 +579,15 @@ pub fn fit_trial_at(trial: &Trial, falls: Falls) -> Result<TrialFit> {
         // and the grid over ρ, which reads it as the strokes' exit, puts
         // x_s3 too far out: the strokes alone place it then, and the
         // retreat's let-go is read against that.
-        let dragged = |friction: &OneTrialFriction| {
-            let (i, from) = retreat?;
-            let out: Vec<Xvf> = track[from..]
+        let out: Vec<Xvf> = retreat.map_or_else(Vec::new, |(_, from)| {
+            track[from..]
                 .iter()
                 .copied()
                 .filter(|s| s.1 < 0.0)
-                .collect();
+                .collect()
+        });
+        let dragged = |friction: &OneTrialFriction| {
+            let (i, _) = retreat?;
             let relaxed = (friction.relaxed_x_m, contact_x_m);
             dragged_out(&out, relaxed, (noise_n, before_contact_n)).map(|d| (i, d))
         };
@@ -718,8 +720,7 @@ fn with_the_stick(
     let (Some(last), Some((exit_m, drag))) = (stuck.into_iter().last(), exit) else {
         return dn;
     };
-    let x_m = trial.x_m[last];
-    let l = drag.map_or(x_m - exit_m, |d| d.length_m(x_m, exit_m));
+    let l = withdrawing_length_m(trial.x_m[last], exit_m, drag);
     if l >= 0.002 {
         stronger(dn, (trial.f_n[last] / l, true), -1.0)
     } else {
@@ -1019,9 +1020,12 @@ fn dragged_out(
     let from_m = contact_x_m - MOST_DRAG_M.max(relaxed_x_m - contact_x_m);
     let grid = || (0..=400).map(move |k| from_m + (contact_x_m - from_m) * k as f64 / 400.0);
     let worth_n2 = (out.len() as f64).ln() * noise_n.max(1e-4).powi(2);
-    let (_, _, at_s3) = straight(out, std::iter::once(relaxed_x_m))?;
-    let (let_go_m, _, line) = straight(out, grid())?;
-    let bent = kinked(out, grid()).filter(|k| line - k.sse > 2.0 * worth_n2);
+    let pulls = Pulls::of(out);
+    let (_, _, at_s3) = pulls.straight(std::iter::once(relaxed_x_m))?;
+    let (let_go_m, _, line) = pulls.straight(grid())?;
+    let bent = pulls
+        .kinked(grid())
+        .filter(|k| line - k.sse > 2.0 * worth_n2);
     match bent {
         Some(k) if at_s3 - k.sse > 3.0 * worth_n2 => Some((k.let_go_m, Some(k.drag))),
         _ if at_s3 - line > worth_n2 => Some((let_go_m, None)),
@@ -1490,10 +1494,11 @@ fn one_way(
             (None, g) => g,
         };
         // The surface dragged out with the needle bends the pull where it
-        // stops following ([`kinked`]): worth its two more parameters by
+        // stops following (`Pulls::kinked`): worth its two more parameters by
         // the same criterion. A snap back to zero is a tent's let-go, which
         // the stick holds.
-        let bent = kinked(&out, grid.clone())
+        let bent = Pulls::of(&out)
+            .kinked(grid.clone())
             .filter(|k| best.is_some_and(|b| b.0 - k.sse > 2.0 * worth_n2) && snapped.is_none());
         drag = bent.map(|k| k.drag);
         let_go = snapped.or(bent.map(|k| k.let_go_m)).or(best.map(|b| b.1));
