@@ -11,6 +11,7 @@ use std::f64::consts::TAU;
 
 use super::motion::{harmonics_along, moved_model, PhaseWander, TissueShift};
 use super::prepare::{Prepared, AFTER, APPROACH, LOADING};
+use crate::fit::lsq::Lsq;
 
 /// A candidate's columns for one trial, one vector per linear parameter.
 pub type Columns = Vec<Vec<f64>>;
@@ -662,18 +663,23 @@ fn sliding_friction_n(p: &Prepared, sign: f64) -> f64 {
 }
 
 /// Walls and membranes where the detector found them, each a local
-/// stiffening up to the force seen falling there: wall_n·s^n over its own
-/// stretch s (0 where it began to load, 1 where it gave way), n on the
-/// grid — 1 a linear spring, 2 and 3 a collagen wall stiffening as it
-/// stretches (Fung). Each wall's stretch is its own (a vessel wall and a
-/// muscle fascia differ tenfold): walking back from the peak, the residual
-/// comes down to a little above the level it fell to (2 % of the wall
-/// force, three noise sd at least), and the straight line from there to
-/// the peak, carried on to that level, says where the wall began to load
-/// — no earlier than where the wall before it gave way, and from no lower
-/// than the level that one fell to: the tip reaches a deeper membrane only
-/// past the one above it, and a wall that gives way as the stage stops
-/// falls to the dwell's level, which need not be the one it rose from.
+/// stiffening up to the force it let go of: wall_n·s^n over its own
+/// stretch s (0 where it began to load, 1 at its top), n on the grid — 1
+/// a linear spring, 2 and 3 a collagen wall stiffening as it stretches
+/// (Fung). Each wall's stretch is its own (a vessel wall and a muscle
+/// fascia differ tenfold), read from its rise ([`rise`]): no
+/// earlier than where the wall before it was through, nor before the
+/// capsule gave way — the tip reaches a deeper membrane only past the one
+/// above it. A wall need not break at once: a layered vessel wall tears
+/// layer by layer and a damaged one softens, so its force may roll over
+/// and ease off over up to its thickness ([`rolled_over_top`],
+/// [`give_way`]); the column then falls from the top in a straight line
+/// to where the wall is through (a cohesive law's linear softening). A
+/// wall that broke at once lets go of the fall the detector measured.
+/// Each is read against the residual's own course there, a straight
+/// line: the pooled nominal can miss one trial by newtons over its
+/// insertion (its friction), and the nominal at its best for the trial
+/// bends its corrections round the walls themselves.
 fn walls(p: &Prepared, n: f64) -> Vec<Vec<f64>> {
     let found = Found {
         x_m: &p.trial.x_m,
@@ -696,22 +702,47 @@ struct Found<'a> {
     noise_n: f64,
 }
 
-/// [`walls`]' one column: every wall found, each stiffening as s^n.
+/// [`walls`]' one column: every wall found, each stiffening as s^n, then
+/// softening to nothing over its give-way.
 fn wall_column(found: &Found, n: f64) -> Vec<f64> {
     let (x, r) = (found.x_m, found.residual_n);
     let mut col = vec![0.0; x.len()];
-    let mut before: Option<(usize, f64)> = None;
-    for &(peak, x_peak, wall_n) in found.structures {
-        let fell_to = r[peak + 1..(peak + 6).min(r.len())].iter().sum::<f64>()
-            / (peak + 6).min(r.len()).saturating_sub(peak + 1).max(1) as f64;
-        let (gave_way, foot) = before.map_or((0, fell_to), |(i, level)| (i, fell_to.max(level)));
-        let level = (0.02 * wall_n).max(3.0 * found.noise_n).min(0.5 * wall_n);
-        let begun = (gave_way..peak)
-            .rev()
-            .find(|&i| r[i] <= foot + level || x[i] <= found.puncture_x_m)
-            .unwrap_or(gave_way);
-        before = Some((peak + 1, fell_to));
-        let start_m = x[begun] - (x_peak - x[begun]) * level / (wall_n - level).max(1e-9);
+    let mut before: Option<usize> = None;
+    for (k, &(last_held, _, fall_n)) in found.structures.iter().enumerate() {
+        let next = found.structures.get(k + 1).map_or(x.len(), |s| s.0);
+        let gave_way = before.unwrap_or(0);
+        let from = (gave_way..last_held)
+            .find(|&i| x[i] > found.puncture_x_m)
+            .unwrap_or(last_held);
+        let level = (0.02 * fall_n).max(3.0 * found.noise_n);
+        // The wall's shape is read off the residual's course through it,
+        // that course read again from the top of a wall that rolled over.
+        let off = |course: &Rise| -> Vec<f64> {
+            (0..x.len())
+                .map(|i| r[i] - course.slope_n_per_m * x[i])
+                .collect()
+        };
+        let mut course = rise(x, r, from, last_held, n);
+        let mut off_course = off(&course);
+        let top = rolled_over_top(x, &off_course, from, last_held, level).unwrap_or(last_held);
+        if top != last_held {
+            course = rise(x, r, from, top, n);
+            off_course = off(&course);
+        }
+        let (peak, through, wall_n) = match give_way(x, &off_course, top, next) {
+            Some(g) if top != last_held || g.through > top + SHARP_SAMPLES => {
+                (top, g.through, g.wall_n)
+            }
+            _ => (last_held, last_held + 1, fall_n),
+        };
+        let x_peak = x[peak];
+        let start = if peak == top {
+            course.start
+        } else {
+            rise(x, r, from, peak, n).start
+        };
+        let start_m = x[start];
+        before = Some(through);
         let stretch_m = (x_peak - start_m).max(1e-6);
         for i in (0..=peak).rev() {
             if x[i] < start_m {
@@ -720,8 +751,155 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
             let s = ((x[i] - start_m) / stretch_m).clamp(0.0, 1.0);
             col[i] += wall_n * s.powf(n);
         }
+        let softening_m = (x[through] - x_peak).max(1e-9);
+        for i in peak + 1..through {
+            col[i] += wall_n * (1.0 - (x[i] - x_peak) / softening_m).clamp(0.0, 1.0);
+        }
     }
     col
+}
+
+/// A wall's rise ([`rise`]).
+struct Rise {
+    /// The sample where the wall began to load.
+    start: usize,
+    /// The slope of the residual's course beneath it, N/m.
+    slope_n_per_m: f64,
+}
+
+/// Where a wall began to load: the least-squares hinge of the residual's
+/// course (a straight line) and the wall's rise on it, h·s^n over its
+/// stretch s (0 at the start, 1 at the peak), over the samples `from`
+/// (past the capsule and the wall before) to the peak, the start scanned
+/// at up to [`RISE_STARTS`] places. The level before a wall need not be
+/// the one after it (the tip may cut less in a vessel's lumen than in the
+/// parenchyma around it), so the start is read from the rise itself; and
+/// the pooled nominal can miss a trial by newtons over its insertion (its
+/// friction), so the course is a line, not a level.
+fn rise(x: &[f64], r: &[f64], from: usize, peak: usize, n: f64) -> Rise {
+    let flat = Rise {
+        start: from.min(peak),
+        slope_n_per_m: 0.0,
+    };
+    if peak < from + 3 {
+        return flat;
+    }
+    let step = (peak - from).div_ceil(RISE_STARTS).max(1);
+    let fit_from = |start: usize| -> Option<(f64, Rise)> {
+        let span_m = x[peak] - x[start];
+        if span_m <= 0.0 {
+            return None;
+        }
+        let mut fit = Lsq::<3>::default();
+        fit.add_all((from..=peak).map(|i| {
+            let s = ((x[i] - x[start]) / span_m).max(0.0).powf(n);
+            ([s, 1.0, x[i] - x[peak]], r[i])
+        }));
+        let c = fit.solve()?;
+        let rise = Rise {
+            start,
+            slope_n_per_m: c[2],
+        };
+        (c[0] > 0.0).then(|| (fit.sse(&c), rise))
+    };
+    (from..peak - 1)
+        .step_by(step)
+        .filter_map(fit_from)
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or(flat, |(_, rise)| rise)
+}
+
+/// The end of the samples after `peak` a wall's fall is read over: while
+/// the needle advances, within [`THICKEST_WALL_M`] of the peak, before
+/// the next wall's peak `next`.
+fn fall_end(x: &[f64], peak: usize, next: usize) -> usize {
+    let last = next.min(x.len());
+    (peak + 1..last)
+        .find(|&i| x[i] <= x[i - 1] || x[i] - x[peak] > THICKEST_WALL_M)
+        .unwrap_or(last)
+}
+
+/// How many places [`rise`] tries a wall's start at.
+const RISE_STARTS: usize = 200;
+
+/// The top of a wall that rolled over and eased off before the fall the
+/// detector saw: walking back from `last_held` (no further than
+/// [`THICKEST_WALL_M`], nor past `from`) over means of five samples that
+/// stay above the one there less `level_n` — the wall easing off, not
+/// yet its rise — the highest, where it stands more than `level_n`
+/// above the mean at `last_held`; `None` where the wall held its load to
+/// the fall.
+fn rolled_over_top(
+    x: &[f64],
+    r: &[f64],
+    from: usize,
+    last_held: usize,
+    level_n: f64,
+) -> Option<usize> {
+    const SIDE: usize = 5;
+    let mean_to = |i: usize| r[i + 1 - SIDE..=i].iter().sum::<f64>() / SIDE as f64;
+    let held_n = mean_to(last_held.checked_sub(SIDE - 1)? + SIDE - 1);
+    let (end, top_n) = (from.max(SIDE - 1)..=last_held)
+        .rev()
+        .take_while(|&i| x[last_held] - x[i] <= THICKEST_WALL_M)
+        .map(|i| (i, mean_to(i)))
+        .take_while(|&(_, m)| m >= held_n - level_n)
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    (top_n > held_n + level_n).then_some(end - SIDE / 2)
+}
+
+/// A fall within this many samples of the peak is a wall that broke at
+/// once: it lets go of the fall the detector measured there.
+const SHARP_SAMPLES: usize = 2;
+
+/// The thickest wall a give-way is looked for over, m: a 3 mm artery.
+const THICKEST_WALL_M: f64 = 0.003;
+
+/// How a wall gave way after its peak ([`give_way`]).
+struct GiveWay {
+    /// The first sample where the wall is through.
+    through: usize,
+    /// The force the wall let go of over its fall.
+    wall_n: f64,
+}
+
+/// How a wall gave way after its peak: the residual (off its course)
+/// there as the wall's force falling in a straight line from the peak to
+/// nothing where it is through, on a level — the least-squares hinge
+/// over every place the fall may end ([`fall_end`]). A wall that broke
+/// at once has its hinge right after the peak. Written
+/// here: a hinge scanned over its knot is a few lines, and no regression
+/// crate has it.
+fn give_way(x: &[f64], r: &[f64], peak: usize, next_peak: usize) -> Option<GiveWay> {
+    let end = fall_end(x, peak, next_peak);
+    // The level alone from each sample to the window's end.
+    let mut tails = vec![Lsq::<2>::default(); end + 1 - peak];
+    for i in (peak..end).rev() {
+        let mut tail = tails[i + 1 - peak].clone();
+        tail.add([0.0, 1.0], r[i]);
+        tails[i - peak] = tail;
+    }
+    let mut best: Option<(f64, GiveWay)> = None;
+    for through in peak + 1..end {
+        let span_m = x[through] - x[peak];
+        if span_m <= 0.0 {
+            continue;
+        }
+        let mut fit = tails[through - peak].clone();
+        fit.add_all((peak..through).map(|i| ([1.0 - (x[i] - x[peak]) / span_m, 1.0], r[i])));
+        let Some(c) = fit.solve() else { continue };
+        let sse = fit.sse(&c);
+        if best.as_ref().is_none_or(|(s, _)| sse < *s) {
+            best = Some((
+                sse,
+                GiveWay {
+                    through,
+                    wall_n: c[0],
+                },
+            ));
+        }
+    }
+    best.map(|(_, g)| g).filter(|g| g.wall_n > 0.0)
 }
 
 /// Cutting that depends on depth: growing with depth past the surface
@@ -1743,14 +1921,31 @@ mod tests {
         );
     }
 
+    /// [`wall_column`] on a trial past its puncture with a 12 mN load cell.
+    fn column_of(
+        x_m: &[f64],
+        residual_n: &[f64],
+        structures: &[(usize, f64, f64)],
+        n: f64,
+    ) -> Vec<f64> {
+        let found = Found {
+            x_m,
+            residual_n,
+            structures,
+            puncture_x_m: 0.0,
+            noise_n: 0.012,
+        };
+        wall_column(&found, n)
+    }
+
     /// Two membranes, 1 µm a sample: the first rises from sample 100 to
     /// 3.8 N at 199 and falls to −0.23 N; the second rises from 300 to
     /// 2.3 N at 399 and gives way as the stage stops, falling to the
-    /// dwell's −0.32 N. Each wall's column is its own rise: nothing between
-    /// them, where a second wall read from the dwell's level would reach
-    /// back over the first.
+    /// dwell's −0.32 N. Each wall's column is its own rise, from where it
+    /// began: nothing between them, where a second wall read back to the
+    /// dwell's level would reach over the first.
     #[test]
-    fn a_wall_begins_past_the_one_before_it_from_the_level_that_one_fell_to() {
+    fn a_wall_begins_past_the_one_before_it() {
         let x_m: Vec<f64> = (0..500).map(|i| i as f64 * 1e-6).collect();
         let rise =
             |i: usize, from: usize, to_n: f64| -0.25 + (to_n + 0.25) * (i - from) as f64 / 99.0;
@@ -1764,14 +1959,7 @@ mod tests {
             })
             .collect();
         let structures = [(199, x_m[199], 4.03), (399, x_m[399], 2.62)];
-        let found = Found {
-            x_m: &x_m,
-            residual_n: &residual_n,
-            structures: &structures,
-            puncture_x_m: 0.0,
-            noise_n: 0.012,
-        };
-        let col = wall_column(&found, 1.0);
+        let col = column_of(&x_m, &residual_n, &structures, 1.0);
         assert!(col[..95].iter().all(|&c| c == 0.0), "{:?}", &col[..100]);
         assert!(
             col[200..295].iter().all(|&c| c == 0.0),
@@ -1780,6 +1968,67 @@ mod tests {
         );
         assert!((col[199] - 4.03).abs() < 1e-9 && (col[399] - 2.62).abs() < 1e-9);
         assert!(col[400..].iter().all(|&c| c == 0.0));
+    }
+
+    /// A vessel wall, 10 µm a sample, on a residual that stands 0.3 N
+    /// before it and 0.05 N after: it loads linearly from sample 100 to
+    /// 0.9 N at 200, rolls over and eases off in a straight line to the
+    /// level after at 260 (the wall's fall 0.85 N), while the detector saw
+    /// the fall only at 230 and measured it 0.2 N. The column rises from
+    /// where the wall began, not from where the residual comes down to the
+    /// level after, to the wall's whole fall at the top, and softens to
+    /// nothing where it is through.
+    #[test]
+    fn a_wall_that_rolls_over_softens_from_its_top_to_where_it_is_through() {
+        let x_m: Vec<f64> = (0..400).map(|i| i as f64 * 1e-5).collect();
+        let residual_n: Vec<f64> = (0..400)
+            .map(|i| match i {
+                0..=99 => 0.3,
+                100..=199 => 0.3 + 0.6 * (i - 100) as f64 / 100.0,
+                200..=259 => 0.9 - 0.85 * (i - 200) as f64 / 60.0,
+                _ => 0.05,
+            })
+            .collect();
+        let structures = [(230, x_m[230], 0.2)];
+        let col = column_of(&x_m, &residual_n, &structures, 1.0);
+        assert!(col[..100].iter().all(|&c| c == 0.0), "{:?}", &col[..110]);
+        // The top is read from means of five samples: a sample off.
+        let near = |i: usize, want_n: f64| (col[i] - want_n).abs() < 0.02;
+        assert!(
+            near(200, 0.85) && near(150, 0.425) && near(230, 0.425),
+            "{:?}",
+            &col[140..240]
+        );
+        assert!(col[260..].iter().all(|&c| c == 0.0), "{:?}", &col[255..265]);
+    }
+
+    /// A wall that breaks at once on a residual whose course falls 1 N a
+    /// millimetre (a pooled nominal that pulls harder than this trial's
+    /// shaft), 10 µm a sample: it loads as 0.6 N·s² from sample 100 to
+    /// 200 and falls at once. Read against that course, it began at 100,
+    /// did not roll over (the residual stands higher 50 samples earlier,
+    /// on the course), and broke at once.
+    #[test]
+    fn a_wall_is_read_against_the_residuals_course_through_it() {
+        let x_m: Vec<f64> = (0..400).map(|i| i as f64 * 1e-5).collect();
+        let residual_n: Vec<f64> = (0..400)
+            .map(|i| {
+                let wall_n = match i {
+                    100..=200 => 0.6 * ((i - 100) as f64 / 100.0).powi(2),
+                    _ => 0.0,
+                };
+                -1000.0 * x_m[i] + wall_n
+            })
+            .collect();
+        let structures = [(200, x_m[200], 0.6)];
+        let col = column_of(&x_m, &residual_n, &structures, 2.0);
+        assert!(
+            col[..=100].iter().all(|&c| c.abs() < 1e-9),
+            "{:?}",
+            &col[..110]
+        );
+        assert!((col[150] - 0.15).abs() < 1e-9 && (col[200] - 0.6).abs() < 1e-9);
+        assert!(col[201..].iter().all(|&c| c == 0.0), "{:?}", &col[195..210]);
     }
 
     /// Each compliant stiffness is searched at the modes a holder of
