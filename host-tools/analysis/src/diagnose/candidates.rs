@@ -11,6 +11,7 @@ use std::f64::consts::TAU;
 
 use super::motion::{harmonics_along, moved_model, PhaseWander, TissueShift};
 use super::prepare::{Prepared, AFTER, APPROACH, LOADING};
+use super::stick::running;
 use crate::fit::lsq::Lsq;
 
 /// A candidate's columns for one trial, one vector per linear parameter.
@@ -722,13 +723,16 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
                 .map(|i| r[i] - course.slope_n_per_m * x[i])
                 .collect()
         };
-        let mut course = rise(x, r, from, last_held, n);
-        let mut off_course = off(&course);
+        let held = rise(x, r, from, last_held, n);
+        let mut off_course = off(&held);
         let top = rolled_over_top(x, &off_course, from, last_held, level).unwrap_or(last_held);
-        if top != last_held {
-            course = rise(x, r, from, top, n);
+        let course = if top == last_held {
+            held
+        } else {
+            let course = rise(x, r, from, top, n);
             off_course = off(&course);
-        }
+            course
+        };
         let (peak, through, wall_n) = match give_way(x, &off_course, top, next) {
             Some(g) if top != last_held || g.through > top + SHARP_SAMPLES => {
                 (top, g.through, g.wall_n)
@@ -736,12 +740,8 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
             _ => (last_held, last_held + 1, fall_n),
         };
         let x_peak = x[peak];
-        let start = if peak == top {
-            course.start
-        } else {
-            rise(x, r, from, peak, n).start
-        };
-        let start_m = x[start];
+        // A wall that rolled over but shows no give-way held to the fall.
+        let start_m = x[if peak == top { course } else { held }.start];
         before = Some(through);
         let stretch_m = (x_peak - start_m).max(1e-6);
         for i in (0..=peak).rev() {
@@ -760,6 +760,7 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
 }
 
 /// A wall's rise ([`rise`]).
+#[derive(Clone, Copy)]
 struct Rise {
     /// The sample where the wall began to load.
     start: usize,
@@ -872,20 +873,15 @@ struct GiveWay {
 /// crate has it.
 fn give_way(x: &[f64], r: &[f64], peak: usize, next_peak: usize) -> Option<GiveWay> {
     let end = fall_end(x, peak, next_peak);
-    // The level alone from each sample to the window's end.
-    let mut tails = vec![Lsq::<2>::default(); end + 1 - peak];
-    for i in (peak..end).rev() {
-        let mut tail = tails[i + 1 - peak].clone();
-        tail.add([0.0, 1.0], r[i]);
-        tails[i - peak] = tail;
-    }
+    // The level alone over the last k samples of the window, for every k.
+    let tails = running((peak..end).rev(), r, |_| [0.0, 1.0]);
     let mut best: Option<(f64, GiveWay)> = None;
     for through in peak + 1..end {
         let span_m = x[through] - x[peak];
         if span_m <= 0.0 {
             continue;
         }
-        let mut fit = tails[through - peak].clone();
+        let mut fit = tails[end - through].clone();
         fit.add_all((peak..through).map(|i| ([1.0 - (x[i] - x[peak]) / span_m, 1.0], r[i])));
         let Some(c) = fit.solve() else { continue };
         let sse = fit.sse(&c);

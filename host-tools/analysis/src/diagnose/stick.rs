@@ -145,7 +145,7 @@ fn best_split(
 
 /// Least-squares sums of `f` on two columns over the first k samples of
 /// `order`, for every k.
-fn running(
+pub(super) fn running(
     order: impl Iterator<Item = usize>,
     f: &[f64],
     col: impl Fn(usize) -> [f64; 2],
