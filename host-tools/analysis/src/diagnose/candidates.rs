@@ -712,6 +712,11 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
     for (k, &(last_held, _, fall_n)) in found.structures.iter().enumerate() {
         let next = found.structures.get(k + 1).map_or(x.len(), |s| s.0);
         let gave_way = before.unwrap_or(0);
+        // A wall needs a sample past it to fall on, and lies past the one
+        // before it.
+        if last_held + 1 >= x.len() || last_held < gave_way {
+            continue;
+        }
         let from = (gave_way..last_held)
             .find(|&i| x[i] > found.puncture_x_m)
             .unwrap_or(last_held);
@@ -811,14 +816,21 @@ fn rise(x: &[f64], r: &[f64], from: usize, peak: usize, n: f64) -> Rise {
 }
 
 /// The end of the samples after `peak` a wall's fall is read over: while
-/// the needle advances, within [`THICKEST_WALL_M`] of the peak, before
+/// the needle advances (neither backs off nor stands still over
+/// [`STILL_SAMPLES`]), within [`THICKEST_WALL_M`] of the peak, before
 /// the next wall's peak `next`.
 fn fall_end(x: &[f64], peak: usize, next: usize) -> usize {
     let last = next.min(x.len());
+    let stood = |i: usize| i >= peak + STILL_SAMPLES && x[i] <= x[i - STILL_SAMPLES];
     (peak + 1..last)
-        .find(|&i| x[i] <= x[i - 1] || x[i] - x[peak] > THICKEST_WALL_M)
+        .find(|&i| x[i] < x[i - 1] || stood(i) || x[i] - x[peak] > THICKEST_WALL_M)
         .unwrap_or(last)
+        .max(peak + 1)
 }
+
+/// Samples the needle must not advance over to have stopped: an encoder
+/// read faster than it counts repeats a reading while it still moves.
+const STILL_SAMPLES: usize = 5;
 
 /// How many places [`rise`] tries a wall's start at.
 const RISE_STARTS: usize = 200;
@@ -840,7 +852,9 @@ fn rolled_over_top(
     const SIDE: usize = 5;
     let mean_to = |i: usize| r[i + 1 - SIDE..=i].iter().sum::<f64>() / SIDE as f64;
     let held_n = mean_to(last_held.checked_sub(SIDE - 1)? + SIDE - 1);
-    let (end, top_n) = (from.max(SIDE - 1)..=last_held)
+    // Means from `from` on: one reaching further back would take in the
+    // wall before.
+    let (end, top_n) = (from + SIDE - 1..=last_held)
         .rev()
         .take_while(|&i| x[last_held] - x[i] <= THICKEST_WALL_M)
         .map(|i| (i, mean_to(i)))
@@ -2025,6 +2039,78 @@ mod tests {
         );
         assert!((col[150] - 0.15).abs() < 1e-9 && (col[200] - 0.6).abs() < 1e-9);
         assert!(col[201..].iter().all(|&c| c == 0.0), "{:?}", &col[195..210]);
+    }
+
+    /// Two walls, 10 µm a sample: the first rises to 2 N at sample 199
+    /// and breaks at once to a level of 0.35 N, which holds to the second
+    /// wall's fall at 259 (its rise hidden in the level). The second is
+    /// read from where the first is through: it does not roll over from
+    /// the first's top, nor soften over the level it held.
+    #[test]
+    fn a_wall_is_not_read_back_over_the_one_before_it() {
+        let x_m: Vec<f64> = (0..400).map(|i| i as f64 * 1e-5).collect();
+        let residual_n: Vec<f64> = (0..400)
+            .map(|i| match i {
+                100..=199 => 2.0 * (i - 100) as f64 / 99.0,
+                200..=259 => 0.35,
+                _ => 0.0,
+            })
+            .collect();
+        let structures = [(199, x_m[199], 1.65), (259, x_m[259], 0.35)];
+        let col = column_of(&x_m, &residual_n, &structures, 1.0);
+        assert!((col[199] - 1.65).abs() < 1e-9, "{:?}", &col[195..205]);
+        assert!(
+            col[200..206].iter().all(|&c| c < 0.1),
+            "{:?}",
+            &col[200..210]
+        );
+        assert!(
+            col[255..=259].iter().all(|&c| c > 0.3),
+            "{:?}",
+            &col[250..262]
+        );
+        assert!(col[260..].iter().all(|&c| c == 0.0));
+    }
+
+    /// A wall at a trial's last sample has nothing to fall on, and one
+    /// listed before the wall ahead of it is through lies behind it:
+    /// neither is read, and neither reads past the trial.
+    #[test]
+    fn a_wall_with_no_sample_past_it_or_behind_another_is_not_read() {
+        let x_m: Vec<f64> = (0..300).map(|i| i as f64 * 1e-5).collect();
+        let residual_n: Vec<f64> = (0..300)
+            .map(|i| match i {
+                100..=199 => (i - 100) as f64 / 99.0,
+                _ => 0.0,
+            })
+            .collect();
+        let structures = [
+            (199, x_m[199], 1.0),
+            (150, x_m[150], 0.5),
+            (299, x_m[299], 0.2),
+        ];
+        let col = column_of(&x_m, &residual_n, &structures, 1.0);
+        assert!((col[199] - 1.0).abs() < 1e-9 && (col[150] - 0.5).abs() < 0.02);
+        assert!(col[200..].iter().all(|&c| c == 0.0), "{:?}", &col[195..]);
+    }
+
+    /// An encoder read faster than it counts repeats a reading while the
+    /// needle advances: a wall easing off over 40 samples, 10 µm a
+    /// sample with every fourth reading repeated, is read through to
+    /// where it is through, not to the first repeat.
+    #[test]
+    fn a_repeated_encoder_reading_does_not_end_a_walls_give_way() {
+        let x_m: Vec<f64> = (0..400).map(|i| (i - i / 4) as f64 * 1e-5).collect();
+        let residual_n: Vec<f64> = (0..400)
+            .map(|i| match i {
+                100..=199 => 0.9 * (i - 100) as f64 / 100.0,
+                200..=239 => 0.9 - 0.9 * (i - 200) as f64 / 40.0,
+                _ => 0.0,
+            })
+            .collect();
+        let g = give_way(&x_m, &residual_n, 200, 400).expect("a give-way");
+        assert!((238..=241).contains(&g.through), "{}", g.through);
+        assert!((g.wall_n - 0.9).abs() < 0.05, "{}", g.wall_n);
     }
 
     /// Each compliant stiffness is searched at the modes a holder of
