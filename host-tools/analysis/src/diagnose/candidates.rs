@@ -821,9 +821,17 @@ fn rise(x: &[f64], r: &[f64], from: usize, peak: usize, n: f64) -> Rise {
 /// the next wall's peak `next`.
 fn fall_end(x: &[f64], peak: usize, next: usize) -> usize {
     let last = next.min(x.len());
+    // Still over the last STILL_SAMPLES steps: the first of them is where
+    // it stopped (the samples at rest are the stop's, not the wall's).
     let stood = |i: usize| i >= peak + STILL_SAMPLES && x[i] <= x[i - STILL_SAMPLES];
     (peak + 1..last)
-        .find(|&i| x[i] < x[i - 1] || stood(i) || x[i] - x[peak] > THICKEST_WALL_M)
+        .find_map(|i| {
+            if stood(i) {
+                Some(i + 1 - STILL_SAMPLES)
+            } else {
+                (x[i] < x[i - 1] || x[i] - x[peak] > THICKEST_WALL_M).then_some(i)
+            }
+        })
         .unwrap_or(last)
         .max(peak + 1)
 }
@@ -2111,6 +2119,18 @@ mod tests {
         let g = give_way(&x_m, &residual_n, 200, 400).expect("a give-way");
         assert!((238..=241).contains(&g.through), "{}", g.through);
         assert!((g.wall_n - 0.9).abs() < 0.05, "{}", g.wall_n);
+    }
+
+    /// A wall's fall is read to where the stage stopped, its first sample
+    /// at rest: the force there falls as cutting and sliding stop, which
+    /// is the stop's, not the wall's.
+    #[test]
+    fn a_walls_fall_is_read_to_where_the_needle_stopped() {
+        let x_m: Vec<f64> = (0..400).map(|i| i.min(250) as f64 * 1e-5).collect();
+        assert_eq!(fall_end(&x_m, 200, 400), 251);
+        let mut once = x_m.clone();
+        once[230] = once[229];
+        assert_eq!(fall_end(&once, 200, 400), 251);
     }
 
     /// Each compliant stiffness is searched at the modes a holder of
