@@ -754,7 +754,7 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
                 break;
             }
             let s = ((x[i] - start_m) / stretch_m).clamp(0.0, 1.0);
-            col[i] += wall_n * s.powf(n);
+            col[i] += wall_n * power(s, n);
         }
         let softening_m = (x[through] - x_peak).max(1e-9);
         for i in peak + 1..through {
@@ -791,16 +791,33 @@ fn rise(x: &[f64], r: &[f64], from: usize, peak: usize, n: f64) -> Rise {
         return flat;
     }
     let step = (peak - from).div_ceil(RISE_STARTS).max(1);
+    // The course's sums are every start's: summed once, the rise's alone
+    // over the samples past each start (s is 0 before it).
+    let mut course = Lsq::<2>::default();
+    course.add_all((from..=peak).map(|i| ([1.0, x[i] - x[peak]], r[i])));
+    let (course_ata, course_aty, yy) = course.sums();
     let fit_from = |start: usize| -> Option<(f64, Rise)> {
         let span_m = x[peak] - x[start];
         if span_m <= 0.0 {
             return None;
         }
-        let mut fit = Lsq::<3>::default();
-        fit.add_all((from..=peak).map(|i| {
-            let s = ((x[i] - x[start]) / span_m).max(0.0).powf(n);
-            ([s, 1.0, x[i] - x[peak]], r[i])
-        }));
+        let [mut ss, mut s1, mut sd, mut sr] = [0.0; 4];
+        for i in (from..=peak).filter(|&i| x[i] > x[start]) {
+            let s = power((x[i] - x[start]) / span_m, n);
+            ss += s * s;
+            s1 += s;
+            sd += s * (x[i] - x[peak]);
+            sr += s * r[i];
+        }
+        let fit = Lsq::<3>::from_sums(
+            [
+                [ss, s1, sd],
+                [0.0, course_ata[0][0], course_ata[0][1]],
+                [0.0, 0.0, course_ata[1][1]],
+            ],
+            [sr, course_aty[0], course_aty[1]],
+            yy,
+        );
         let c = fit.solve()?;
         let rise = Rise {
             start,
@@ -839,6 +856,18 @@ fn fall_end(x: &[f64], peak: usize, next: usize) -> usize {
 /// Samples the needle must not advance over to have stopped: an encoder
 /// read faster than it counts repeats a reading while it still moves.
 const STILL_SAMPLES: usize = 5;
+
+/// s^n, by multiplication for the wall grid's exponents (1, 1.5, 2, 3):
+/// `powf` was most of [`rise`]'s time.
+fn power(s: f64, n: f64) -> f64 {
+    match n {
+        1.0 => s,
+        1.5 => s * s.sqrt(),
+        2.0 => s * s,
+        3.0 => s * s * s,
+        _ => s.powf(n),
+    }
+}
 
 /// How many places [`rise`] tries a wall's start at.
 const RISE_STARTS: usize = 200;

@@ -63,6 +63,12 @@ impl<const N: usize> Lsq<N> {
         (self.ata, self.aty, self.yy) = (ata, aty, yy);
     }
 
+    /// The sums made: ΦᵀΦ (its upper triangle), Φᵀy, yᵀy — for
+    /// [`Self::from_sums`] to build a larger system on.
+    pub fn sums(&self) -> ([[f64; N]; N], [f64; N], f64) {
+        (self.ata, self.aty, self.yy)
+    }
+
     /// ΦᵀΦ, its lower triangle mirrored from the upper.
     fn gram(&self) -> [[f64; N]; N] {
         let mut m = self.ata;
