@@ -140,7 +140,7 @@ pub const CANDIDATES: [Candidate; 8] = [
         effect: "internal_structures",
         grid_name: "stiffening_exponent",
         grid: &[1.0, 1.5, 2.0, 3.0],
-        linear: &["wall_gain"],
+        linear: &["wall_gain", "layer_step_gain"],
         columns: walls,
         on_grid: None,
         grid_params: grid_as_named,
@@ -689,7 +689,24 @@ fn walls(p: &Prepared, n: f64) -> Vec<Vec<f64>> {
         puncture_x_m: p.geometry.puncture_x_m,
         noise_n: p.noise_n,
     };
-    vec![wall_column(&found, n)]
+    let (col, steps) = wall_column(&found, n);
+    vec![col, layer_steps(&steps, &p.cutting)]
+}
+
+/// The cutting beneath each wall's layer against the one above it: a
+/// membrane parts two tissues (skin and the muscle under its fascia) that
+/// need not cut alike, so the force past a wall need not come back to
+/// the course it rose from. Each wall's step (`(through, step_n)`, the
+/// wall's rise less its fall) holds past where it is through as long as
+/// the tip cuts — the nominal's cutting share.
+fn layer_steps(steps: &[(usize, f64)], cutting: &[f64]) -> Vec<f64> {
+    let mut col = vec![0.0; cutting.len()];
+    for &(through, step_n) in steps {
+        for (c, share) in col.iter_mut().zip(cutting).skip(through) {
+            *c += step_n * share;
+        }
+    }
+    col
 }
 
 /// What [`walls`] reads of a trial: its positions and residual, the
@@ -703,11 +720,13 @@ struct Found<'a> {
     noise_n: f64,
 }
 
-/// [`walls`]' one column: every wall found, each stiffening as s^n, then
-/// softening to nothing over its give-way.
-fn wall_column(found: &Found, n: f64) -> Vec<f64> {
+/// [`walls`]' first column: every wall found, each stiffening as s^n,
+/// then softening to nothing over its give-way; and each wall's layer
+/// step, where it is through (for [`layer_steps`]).
+fn wall_column(found: &Found, n: f64) -> (Vec<f64>, Vec<(usize, f64)>) {
     let (x, r) = (found.x_m, found.residual_n);
     let mut col = vec![0.0; x.len()];
+    let mut steps = Vec::new();
     let mut before: Option<usize> = None;
     for (k, &(last_held, _, fall_n)) in found.structures.iter().enumerate() {
         let next = found.structures.get(k + 1).map_or(x.len(), |s| s.0);
@@ -746,7 +765,13 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
         };
         let x_peak = x[peak];
         // A wall that rolled over but shows no give-way held to the fall.
-        let start_m = x[if peak == top { course } else { held }.start];
+        let risen = if peak == top { course } else { held };
+        let start_m = x[risen.start];
+        // A rise too short to read (no height) says nothing of the layer,
+        // nor does a straight one (its height is its course's too).
+        if risen.height_n > 0.0 && n > 1.0 {
+            steps.push((through, risen.height_n - wall_n));
+        }
         before = Some(through);
         let stretch_m = (x_peak - start_m).max(1e-6);
         for i in (0..=peak).rev() {
@@ -761,7 +786,7 @@ fn wall_column(found: &Found, n: f64) -> Vec<f64> {
             col[i] += wall_n * (1.0 - (x[i] - x_peak) / softening_m).clamp(0.0, 1.0);
         }
     }
-    col
+    (col, steps)
 }
 
 /// A wall's rise ([`rise`]).
@@ -771,6 +796,8 @@ struct Rise {
     start: usize,
     /// The slope of the residual's course beneath it, N/m.
     slope_n_per_m: f64,
+    /// How far it rose above that course to its peak, N.
+    height_n: f64,
 }
 
 /// Where a wall began to load: the least-squares hinge of the residual's
@@ -786,6 +813,7 @@ fn rise(x: &[f64], r: &[f64], from: usize, peak: usize, n: f64) -> Rise {
     let flat = Rise {
         start: from.min(peak),
         slope_n_per_m: 0.0,
+        height_n: 0.0,
     };
     if peak < from + 3 {
         return flat;
@@ -822,6 +850,7 @@ fn rise(x: &[f64], r: &[f64], from: usize, peak: usize, n: f64) -> Rise {
         let rise = Rise {
             start,
             slope_n_per_m: c[2],
+            height_n: c[0],
         };
         (c[0] > 0.0).then(|| (fit.sse(&c), rise))
     };
@@ -1982,7 +2011,7 @@ mod tests {
             puncture_x_m: 0.0,
             noise_n: 0.012,
         };
-        wall_column(&found, n)
+        wall_column(&found, n).0
     }
 
     /// Two membranes, 1 µm a sample: the first rises from sample 100 to
@@ -2160,6 +2189,52 @@ mod tests {
         let mut once = x_m.clone();
         once[230] = once[229];
         assert_eq!(fall_end(&once, 200, 400), 251);
+    }
+
+    /// A fascia between skin and the muscle beneath it, 10 µm a sample:
+    /// the residual stands at 0 N, stiffens as s² by 1 N to sample 200
+    /// and falls 1.5 N at once, to −0.5 N, where the muscle cuts half a
+    /// newton less than the skin until the stage stops at 300 (the
+    /// nominal's cutting share 1 to there, 0 at rest). The layer's step
+    /// is −0.5 N past the wall while the tip cuts, nothing before it nor
+    /// at rest; a wall whose force comes back to its course leaves none,
+    /// and a straight rise (n = 1, its height its course's too) none.
+    #[test]
+    fn a_layer_beneath_a_wall_cuts_by_its_own_step() {
+        let x_m: Vec<f64> = (0..400).map(|i| i.min(300) as f64 * 1e-5).collect();
+        let cutting: Vec<f64> = (0..400).map(|i| f64::from(i < 300)).collect();
+        let steps_of = |after_n: f64| {
+            let residual_n: Vec<f64> = (0..400)
+                .map(|i| match i {
+                    100..=200 => ((i - 100) as f64 / 100.0).powi(2),
+                    201.. => after_n,
+                    _ => 0.0,
+                })
+                .collect();
+            let found = Found {
+                x_m: &x_m,
+                residual_n: &residual_n,
+                structures: &[(200, x_m[200], 1.0 - after_n)],
+                puncture_x_m: 0.0,
+                noise_n: 0.012,
+            };
+            let steps = |n: f64| layer_steps(&wall_column(&found, n).1, &cutting);
+            (steps(2.0), steps(1.0))
+        };
+        let (step, straight) = steps_of(-0.5);
+        assert!(straight.iter().all(|&c| c == 0.0));
+        assert!(
+            step[..=200].iter().all(|&c| c == 0.0),
+            "{:?}",
+            &step[195..205]
+        );
+        assert!(
+            step[201..300].iter().all(|&c| (c + 0.5).abs() < 1e-6),
+            "{:?}",
+            &step[201..210]
+        );
+        assert!(step[300..].iter().all(|&c| c == 0.0));
+        assert!(steps_of(0.0).0.iter().all(|&c| c.abs() < 1e-6));
     }
 
     /// Each compliant stiffness is searched at the modes a holder of
