@@ -1997,13 +1997,14 @@ mod tests {
         );
     }
 
-    /// [`wall_column`] on a trial past its puncture with a 12 mN load cell.
-    fn column_of(
+    /// [`wall_column`] on a trial past its puncture with a 12 mN load
+    /// cell: the column and each wall's layer step.
+    fn walls_of(
         x_m: &[f64],
         residual_n: &[f64],
         structures: &[(usize, f64, f64)],
         n: f64,
-    ) -> Vec<f64> {
+    ) -> (Vec<f64>, Vec<(usize, f64)>) {
         let found = Found {
             x_m,
             residual_n,
@@ -2011,7 +2012,17 @@ mod tests {
             puncture_x_m: 0.0,
             noise_n: 0.012,
         };
-        wall_column(&found, n).0
+        wall_column(&found, n)
+    }
+
+    /// [`walls_of`]'s column alone.
+    fn column_of(
+        x_m: &[f64],
+        residual_n: &[f64],
+        structures: &[(usize, f64, f64)],
+        n: f64,
+    ) -> Vec<f64> {
+        walls_of(x_m, residual_n, structures, n).0
     }
 
     /// Two membranes, 1 µm a sample: the first rises from sample 100 to
@@ -2211,14 +2222,9 @@ mod tests {
                     _ => 0.0,
                 })
                 .collect();
-            let found = Found {
-                x_m: &x_m,
-                residual_n: &residual_n,
-                structures: &[(200, x_m[200], 1.0 - after_n)],
-                puncture_x_m: 0.0,
-                noise_n: 0.012,
-            };
-            let steps = |n: f64| layer_steps(&wall_column(&found, n).1, &cutting);
+            let structures = [(200, x_m[200], 1.0 - after_n)];
+            let steps =
+                |n: f64| layer_steps(&walls_of(&x_m, &residual_n, &structures, n).1, &cutting);
             (steps(2.0), steps(1.0))
         };
         let (step, straight) = steps_of(-0.5);
